@@ -1,0 +1,67 @@
+// Benchmarks of the real-time core: one control step and one plant step.
+// Speed is shown here, never asserted by a timed test.
+#include <benchmark/benchmark.h>
+
+#include "cpm/control/controller.hpp"
+#include "cpm/sim/plant.hpp"
+
+namespace {
+
+using namespace cpm;
+
+// A calibrated model with dynamic effects: the work a real cycle does.
+ctl::MachineModel calibrated_model_with_effects() {
+  ctl::MachineModel m = ctl::MachineModel::elkady();
+  m.kinematics.planes[0].normal = Vec3(1.0, 2e-3, -1e-3).normalized();
+  m.kinematics.planes[1].normal = Vec3(-2e-3, 1.0, 1e-3).normalized();
+  m.kinematics.planes[2].normal = Vec3(1e-3, 1e-3, 1.0).normalized();
+  for (int i = 0; i < 3; ++i) {
+    m.kinematics.planes[i].scale = 1.0 + 1e-4 * (i + 1);
+    m.kinematics.planes[i].offset = 1e-4 * (i - 1);
+    ctl::add_effect(m, "viscous_friction", i, {8.0});
+    ctl::add_effect(m, "coulomb_friction", i, {3.0});
+  }
+  return m;
+}
+
+void control_step(benchmark::State& state, ctl::ControlLaw law, bool calibrated) {
+  const ctl::Machine model(calibrated ? calibrated_model_with_effects() : ctl::MachineModel::elkady());
+  const ctl::Controller controller(model, law, ctl::table3_gains(law));
+  const ctl::CircleTrajectory circle(ctl::CircleSpec{});
+  ctl::ControlInput in;
+  ctl::ControlOutput out;
+  double t = 0.0;
+  for (auto _ : state) {
+    in.ref = circle.sample(t);
+    in.d = in.ref.p - model.kinematics().d0 + Vec3(1e-5, -2e-5, 3e-5);
+    in.d_dot = in.ref.v;
+    const Status s = controller.step(in, out);
+    benchmark::DoNotOptimize(s);
+    benchmark::DoNotOptimize(out.force);
+    t = t < 3.999 ? t + 1e-3 : 0.0;
+  }
+}
+BENCHMARK_CAPTURE(control_step, computed_torque_nominal, ctl::ControlLaw::computed_torque, false);
+BENCHMARK_CAPTURE(control_step, computed_torque_calibrated_effects, ctl::ControlLaw::computed_torque, true);
+BENCHMARK_CAPTURE(control_step, pd_feedforward_calibrated_effects, ctl::ControlLaw::pd_feedforward, true);
+BENCHMARK_CAPTURE(control_step, pd_nominal, ctl::ControlLaw::pd, false);
+
+void plant_step(benchmark::State& state, bool calibrated) {
+  const ctl::Machine truth(calibrated ? calibrated_model_with_effects() : ctl::MachineModel::elkady());
+  sim::Plant plant(truth, sim::PlantOptions{});
+  const Vec3 start(0.6, 0.425, 0.3);
+  (void)plant.reset(start);
+  const Vec3 hold(0.0, 0.0, -truth.inertia().E);
+  long k = 0;
+  for (auto _ : state) {
+    const Status s = plant.step(hold, 1e-3);
+    benchmark::DoNotOptimize(s);
+    if (++k % 2000 == 0) (void)plant.reset(start);
+  }
+  state.counters["sim_s_per_wall_s"] =
+      benchmark::Counter(1e-3 * static_cast<double>(state.iterations()), benchmark::Counter::kIsRate);
+}
+BENCHMARK_CAPTURE(plant_step, nominal_1ms_rk4x10, false);
+BENCHMARK_CAPTURE(plant_step, calibrated_effects_1ms_rk4x10, true);
+
+}  // namespace

@@ -1,0 +1,119 @@
+// The machine model: one constant description used by the controller (the
+// model it believes), the simulator (the true machine) and identification
+// (the numbers it fits). As in Pinocchio, the model is constant data and
+// the algorithms are functions over it; per-cycle values live in the
+// caller's preallocated structs.
+//
+// Dynamics (Elkady eqs. 4-14, machine.md), in the machine frame with z down
+// and q = p the platform centre (m):
+//     F = M(q) q_dd + G(q, q_d) q_d + K(q)
+//     M = 2A I + 2B Gamma^T Gamma,  G = 2B Gamma^T Gamma_dot,
+//     K = -(0, 0, E) + C Gamma^T (-cos t11, sin t21, 0)
+// F is the force on the platform in the machine frame (N). Actuator forces
+// are F_d = J^T F + sum of the additive effects, J = dp/dd of the calibrated
+// kinematics.
+#pragma once
+
+#include <string_view>
+#include <vector>
+
+#include "cpm/control/effects.hpp"
+#include "cpm/kinematics/kinematic_effects.hpp"
+#include "cpm/kinematics/limbs.hpp"
+#include "cpm/kinematics/plane_model.hpp"
+#include "cpm/kinematics/workspace.hpp"
+
+namespace cpm::ctl {
+
+inline constexpr double kGravity = 9.81;  // m/s^2, along +z (down)
+
+// Elkady's Table 2 (kg): m1 first link of a limb (uniform rod), m2 second
+// link (split between M_i and B_i), m3 prismatic joint and actuator, m4 tool.
+struct LinkMasses {
+  double m1 = 1.892994;
+  double m2 = 0.695528;
+  double m3 = 0.2;
+  double m4 = 0.3;
+};
+
+// The four constants in which the dynamics is linear (machine.md):
+// A (kg), B (kg m^2), C (N m), E (N).
+struct InertiaConstants {
+  double A = 0, B = 0, C = 0, E = 0;
+  static InertiaConstants from_masses(const LinkMasses& m, double L1);
+};
+
+struct MachineModel {
+  kin::KinematicModel kinematics = kin::KinematicModel::nominal();
+  kin::Strokes strokes;
+  LinkMasses masses;
+  DynamicEffects effects;
+  double force_limit = 120.0;  // |F_i| per actuator (N)
+
+  static MachineModel elkady();  // the nominal machine of machine.md
+  void validate() const;         // throws Error saying what and where
+};
+
+// Add an effect of effects.md to a model by its stable name: kinematic ones
+// (backlash, cyclic_error, ...) to limb `axis` (0..2) of the kinematics,
+// dynamic ones to the effect list (axis -1 for machine-wide ones). Values in
+// the order and units of effects.md. Throws Error naming the effect and what
+// is wrong (unknown name, wrong number of values, out of bounds).
+void add_effect(MachineModel& model, std::string_view name, int axis,
+                const std::vector<double>& values);
+
+// Everything the dynamics computes at one state.
+struct RigidBodyTerms {
+  Mat3 M = Mat3::Zero();     // inertia matrix (kg)
+  Vec3 Gv = Vec3::Zero();    // G(q, q_d) q_d (N)
+  Vec3 K = Vec3::Zero();     // gravity (N)
+  kin::LimbMotion limbs;     // limb angles, Gamma, Gamma_dot
+};
+
+// The platform seen through the actuators' encoders.
+struct TaskState {
+  Vec3 p = Vec3::Zero();      // platform point (m)
+  Vec3 p_dot = Vec3::Zero();  // platform velocity (m/s)
+  Mat3 J = Mat3::Identity();  // dp/dd
+};
+
+// A validated, prepared machine. Construction is the only step that can
+// fail or allocate; the member functions are noexcept and allocation-free,
+// fit for the control cycle.
+class Machine {
+ public:
+  explicit Machine(MachineModel model);
+
+  [[nodiscard]] const MachineModel& model() const noexcept { return model_; }
+  [[nodiscard]] const kin::KinematicModel& kinematics() const noexcept { return model_.kinematics; }
+  [[nodiscard]] const kin::LimbGeometry& limbs() const noexcept { return model_.kinematics.limbs; }
+  // Effective constants: from the masses, plus inertia_error and payload_mass.
+  [[nodiscard]] const InertiaConstants& inertia() const noexcept { return inertia_; }
+  // Per actuator, the factor (1 + k) by which the drive scales its command.
+  [[nodiscard]] const Vec3& drive_gain() const noexcept { return drive_gain_; }
+  [[nodiscard]] double force_limit() const noexcept { return model_.force_limit; }
+  [[nodiscard]] bool has_additive_effects() const noexcept { return additive_effects_; }
+
+  // M, G q_d and K at (p, p_dot). Fails outside the limbs' reach or at a singularity.
+  Status rigid_body(const Vec3& p, const Vec3& p_dot, RigidBodyTerms& out) const noexcept;
+  // Platform force for a motion: M p_dd + G p_dot + K (N).
+  Status inverse_dynamics(const Vec3& p, const Vec3& p_dot, const Vec3& p_dd,
+                          Vec3& force) const noexcept;
+  // Sum of the additive effect forces on each actuator (N).
+  [[nodiscard]] Vec3 effect_forces(const Vec3& d, const Vec3& d_dot) const noexcept;
+  // Platform state from encoder position and velocity through the calibrated kinematics.
+  Status task_state(const Vec3& d, const Vec3& d_dot, const kin::KinematicInputs& in,
+                    TaskState& out) const noexcept;
+
+  // Energies of Elkady eqs. 4-5 (J), for checks and diagnostics.
+  Status kinetic_energy(const Vec3& p, const Vec3& p_dot, double& T) const noexcept;
+  Status potential_energy(const Vec3& p, double& V) const noexcept;
+
+ private:
+  MachineModel model_;
+  InertiaConstants inertia_;
+  Vec3 drive_gain_ = Vec3::Ones();
+  bool additive_effects_ = false;
+};
+
+}  // namespace cpm::ctl

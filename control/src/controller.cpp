@@ -1,0 +1,94 @@
+#include "cpm/control/controller.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+namespace cpm::ctl {
+
+const char* law_name(ControlLaw law) noexcept {
+  switch (law) {
+    case ControlLaw::pd: return "pd";
+    case ControlLaw::pd_gravity: return "pd_gravity";
+    case ControlLaw::pd_feedforward: return "pd_feedforward";
+    case ControlLaw::computed_torque: return "computed_torque";
+  }
+  return "unknown";
+}
+
+std::optional<ControlLaw> law_from_name(std::string_view name) noexcept {
+  for (ControlLaw l : {ControlLaw::pd, ControlLaw::pd_gravity, ControlLaw::pd_feedforward,
+                       ControlLaw::computed_torque})
+    if (name == law_name(l)) return l;
+  return std::nullopt;
+}
+
+void Gains::validate() const {
+  if (!kp.allFinite() || !kd.allFinite() || (kp.array() < 0.0).any() || (kd.array() < 0.0).any())
+    throw Error("controller gains: kp and kd must be finite and >= 0");
+}
+
+Gains table3_gains(ControlLaw law) noexcept {
+  switch (law) {
+    case ControlLaw::pd: return {Vec3::Constant(12691.0), Vec3::Constant(436.0)};
+    case ControlLaw::pd_gravity: return {Vec3::Constant(8507.0), Vec3::Constant(436.0)};
+    case ControlLaw::pd_feedforward: return {Vec3::Constant(7053.0), Vec3::Constant(436.0)};
+    case ControlLaw::computed_torque: return {Vec3::Constant(2550.25), Vec3::Constant(101.0)};
+  }
+  return {};
+}
+
+Controller::Controller(const Machine& model, ControlLaw law, const Gains& gains)
+    : model_(&model), law_(law), gains_(gains) {
+  gains_.validate();
+}
+
+Status Controller::step(const ControlInput& in, ControlOutput& out) const noexcept {
+  out.force.setZero();
+  out.force_unlimited.setZero();
+  out.saturated = {false, false, false};
+  const Machine& m = *model_;
+  const kin::KinematicModel& km = m.kinematics();
+  if (!in.ref.p.allFinite() || !in.ref.v.allFinite() || !in.ref.a.allFinite())
+    return Status::failure(Fault::not_finite);
+  if (Status s = m.task_state(in.d, in.d_dot, in.kin, out.estimate); !s) return s;
+
+  // The reference through the calibrated inverse kinematics.
+  Mat3 J_ref;
+  if (Status s = kin::inverse(km, in.ref.p, in.kin, out.d_ref); !s) return s;
+  if (Status s = kin::jacobian(km, out.d_ref, in.ref.p, in.kin, J_ref); !s) return s;
+  out.d_dot_ref = J_ref.partialPivLu().solve(in.ref.v);
+
+  Vec3 F = Vec3::Zero();
+  if (law_ == ControlLaw::computed_torque) {
+    const TaskState& x = out.estimate;
+    RigidBodyTerms t;
+    if (Status s = m.rigid_body(x.p, x.p_dot, t); !s) return s;
+    const Vec3 accel = in.ref.a + gains_.kd.cwiseProduct(in.ref.v - x.p_dot) +
+                       gains_.kp.cwiseProduct(in.ref.p - x.p);
+    F.noalias() = x.J.transpose() * (t.M * accel + t.Gv + t.K);
+    F += m.effect_forces(in.d, in.d_dot);
+  } else {
+    F = gains_.kp.cwiseProduct(out.d_ref - in.d) + gains_.kd.cwiseProduct(out.d_dot_ref - in.d_dot);
+    if (law_ != ControlLaw::pd) {
+      RigidBodyTerms t;
+      if (Status s = m.rigid_body(in.ref.p, in.ref.v, t); !s) return s;
+      Vec3 Fp = t.K;
+      if (law_ == ControlLaw::pd_feedforward) {
+        Fp.noalias() += t.M * in.ref.a + t.Gv;
+        F += m.effect_forces(out.d_ref, out.d_dot_ref);
+      }
+      F.noalias() += J_ref.transpose() * Fp;
+    }
+  }
+  F.array() /= m.drive_gain().array();
+  if (!F.allFinite()) return Status::failure(Fault::not_finite);
+  out.force_unlimited = F;
+  const double lim = m.force_limit();
+  for (int i = 0; i < 3; ++i) {
+    out.force[i] = std::clamp(F[i], -lim, lim);
+    out.saturated[i] = out.force[i] != F[i];
+  }
+  return {};
+}
+
+}  // namespace cpm::ctl

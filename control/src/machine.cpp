@@ -1,0 +1,154 @@
+#include "cpm/control/machine.hpp"
+
+#include <cmath>
+#include <sstream>
+
+namespace cpm::ctl {
+
+InertiaConstants InertiaConstants::from_masses(const LinkMasses& m, double L1) {
+  const double total = m.m1 + 2.0 * m.m2 + m.m3 + m.m4;
+  return {0.5 * total, (m.m1 / 6.0 + m.m2 / 4.0) * L1 * L1, 0.5 * (m.m1 + m.m2) * kGravity * L1,
+          total * kGravity};
+}
+
+MachineModel MachineModel::elkady() { return MachineModel{}; }
+
+void MachineModel::validate() const {
+  kinematics.validate();
+  strokes.validate();
+  const double ms[] = {masses.m1, masses.m2, masses.m3, masses.m4};
+  const char* names[] = {"m1", "m2", "m3", "m4"};
+  for (int i = 0; i < 4; ++i)
+    if (!std::isfinite(ms[i]) || ms[i] < 0.0)
+      throw Error(std::string("model masses: ") + names[i] + " must be a finite mass >= 0 kg");
+  if (!std::isfinite(force_limit) || !(force_limit > 0.0))
+    throw Error("model: force_limit must be a finite force > 0 N");
+  const kin::LimbGeometry& g = kinematics.limbs;
+  if (!(g.L > 0 && g.L1 > 0 && g.L2 > 0 && g.D > 0) || !std::isfinite(g.L + g.L1 + g.L2 + g.D))
+    throw Error("model limbs: L, L1, L2 and D must be finite lengths > 0 m");
+  for (int i = 0; i < 3; ++i)
+    if (g.mode[i] != 1 && g.mode[i] != -1)
+      throw Error("model limbs: assembly mode of limb " + std::to_string(i + 1) +
+                  " must be +1 or -1");
+  for (const DynamicEffect& e : effects) e.validate();
+}
+
+void add_effect(MachineModel& model, std::string_view name, int axis,
+                const std::vector<double>& values) {
+  const std::string label = std::string(name);
+  if (const auto kt = kin::kinematic_effect_from_name(name)) {
+    const kin::KinematicEffectInfo& in = kin::info(*kt);
+    if (axis < 0 || axis > 2) throw Error(label + ": a kinematic effect needs an axis 1, 2 or 3");
+    if (static_cast<int>(values.size()) != in.n_params)
+      throw Error(label + ": expects " + std::to_string(in.n_params) + " values, got " +
+                  std::to_string(values.size()));
+    std::array<double, 3> v{};
+    for (int j = 0; j < in.n_params; ++j) {
+      const auto& p = in.params[j];
+      if (!std::isfinite(values[j]) || values[j] < p.lower || values[j] > p.upper) {
+        std::ostringstream os;
+        os << label << "[axis " << axis + 1 << "]: " << p.name << " = " << values[j] << " " << p.unit
+           << " is outside its physical range [" << p.lower << ", " << p.upper << "]";
+        throw Error(os.str());
+      }
+      v[j] = values[j];
+    }
+    kin::set_params(model.kinematics.effects[axis], *kt, v);
+    model.kinematics.validate();
+    return;
+  }
+  const auto dt = dynamic_effect_from_name(name);
+  if (!dt) throw Error("unknown effect '" + label + "' (see shared/spec/effects.md for the names)");
+  const DynamicEffectInfo& in = info(*dt);
+  if (static_cast<int>(values.size()) != in.n_params)
+    throw Error(label + ": expects " + std::to_string(in.n_params) + " values, got " +
+                std::to_string(values.size()));
+  DynamicEffect e;
+  e.type = *dt;
+  e.axis = static_cast<std::int8_t>(in.per_axis ? axis : -1);
+  if (!in.per_axis && axis >= 0) throw Error(label + " acts on all axes together; give no axis");
+  for (int j = 0; j < in.n_params; ++j) e.param[j] = values[j];
+  model.effects.add(e);
+}
+
+Machine::Machine(MachineModel model) : model_(std::move(model)) {
+  model_.validate();
+  inertia_ = InertiaConstants::from_masses(model_.masses, model_.kinematics.limbs.L1);
+  for (const DynamicEffect& e : model_.effects) {
+    switch (e.type) {
+      case DynamicEffectType::force_gain: drive_gain_[e.axis] *= 1.0 + e.param[0]; break;
+      case DynamicEffectType::payload_mass:
+        inertia_.A += 0.5 * e.param[0];
+        inertia_.E += e.param[0] * kGravity;
+        break;
+      case DynamicEffectType::inertia_error:
+        inertia_.A += e.param[0];
+        inertia_.B += e.param[1];
+        inertia_.C += e.param[2];
+        inertia_.E += e.param[3];
+        break;
+      default: additive_effects_ = true; break;
+    }
+  }
+  if (!(inertia_.A > 0.0) || inertia_.B < 0.0) {
+    std::ostringstream os;
+    os << "model: with its effects the machine has A = " << inertia_.A << " kg, B = " << inertia_.B
+       << " kg m^2; A must be > 0 and B >= 0 (is a payload or inertia error too negative?)";
+    throw Error(os.str());
+  }
+}
+
+Status Machine::rigid_body(const Vec3& p, const Vec3& p_dot, RigidBodyTerms& out) const noexcept {
+  if (Status s = kin::solve_limb_motion(limbs(), p, p_dot, out.limbs); !s) return s;
+  const Mat3& Gam = out.limbs.pose.Gamma;
+  const InertiaConstants& c = inertia_;
+  out.M.noalias() = 2.0 * c.B * Gam.transpose() * Gam;
+  out.M.diagonal().array() += 2.0 * c.A;
+  out.Gv.noalias() = 2.0 * c.B * Gam.transpose() * (out.limbs.Gamma_dot * p_dot);
+  const Vec3 lambda(-std::cos(out.limbs.pose.theta[0]), std::sin(out.limbs.pose.theta[1]), 0.0);
+  out.K.noalias() = c.C * Gam.transpose() * lambda;
+  out.K.z() -= c.E;
+  return {};
+}
+
+Status Machine::inverse_dynamics(const Vec3& p, const Vec3& p_dot, const Vec3& p_dd,
+                                 Vec3& force) const noexcept {
+  if (!all_finite(p_dd)) return Status::failure(Fault::not_finite);
+  RigidBodyTerms t;
+  if (Status s = rigid_body(p, p_dot, t); !s) return s;
+  force.noalias() = t.M * p_dd + t.Gv + t.K;
+  return {};
+}
+
+Vec3 Machine::effect_forces(const Vec3& d, const Vec3& d_dot) const noexcept {
+  Vec3 f = Vec3::Zero();
+  if (!additive_effects_) return f;
+  for (const DynamicEffect& e : model_.effects)
+    if (e.axis >= 0) f[e.axis] += effect_force(e, d[e.axis], d_dot[e.axis]);
+  return f;
+}
+
+Status Machine::task_state(const Vec3& d, const Vec3& d_dot, const kin::KinematicInputs& in,
+                           TaskState& out) const noexcept {
+  if (!all_finite(d_dot)) return Status::failure(Fault::not_finite);
+  if (Status s = kin::forward(kinematics(), d, in, out.p); !s) return s;
+  if (Status s = kin::jacobian(kinematics(), d, out.p, in, out.J); !s) return s;
+  out.p_dot.noalias() = out.J * d_dot;
+  return {};
+}
+
+Status Machine::kinetic_energy(const Vec3& p, const Vec3& p_dot, double& T) const noexcept {
+  kin::LimbPose pose;
+  if (Status s = kin::solve_limbs(limbs(), p, pose); !s) return s;
+  T = inertia_.A * p_dot.squaredNorm() + inertia_.B * (pose.Gamma * p_dot).squaredNorm();
+  return {};
+}
+
+Status Machine::potential_energy(const Vec3& p, double& V) const noexcept {
+  kin::LimbPose pose;
+  if (Status s = kin::solve_limbs(limbs(), p, pose); !s) return s;
+  V = -inertia_.C * (std::sin(pose.theta[0]) + std::cos(pose.theta[1])) - inertia_.E * p.z();
+  return {};
+}
+
+}  // namespace cpm::ctl

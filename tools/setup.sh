@@ -1,0 +1,24 @@
+#!/usr/bin/env bash
+# Install what cpmd needs to build and test, from Debian bookworm's packages.
+# Idempotent and quiet when everything is already there.
+set -euo pipefail
+packages=(
+  build-essential cmake pkg-config
+  libeigen3-dev            # linear algebra (fixed-size types in the control cycle)
+  libgtest-dev libgmock-dev googletest
+  libbenchmark-dev
+  libyaml-cpp-dev          # configuration and model files
+  liblcm-dev liblcm-bin    # LCM transport and lcm-gen
+  libgpiod-dev             # GPIO (v1 API, libgpiod 1.6)
+)
+missing=()
+for p in "${packages[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+[ ${#missing[@]} -eq 0 ] && exit 0
+echo "setup: installing ${missing[*]}"
+SUDO=""
+[ "$(id -u)" -ne 0 ] && SUDO="sudo"
+export DEBIAN_FRONTEND=noninteractive
+$SUDO apt-get update -qq
+$SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
