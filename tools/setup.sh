@@ -10,6 +10,7 @@ packages=(
   libyaml-cpp-dev          # configuration and model files
   liblcm-dev liblcm-bin    # LCM transport and lcm-gen
   libgpiod-dev             # GPIO (v1 API, libgpiod 1.6)
+  qemu-system-x86          # SIL tests: boots Debian's kernel (vcan, gpio-sim) when the host has none
 )
 missing=()
 for p in "${packages[@]}"; do
