@@ -61,9 +61,12 @@ Status solve_one(const LimbGeometry& g, int i, const Vec3& p, LimbSolution& s) {
     const double limit = rho > g.L1 ? g.L1 + g.L2 : std::abs(g.L1 - g.L2);
     return Status::failure(Fault::limb_unreachable, i, rho, limit);
   }
-  const double alpha = std::atan2(r.y(), r.x()) + g.mode[i] * std::acos(c);
-  s.u = Vec2(std::cos(alpha), std::sin(alpha));
+  // u = rotation of r/rho by +-acos(c), without calling acos, cos or sin.
+  const Vec2 r_hat = r / rho;
+  const double sn = g.mode[i] * std::sqrt(std::max(0.0, 1.0 - c * c));
+  s.u = Vec2(c * r_hat.x() - sn * r_hat.y(), c * r_hat.y() + sn * r_hat.x());
   s.u_perp = Vec2(-s.u.y(), s.u.x());
+  const double alpha = std::atan2(s.u.y(), s.u.x());
   s.w = r - g.L1 * s.u;
   s.theta = f.sign * (alpha - f.offset);
   s.theta = std::remainder(s.theta, 2.0 * std::numbers::pi);

@@ -30,13 +30,18 @@ RunResult run_closed_loop(const ctl::Controller& controller, Plant& plant,
   Vec3 sum_axis = Vec3::Zero();
   ctl::ControlInput in;
   ctl::ControlOutput out;
+  // The controller knows only what it commands: it takes the direction of
+  // motion (for backlash compensation) from its own reference velocity (the
+  // actuator axes are the task axes to within a milliradian), not from the plant.
+  const kin::DirectionTracker direction;
   for (long k = 0; k < n; ++k) {
     const double t = k * dt;
     const EncoderReading enc = plant.read();
     in.d = enc.d;
     in.d_dot = enc.d_dot;
-    in.kin = plant.kinematic_inputs();
     in.ref = trajectory.sample(t);
+    in.kin.t = t;
+    direction.update(in.ref.v, in.kin);
     if (Status s = controller.step(in, out); !s) {
       r.fault = s;
       r.fault_time = t;

@@ -82,10 +82,7 @@ Status Plant::step(const Vec3& force_command, double dt) noexcept {
   // Direction of motion of each axis, for backlash: kept while the axis rests.
   Vec3 d, d_dot;
   if (Status s = actuator_state(d, d_dot); !s) return s;
-  for (int i = 0; i < 3; ++i) {
-    if (d_dot[i] > opt_.direction_threshold) kin_in_.dir[i] = +1;
-    if (d_dot[i] < -opt_.direction_threshold) kin_in_.dir[i] = -1;
-  }
+  kin::DirectionTracker{opt_.direction_threshold}.update(d_dot, kin_in_);
   return {};
 }
 

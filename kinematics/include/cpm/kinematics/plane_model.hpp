@@ -49,6 +49,18 @@ struct KinematicInputs {
   double t = 0.0;                              // time since the machine was cold (s)
 };
 
+// Keeps the direction each axis last moved in (for backlash): an axis whose
+// speed is below `threshold` keeps its last direction. Real-time safe.
+struct DirectionTracker {
+  double threshold = 1e-6;  // m/s
+  void update(const Vec3& d_dot, KinematicInputs& in) const noexcept {
+    for (int i = 0; i < 3; ++i) {
+      if (d_dot[i] > threshold) in.dir[i] = +1;
+      if (d_dot[i] < -threshold) in.dir[i] = -1;
+    }
+  }
+};
+
 struct KinematicModel {
   std::array<LimbPlane, 3> planes{};
   std::array<LimbKinematicEffects, 3> effects{};
