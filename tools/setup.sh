@@ -8,6 +8,7 @@ packages=(
   libgtest-dev libgmock-dev googletest
   libbenchmark-dev
   libyaml-cpp-dev          # configuration and model files
+  libssl-dev               # SHA-256 of data files (libcrypto), model file provenance
   liblcm-dev liblcm-bin    # LCM transport and lcm-gen
   libgpiod-dev             # GPIO (v1 API, libgpiod 1.6)
   qemu-system-x86          # SIL tests: boots Debian's kernel (vcan, gpio-sim) when the host has none

@@ -1,0 +1,542 @@
+// The YAML model file (docs/model-file.md): rendering by hand, so that the
+// file carries a unit comment on every number and doubles in their shortest
+// exact form; loading through yaml-cpp with a strict walker that refuses
+// unknown keys, missing keys, wrong types and out-of-range values, naming
+// FILE:LINE:COLUMN and the key path.
+#include "cpm/io/model_file.hpp"
+
+#include <yaml-cpp/yaml.h>
+
+#include <cmath>
+#include <filesystem>
+#include <map>
+#include <numbers>
+#include <set>
+#include <sstream>
+
+#include "util.hpp"
+
+namespace cpm::io {
+
+namespace {
+
+constexpr int kFormatVersion = 1;
+
+// ------------------------------------------------------------------ loading
+
+std::string join(const std::string& path, const std::string& key) {
+  return path.empty() ? key : path + "." + key;
+}
+
+std::string describe_node(const YAML::Node& n) {
+  switch (n.Type()) {
+    case YAML::NodeType::Null: return "nothing (null)";
+    case YAML::NodeType::Sequence: return "a list";
+    case YAML::NodeType::Map: return "a mapping";
+    case YAML::NodeType::Scalar: return "'" + n.Scalar() + "'";
+    default: return "an undefined value";
+  }
+}
+
+class Loader {
+ public:
+  explicit Loader(std::string file) : file_(std::move(file)) {}
+
+  [[noreturn]] void fail(const YAML::Node& n, const std::string& path, const std::string& why) const {
+    std::string where = file_;
+    const YAML::Mark m = n.Mark();
+    if (m.line >= 0) where += ":" + std::to_string(m.line + 1) + ":" + std::to_string(m.column + 1);
+    throw Error(where + ": " + (path.empty() ? "" : path + ": ") + why);
+  }
+
+  double number(const YAML::Node& n, const std::string& path) const {
+    if (!n.IsScalar()) fail(n, path, "expected a number, got " + describe_node(n));
+    const std::string& s = n.Scalar();
+    double v;
+    if (!detail::parse_double(detail::trim(s), v)) {
+      if (s == ".inf" || s == "-.inf" || s == "+.inf" || s == ".nan" || s == ".NaN" || s == ".Inf")
+        fail(n, path, "'" + s + "' is not a finite number");
+      fail(n, path, "expected a number, got '" + s + "'");
+    }
+    if (!std::isfinite(v)) fail(n, path, "'" + s + "' is not a finite number");
+    return v;
+  }
+
+  double number_in(const YAML::Node& n, const std::string& path, double lo, double hi,
+                   const char* unit, bool open_lo = false) const {
+    const double v = number(n, path);
+    if (v < lo || v > hi || (open_lo && v == lo)) {
+      std::ostringstream os;
+      os << v << " " << unit << " is out of range: must be " << (open_lo ? "> " : ">= ") << lo;
+      if (hi < 1e300) os << " and <= " << hi;
+      fail(n, path, os.str());
+    }
+    return v;
+  }
+
+  long integer(const YAML::Node& n, const std::string& path) const {
+    const double v = number(n, path);
+    if (v != std::floor(v) || std::abs(v) > 1e9)
+      fail(n, path, "expected an integer, got '" + n.Scalar() + "'");
+    return static_cast<long>(v);
+  }
+
+  std::string text(const YAML::Node& n, const std::string& path) const {
+    if (n.IsNull()) return "";
+    if (!n.IsScalar()) fail(n, path, "expected a text, got " + describe_node(n));
+    return n.Scalar();
+  }
+
+  Vec3 vec3(const YAML::Node& n, const std::string& path) const {
+    if (!n.IsSequence() || n.size() != 3)
+      fail(n, path, "expected a list of 3 numbers [x, y, z], got " + describe_node(n) +
+                        (n.IsSequence() ? " of " + std::to_string(n.size()) : ""));
+    static const char* axis[] = {"x", "y", "z"};
+    Vec3 v;
+    for (std::size_t i = 0; i < 3; ++i) v[static_cast<int>(i)] = number(n[i], join(path, axis[i]));
+    return v;
+  }
+
+  const std::string& file() const { return file_; }
+
+ private:
+  std::string file_;
+};
+
+// A mapping whose keys are checked: unknown and duplicate keys are refused.
+class Map {
+ public:
+  Map(const Loader& ld, const YAML::Node& n, std::string path, std::set<std::string> allowed)
+      : ld_(ld), node_(n), path_(std::move(path)) {
+    if (!n.IsMap()) ld.fail(n, path_, "expected a mapping (key: value lines), got " + describe_node(n));
+    for (auto it = n.begin(); it != n.end(); ++it) {
+      if (!it->first.IsScalar()) ld.fail(it->first, path_, "a key must be a plain name");
+      const std::string key = it->first.Scalar();
+      if (!allowed.count(key)) {
+        std::string list;
+        for (const auto& a : allowed) list += (list.empty() ? "" : ", ") + a;
+        ld.fail(it->first, join(path_, key), "unknown key (expected one of: " + list + ")");
+      }
+      if (!items_.emplace(key, it->second).second)
+        ld.fail(it->first, join(path_, key), "key given twice");
+    }
+  }
+  bool has(const std::string& key) const { return items_.count(key) != 0; }
+  YAML::Node get(const std::string& key) const {
+    const auto it = items_.find(key);
+    if (it == items_.end()) ld_.fail(node_, path_, "missing required key '" + key + "'");
+    return it->second;
+  }
+  std::string path(const std::string& key) const { return join(path_, key); }
+  const std::map<std::string, YAML::Node>& items() const { return items_; }
+  double number(const std::string& key) const { return ld_.number(get(key), path(key)); }
+
+ private:
+  const Loader& ld_;
+  YAML::Node node_;
+  std::string path_;
+  std::map<std::string, YAML::Node> items_;
+};
+
+std::set<std::string> kinematic_effect_names() {
+  std::set<std::string> s;
+  for (int t = 0; t < kin::kKinematicEffectTypes; ++t)
+    s.insert(kin::info(static_cast<kin::KinematicEffectType>(t)).name);
+  return s;
+}
+
+bool is_hex64(const std::string& s) {
+  if (s.size() != 64) return false;
+  for (char c : s)
+    if (!((c >= '0' && c <= '9') || (c >= 'a' && c <= 'f'))) return false;
+  return true;
+}
+
+void load_limb(const Loader& ld, const Map& parent, int i, ctl::MachineModel& m) {
+  const std::string key = "limb" + std::to_string(i + 1);
+  const Map limb(ld, parent.get(key), parent.path(key),
+                 {"assembly_mode", "d0", "stroke", "normal", "scale", "offset", "effects"});
+  kin::KinematicModel& km = m.kinematics;
+  {
+    const long mode = ld.integer(limb.get("assembly_mode"), limb.path("assembly_mode"));
+    if (mode != 1 && mode != -1)
+      ld.fail(limb.get("assembly_mode"), limb.path("assembly_mode"), "must be 1 or -1");
+    km.limbs.mode[i] = static_cast<int>(mode);
+  }
+  km.d0[i] = limb.number("d0");
+  {
+    const YAML::Node s = limb.get("stroke");
+    if (!s.IsSequence() || s.size() != 2)
+      ld.fail(s, limb.path("stroke"), "expected [min, max] in m, got " + describe_node(s));
+    m.strokes.min[i] = ld.number(s[0], limb.path("stroke") + ".min");
+    m.strokes.max[i] = ld.number(s[1], limb.path("stroke") + ".max");
+    if (!(m.strokes.max[i] > m.strokes.min[i]))
+      ld.fail(s, limb.path("stroke"), "min must be below max");
+  }
+  kin::LimbPlane& pl = km.planes[i];
+  pl.normal = ld.vec3(limb.get("normal"), limb.path("normal"));
+  if (std::abs(pl.normal.norm() - 1.0) > 1e-9) {
+    std::ostringstream os;
+    os.precision(17);
+    os << "the plane normal must be a unit vector; its length is " << pl.normal.norm();
+    ld.fail(limb.get("normal"), limb.path("normal"), os.str());
+  }
+  if (!(pl.normal[i] > 0.5))
+    ld.fail(limb.get("normal"), limb.path("normal"),
+            "the plane normal must point along the limb's own axis (component " +
+                std::string(1, "xyz"[i]) + " > 0.5)");
+  pl.scale = ld.number_in(limb.get("scale"), limb.path("scale"), 0.5, 1.5, "", true);
+  if (pl.scale == 1.5) ld.fail(limb.get("scale"), limb.path("scale"), "must be < 1.5");
+  pl.offset = limb.number("offset");
+  if (!limb.has("effects")) return;
+  const YAML::Node en = limb.get("effects");
+  if (en.IsNull()) return;
+  const Map effects(ld, en, limb.path("effects"), kinematic_effect_names());
+  for (const auto& [name, node] : effects.items()) {
+    const auto type = *kin::kinematic_effect_from_name(name);
+    const kin::KinematicEffectInfo& in = kin::info(type);
+    std::set<std::string> pnames;
+    for (int j = 0; j < in.n_params; ++j) pnames.insert(in.params[j].name);
+    const Map pm(ld, node, effects.path(name), pnames);
+    std::array<double, 3> v{};
+    for (int j = 0; j < in.n_params; ++j) {
+      const auto& p = in.params[j];
+      v[j] = ld.number_in(pm.get(p.name), pm.path(p.name), p.lower, p.upper, p.unit);
+    }
+    kin::set_params(km.effects[i], type, v);
+  }
+}
+
+ctl::DynamicEffect load_dynamic_effect(const Loader& ld, const YAML::Node& n, const std::string& path) {
+  if (!n.IsMap()) ld.fail(n, path, "expected a mapping {effect: NAME, axis: N, params...}");
+  const YAML::Node name_node = n["effect"];
+  if (!name_node) ld.fail(n, path, "missing required key 'effect' (the effect's name of effects.md)");
+  const std::string name = ld.text(name_node, join(path, "effect"));
+  const auto type = ctl::dynamic_effect_from_name(name);
+  if (!type) {
+    std::string list;
+    for (int t = 0; t < ctl::kDynamicEffectTypes; ++t)
+      list += (t ? ", " : "") + std::string(ctl::info(static_cast<ctl::DynamicEffectType>(t)).name);
+    ld.fail(name_node, join(path, "effect"), "unknown dynamic effect '" + name + "' (one of: " + list + ")");
+  }
+  const ctl::DynamicEffectInfo& in = ctl::info(*type);
+  std::set<std::string> allowed{"effect"};
+  if (in.per_axis) allowed.insert("axis");
+  for (int j = 0; j < in.n_params; ++j) allowed.insert(in.params[j].name);
+  const std::string epath = path + "(" + name + ")";
+  if (!in.per_axis && n["axis"])
+    ld.fail(n["axis"], join(epath, "axis"), name + " acts on all axes together: give no axis");
+  const Map m(ld, n, epath, allowed);
+  ctl::DynamicEffect e;
+  e.type = *type;
+  if (in.per_axis) {
+    const long axis = ld.integer(m.get("axis"), m.path("axis"));
+    if (axis < 1 || axis > 3) ld.fail(m.get("axis"), m.path("axis"), "must be 1, 2 or 3");
+    e.axis = static_cast<std::int8_t>(axis - 1);
+  }
+  for (int j = 0; j < in.n_params; ++j) {
+    const auto& p = in.params[j];
+    e.param[j] = ld.number_in(m.get(p.name), m.path(p.name), p.lower, p.upper, p.unit);
+  }
+  try {
+    e.validate();
+  } catch (const Error& err) {
+    ld.fail(n, epath, err.what());
+  }
+  return e;
+}
+
+}  // namespace
+
+ModelFile parse_model_file(const std::string& text, const std::string& name) {
+  const Loader ld(name);
+  YAML::Node root;
+  try {
+    root = YAML::Load(text);
+  } catch (const YAML::Exception& e) {
+    std::string where = name;
+    if (e.mark.line >= 0)
+      where += ":" + std::to_string(e.mark.line + 1) + ":" + std::to_string(e.mark.column + 1);
+    throw Error(where + ": not valid YAML: " + e.msg);
+  }
+  if (!root || root.IsNull()) throw Error(name + ": empty model file");
+  const Map top(ld, root, "",
+                {"cpmd_model", "geometry", "masses", "force_limit", "kinematics", "dynamic_effects",
+                 "fitted", "history"});
+  {
+    const long v = ld.integer(top.get("cpmd_model"), "cpmd_model");
+    if (v != kFormatVersion)
+      ld.fail(top.get("cpmd_model"), "cpmd_model",
+              "format version " + std::to_string(v) + " is not known (this build reads " +
+                  std::to_string(kFormatVersion) + ")");
+  }
+  ModelFile out;
+  ctl::MachineModel& m = out.model;
+  m = ctl::MachineModel::elkady();
+  {
+    const Map g(ld, top.get("geometry"), "geometry", {"L", "L1", "L2", "D", "singularity_margin"});
+    kin::LimbGeometry& lg = m.kinematics.limbs;
+    lg.L = ld.number_in(g.get("L"), g.path("L"), 0.0, 10.0, "m", true);
+    lg.L1 = ld.number_in(g.get("L1"), g.path("L1"), 0.0, 10.0, "m", true);
+    lg.L2 = ld.number_in(g.get("L2"), g.path("L2"), 0.0, 10.0, "m", true);
+    lg.D = ld.number_in(g.get("D"), g.path("D"), 0.0, 10.0, "m", true);
+    lg.singularity_margin = ld.number_in(g.get("singularity_margin"), g.path("singularity_margin"),
+                                         0.0, std::numbers::pi / 4, "rad");
+  }
+  {
+    const Map ms(ld, top.get("masses"), "masses", {"m1", "m2", "m3", "m4"});
+    m.masses.m1 = ld.number_in(ms.get("m1"), ms.path("m1"), 0.0, 1e4, "kg");
+    m.masses.m2 = ld.number_in(ms.get("m2"), ms.path("m2"), 0.0, 1e4, "kg");
+    m.masses.m3 = ld.number_in(ms.get("m3"), ms.path("m3"), 0.0, 1e4, "kg");
+    m.masses.m4 = ld.number_in(ms.get("m4"), ms.path("m4"), 0.0, 1e4, "kg");
+  }
+  m.force_limit = ld.number_in(top.get("force_limit"), "force_limit", 0.0, 1e6, "N", true);
+  {
+    const Map k(ld, top.get("kinematics"), "kinematics", {"limb1", "limb2", "limb3"});
+    m.kinematics.effects = {};
+    for (int i = 0; i < 3; ++i) load_limb(ld, k, i, m);
+  }
+  m.effects.clear();
+  if (top.has("dynamic_effects")) {
+    const YAML::Node de = top.get("dynamic_effects");
+    if (!de.IsNull()) {
+      if (!de.IsSequence())
+        ld.fail(de, "dynamic_effects", "expected a list of effects, got " + describe_node(de));
+      if (de.size() > static_cast<std::size_t>(ctl::DynamicEffects::kCapacity))
+        ld.fail(de, "dynamic_effects",
+                "at most " + std::to_string(ctl::DynamicEffects::kCapacity) + " dynamic effects");
+      for (std::size_t i = 0; i < de.size(); ++i)
+        m.effects.add(load_dynamic_effect(ld, de[i], "dynamic_effects[" + std::to_string(i) + "]"));
+    }
+  }
+  if (top.has("fitted") && !top.get("fitted").IsNull()) {
+    const YAML::Node fl = top.get("fitted");
+    if (!fl.IsSequence()) ld.fail(fl, "fitted", "expected a list, got " + describe_node(fl));
+    for (std::size_t i = 0; i < fl.size(); ++i) {
+      const Map f(ld, fl[i], "fitted[" + std::to_string(i) + "]",
+                  {"name", "unit", "nominal", "value", "std_error"});
+      FittedParameter p;
+      p.name = ld.text(f.get("name"), f.path("name"));
+      if (p.name.empty()) ld.fail(f.get("name"), f.path("name"), "must not be empty");
+      p.unit = ld.text(f.get("unit"), f.path("unit"));
+      p.nominal = f.number("nominal");
+      p.value = f.number("value");
+      if (f.has("std_error")) {
+        p.std_error = f.number("std_error");
+        if (p.std_error < 0.0 && p.std_error != -1.0)
+          ld.fail(f.get("std_error"), f.path("std_error"), "must be >= 0, or -1 when unknown");
+      }
+      out.fitted.push_back(std::move(p));
+    }
+  }
+  if (top.has("history") && !top.get("history").IsNull()) {
+    const YAML::Node hl = top.get("history");
+    if (!hl.IsSequence()) ld.fail(hl, "history", "expected a list, got " + describe_node(hl));
+    for (std::size_t i = 0; i < hl.size(); ++i) {
+      const Map h(ld, hl[i], "history[" + std::to_string(i) + "]",
+                  {"tool", "data_file", "data_sha256", "date", "note"});
+      Provenance p;
+      p.tool = ld.text(h.get("tool"), h.path("tool"));
+      p.date = ld.text(h.get("date"), h.path("date"));
+      if (h.has("data_file")) p.data_file = ld.text(h.get("data_file"), h.path("data_file"));
+      if (h.has("data_sha256")) {
+        p.data_sha256 = ld.text(h.get("data_sha256"), h.path("data_sha256"));
+        if (!p.data_sha256.empty() && !is_hex64(p.data_sha256))
+          ld.fail(h.get("data_sha256"), h.path("data_sha256"),
+                  "expected 64 lowercase hexadecimal digits (SHA-256)");
+      }
+      if (h.has("note")) p.note = ld.text(h.get("note"), h.path("note"));
+      out.history.push_back(std::move(p));
+    }
+  }
+  // The model's own checks (planes meeting in a point, effect consistency)
+  // and the prepared machine's (positive inertia with the effects).
+  try {
+    m.validate();
+    const ctl::Machine machine(m);
+    (void)machine;
+  } catch (const Error& e) {
+    throw Error(name + ": " + e.what());
+  }
+  return out;
+}
+
+ModelFile load_model_file(const std::string& path) {
+  return parse_model_file(detail::read_whole_file(path), path);
+}
+
+// ---------------------------------------------------------------- rendering
+
+namespace {
+
+// YAML double-quoted scalar: always safe, whatever the text holds.
+std::string quoted(const std::string& s) {
+  std::string out = "\"";
+  for (unsigned char c : s) {
+    switch (c) {
+      case '"': out += "\\\""; break;
+      case '\\': out += "\\\\"; break;
+      case '\n': out += "\\n"; break;
+      case '\t': out += "\\t"; break;
+      case '\r': out += "\\r"; break;
+      default:
+        if (c < 0x20 || c == 0x7f) {
+          static const char* hex = "0123456789abcdef";
+          out += "\\x";
+          out.push_back(hex[c >> 4]);
+          out.push_back(hex[c & 15]);
+        } else {
+          out.push_back(static_cast<char>(c));
+        }
+    }
+  }
+  return out + "\"";
+}
+
+class Writer {
+ public:
+  // "  key: value      # comment" with comments aligned in one column.
+  void kv(int indent, const std::string& key, const std::string& value, const std::string& comment = "") {
+    std::string line(static_cast<std::size_t>(indent), ' ');
+    line += key + ":";
+    if (!value.empty()) line += " " + value;
+    if (!comment.empty()) {
+      if (line.size() < kCommentColumn) line.resize(kCommentColumn, ' ');
+      else line += "  ";
+      line += "# " + comment;
+    }
+    out_ += line + "\n";
+  }
+  void raw(const std::string& s) { out_ += s; }
+  std::string str() const { return out_; }
+
+ private:
+  static constexpr std::size_t kCommentColumn = 32;
+  std::string out_;
+};
+
+std::string num(double v) { return detail::format_double(v); }
+std::string vec(const Vec3& v) { return "[" + num(v.x()) + ", " + num(v.y()) + ", " + num(v.z()) + "]"; }
+
+}  // namespace
+
+std::string render_model_file(const ModelFile& mf) {
+  const ctl::MachineModel& m = mf.model;
+  const kin::KinematicModel& km = m.kinematics;
+  const kin::LimbGeometry& g = km.limbs;
+  Writer w;
+  w.raw("# cpmd machine model: the 3-PRRR Cartesian parallel manipulator\n"
+        "# (shared/spec/machine.md and effects.md; the schema is docs/model-file.md).\n"
+        "# SI units throughout: m, s, kg, N, rad. Each number's unit is in the comment beside it.\n");
+  w.kv(0, "cpmd_model", std::to_string(kFormatVersion), "format version of this file");
+  w.raw("\n# Limb geometry (Elkady Table 1).\n");
+  w.kv(0, "geometry", "");
+  w.kv(2, "L", num(g.L), "m, half side of the platform square");
+  w.kv(2, "L1", num(g.L1), "m, first link A_i M_i");
+  w.kv(2, "L2", num(g.L2), "m, second link M_i B_i");
+  w.kv(2, "D", num(g.D), "m, offset of limb 3's base along y");
+  w.kv(2, "singularity_margin", num(g.singularity_margin),
+       "rad, elbow angle from straight/folded that counts as singular");
+  w.raw("\n# Link masses of one limb (Elkady Table 2).\n");
+  w.kv(0, "masses", "");
+  w.kv(2, "m1", num(m.masses.m1), "kg, first link (uniform rod)");
+  w.kv(2, "m2", num(m.masses.m2), "kg, second link");
+  w.kv(2, "m3", num(m.masses.m3), "kg, prismatic joint and actuator");
+  w.kv(2, "m4", num(m.masses.m4), "kg, tool");
+  w.raw("\n");
+  w.kv(0, "force_limit", num(m.force_limit), "N, largest |F_i| an actuator may be commanded");
+  w.raw("\n# Per limb i (limb i drives axis i): the assembly mode, the actuator, the calibrated\n"
+        "# plane u^T p = (d~ + d0) c + n (Kim eq. 5) and the kinematic effects of effects.md.\n");
+  w.kv(0, "kinematics", "");
+  static const char* drives[] = {"drives x", "drives y", "drives z"};
+  for (int i = 0; i < 3; ++i) {
+    const kin::LimbPlane& pl = km.planes[i];
+    w.kv(2, "limb" + std::to_string(i + 1), "", drives[i]);
+    w.kv(4, "assembly_mode", std::to_string(g.mode[i]), "+1 or -1, the elbow's branch");
+    w.kv(4, "d0", num(km.d0[i]), "m, actuator offset: p_i = d_i + d0_i nominally");
+    w.kv(4, "stroke", "[" + num(m.strokes.min[i]) + ", " + num(m.strokes.max[i]) + "]",
+         "m, encoder range [min, max]");
+    w.kv(4, "normal", vec(pl.normal), "u, unit normal of the limb's plane");
+    w.kv(4, "scale", num(pl.scale), "c (1), cos(gamma) in Kim's terms");
+    w.kv(4, "offset", num(pl.offset), "n (m), projected offset of the plane");
+    std::vector<kin::KinematicEffectType> present;
+    for (int t = 0; t < kin::kKinematicEffectTypes; ++t) {
+      const auto type = static_cast<kin::KinematicEffectType>(t);
+      const auto v = kin::get_params(km.effects[i], type);
+      bool any = false;
+      for (int j = 0; j < kin::info(type).n_params; ++j) any |= (v[j] != 0.0);
+      if (any) present.push_back(type);
+    }
+    if (present.empty()) {
+      w.kv(4, "effects", "{}", "kinematic effects by name (effects.md)");
+      continue;
+    }
+    w.kv(4, "effects", "", "kinematic effects by name (effects.md)");
+    for (const auto type : present) {
+      const kin::KinematicEffectInfo& in = kin::info(type);
+      const auto v = kin::get_params(km.effects[i], type);
+      w.kv(6, in.name, "");
+      for (int j = 0; j < in.n_params; ++j) w.kv(8, in.params[j].name, num(v[j]), in.params[j].unit);
+    }
+  }
+  w.raw("\n# Dynamic effects (effects.md): forces beyond Elkady's rigid-body model, in the order\n"
+        "# the model adds them. Per-axis effects name their axis (1..3).\n");
+  if (m.effects.size() == 0) {
+    w.kv(0, "dynamic_effects", "[]");
+  } else {
+    w.kv(0, "dynamic_effects", "");
+    for (const ctl::DynamicEffect& e : m.effects) {
+      const ctl::DynamicEffectInfo& in = ctl::info(e.type);
+      w.kv(2, "- effect", in.name);
+      if (in.per_axis) w.kv(4, "axis", std::to_string(e.axis + 1));
+      for (int j = 0; j < in.n_params; ++j) w.kv(4, in.params[j].name, num(e.param[j]), in.params[j].unit);
+    }
+  }
+  w.raw("\n# Parameters a tool fitted: nominal (before) and fitted value, standard error\n"
+        "# (-1: unknown), in `unit`.\n");
+  if (mf.fitted.empty()) {
+    w.kv(0, "fitted", "[]");
+  } else {
+    w.kv(0, "fitted", "");
+    for (const FittedParameter& p : mf.fitted) {
+      w.kv(2, "- name", quoted(p.name));
+      w.kv(4, "unit", quoted(p.unit));
+      w.kv(4, "nominal", num(p.nominal));
+      w.kv(4, "value", num(p.value));
+      w.kv(4, "std_error", num(p.std_error < 0.0 ? -1.0 : p.std_error));
+    }
+  }
+  w.raw("\n# Where this model came from, oldest first.\n");
+  if (mf.history.empty()) {
+    w.kv(0, "history", "[]");
+  } else {
+    w.kv(0, "history", "");
+    for (const Provenance& p : mf.history) {
+      w.kv(2, "- tool", quoted(p.tool));
+      w.kv(4, "data_file", quoted(p.data_file));
+      w.kv(4, "data_sha256", quoted(p.data_sha256));
+      w.kv(4, "date", quoted(p.date), "ISO 8601, UTC");
+      w.kv(4, "note", quoted(p.note));
+    }
+  }
+  return w.str();
+}
+
+void save_model_file(const std::string& path, const ModelFile& m, const std::string& forbid_path) {
+  namespace fs = std::filesystem;
+  if (!forbid_path.empty()) {
+    std::error_code ec;
+    const bool same = (fs::exists(path, ec) && fs::exists(forbid_path, ec) &&
+                       fs::equivalent(path, forbid_path, ec)) ||
+                      fs::weakly_canonical(path, ec) == fs::weakly_canonical(forbid_path, ec);
+    if (same)
+      throw Error(path + ": refusing to overwrite the input model file " + forbid_path +
+                  "; write the new model to another file");
+  }
+  const std::string text = render_model_file(m);
+  // Never write a file that would not load: the same checks as a reader.
+  parse_model_file(text, path);
+  write_file_atomically(path, text);
+}
+
+}  // namespace cpm::io
