@@ -181,6 +181,15 @@ void parse_rows(Table& tb) {
     return false;
   };
   // Map each field of the header to a column slot (-1: ignored).
+  {
+    // A file without a header: its first row would be taken for one.
+    bool numeric = true;
+    double v;
+    for (const auto f : tb.header_fields) numeric = numeric && detail::parse_double(f, v);
+    if (numeric)
+      tb.fail(tb.header.number, "this line holds numbers, not column names: the first line that is "
+                                "not a comment must be the header (e.g. d1,d2,d3,...)");
+  }
   std::vector<int> slot(tb.header_fields.size(), -1);
   for (std::size_t j = 0; j < tb.header_fields.size(); ++j) {
     const std::string_view nm = tb.header_fields[j];

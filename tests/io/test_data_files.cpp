@@ -309,6 +309,8 @@ TEST(DataFiles, EmptyFilesAndHeaderWithoutRowsAreRefused) {
               HasSubstr("e.csv: empty file: no header line"));
   EXPECT_THAT(error_of([] { parse_data(kBallbarHead + "d1,d2,d3,length\n\n\n", "e.csv"); }),
               HasSubstr("e.csv:3: no data: the header is not followed by any row"));
+  EXPECT_THAT(error_of([] { parse_data(kBallbarHead + "0.1,0.2,0.3,0.1\n0,0,0,0.1\n", "e.csv"); }),
+              HasSubstr("e.csv:3: this line holds numbers, not column names"));
   EXPECT_THAT(error_of([] { parse_data(kBallbarHead + "d1,d2,,length\n0,0,0,0\n", "e.csv"); }),
               HasSubstr("e.csv:3: column 3 of the header has no name"));
   EXPECT_THAT(error_of([] { parse_data(kBallbarHead + "d1,d2,d3,d1,length\n0,0,0,0,0.1\n", "e.csv"); }),

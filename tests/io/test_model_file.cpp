@@ -310,3 +310,22 @@ TEST(ModelFile, NowIsIso8601Utc) {
 
 }  // namespace
 }  // namespace cpm::io
+
+namespace cpm::io {
+namespace {
+
+TEST(ModelFile, TheExampleOfTheDocsLoads) {
+  const std::string doc = test::read_text("docs/model-file.md");
+  const auto begin = doc.find("```yaml\n");
+  ASSERT_NE(begin, std::string::npos);
+  const auto end = doc.find("```", begin + 8);
+  const ModelFile mf = parse_model_file(doc.substr(begin + 8, end - begin - 8), "docs/model-file.md");
+  EXPECT_EQ(mf.model.effects.size(), 3);
+  EXPECT_EQ(mf.model.kinematics.effects[1].backlash, 1.2e-5);
+  EXPECT_EQ(mf.history.size(), 2u);
+  ASSERT_EQ(mf.fitted.size(), 2u);
+  EXPECT_EQ(mf.fitted[0].name, "kinematics.limb3.scale");
+}
+
+}  // namespace
+}  // namespace cpm::io
