@@ -1,0 +1,78 @@
+// cpmd's configuration: one YAML file (see config/sim.yaml, docs/daemon.md).
+//
+// Loading is strict: an unknown key, a missing key, a value of the wrong type
+// or out of range is refused with the file, line:column, the key's path and
+// the reason, e.g.
+//   "sim.yaml:12:9: limits.velocity: must be > 0 and <= 2 m/s, got -1".
+// Relative file paths in the config are relative to the config file's folder.
+#pragma once
+
+#include <string>
+
+#include "cpm/control/controller.hpp"
+#include "cpm/sim/plant.hpp"
+
+namespace cpm::daemon {
+
+struct LoopConfig {
+  double rate_hz = 1000.0;          // control rate (Hz)
+  int priority = 80;                // SCHED_FIFO priority (1..99); 0 = normal scheduling
+  int cpu = -1;                     // CPU to pin the loop to; -1 = no pinning
+  bool lock_memory = true;          // mlockall + pre-fault
+  int max_consecutive_overruns = 5; // this many in a row is a fault
+};
+
+struct LimitsConfig {
+  Vec3 workspace_min = Vec3(0.235, 0.235, 0.2378);  // task-space soft limits (m)
+  Vec3 workspace_max = Vec3(0.615, 0.615, 0.5168);
+  double velocity = 0.5;            // max trajectory speed (m/s)
+  double acceleration = 5.0;        // max trajectory acceleration (m/s^2)
+  double overspeed = 0.8;           // measured platform speed that is a fault (m/s)
+  double force = 120.0;             // actuator force limit (N); <= the model's
+  double following_error = 0.005;   // |p_ref - p| that is a fault (m)
+  double stop_deceleration = 2.0;   // deceleration of a stop (m/s^2)
+  double enable_timeout = 0.5;      // drives must report enabled within this (s)
+};
+
+struct ControllerConfig {
+  ctl::ControlLaw law = ctl::ControlLaw::computed_torque;
+  ctl::Gains gains = ctl::table3_gains(ctl::ControlLaw::computed_torque);
+};
+
+struct LcmConfig {
+  std::string url = "udpm://239.255.76.67:7667?ttl=0";  // ttl=0: never leaves the host
+  std::string state_channel = "CPMD_STATE";
+  std::string stats_channel = "CPMD_STATS";
+  std::string trajectory_channel = "CPMD_TRAJ";
+  std::string control_channel = "CPMD_CONTROL";
+  std::string ack_channel = "CPMD_ACK";
+  int state_decimation = 1;  // publish the state every N cycles
+};
+
+struct SimConfig {
+  std::string truth_model_file;   // the true machine (model file); "" = same as model_file
+  sim::PlantOptions plant;
+  Vec3 initial_position = Vec3(0.600, 0.425, 0.300);
+  double enable_delay = 0.005;    // s
+};
+
+struct DaemonConfig {
+  std::string source;             // the file it came from
+  std::string model_file;         // the model the controller believes; "builtin:elkady" = machine.md
+  std::string backend = "sim";    // "sim" (now), "canopen" (next)
+  SimConfig sim;
+  LoopConfig loop;
+  ControllerConfig controller;
+  LimitsConfig limits;
+  LcmConfig lcm;
+};
+
+DaemonConfig load_config(const std::string& path);
+DaemonConfig parse_config(const std::string& text, const std::string& name,
+                          const std::string& base_dir = ".");
+
+// Load a model file ("builtin:elkady" is the nominal machine of machine.md),
+// throws Error naming the file.
+ctl::MachineModel load_model(const std::string& path);
+
+}  // namespace cpm::daemon

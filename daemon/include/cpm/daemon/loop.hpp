@@ -1,0 +1,220 @@
+// The control loop of cpmd: the state machine and one control cycle.
+//
+// cycle() is the real-time part: a straight list of phases over preallocated
+// data (architecture.md), allocation-free, lock-free, noexcept, and with no
+// system call but the backend's I/O (and clock_gettime, a vDSO read, for the
+// phase timers):
+//   1 read backend   drive feedback, drive status, e-stop
+//   2 estimate       calibrated forward kinematics: p, p_dot, J
+//      (commands)    at most a few commands from the command queue
+//   3 trajectory     reference at the cycle's nominal time k / rate
+//   4 inverse kin.   d_ref = IK(p_ref) of the calibrated model
+//   5 controller     the selected law, actuator forces, force limit
+//   6 safety         following error, soft limits, overspeed, drives, e-stop,
+//                    overruns -> latched faults
+//   7 write backend  forces, enable
+//   8 publish        state snapshot into the SPSC ring for the LCM thread
+// The schedule (clock_nanosleep on an absolute time) lives in rt.hpp; tests
+// call cycle() directly, deterministic and without threads.
+//
+// States and commands (docs/daemon.md has the full table):
+//   init -> disabled            when the loop starts
+//   disabled --enable--> enabling --drives enabled--> holding
+//   holding --segment--> moving --queue empty--> holding
+//   moving --stop--> stopping --at rest--> holding
+//   moving/stopping --disable--> stopping --at rest--> disabled
+//   enabling/holding --disable--> disabled
+//   any --fault--> fault (latched, drives off) --reset--> disabled
+// On every entry to enabling and on reset the hold point is resynchronised
+// to the measured position, so nothing jumps.
+#pragma once
+
+#include <atomic>
+#include <cstdint>
+#include <optional>
+#include <variant>
+
+#include <cpm_msgs/loop_stats_t.hpp>
+#include <cpm_msgs/state_t.hpp>
+
+#include "cpm/daemon/backend.hpp"
+#include "cpm/daemon/config.hpp"
+#include "cpm/daemon/spsc.hpp"
+#include "cpm/daemon/stream_trajectory.hpp"
+
+namespace cpm::daemon {
+
+enum class Mode : std::uint8_t { init = 0, disabled, enabling, holding, moving, stopping, fault };
+const char* mode_name(Mode m) noexcept;
+
+// Latched fault bits (= state_t.FAULT_*).
+enum FaultBit : std::uint32_t {
+  kFaultFollowingError = 1,
+  kFaultSoftLimit = 2,
+  kFaultOverspeed = 4,
+  kFaultController = 8,
+  kFaultEstimate = 16,
+  kFaultDrive = 32,
+  kFaultBackendIo = 64,
+  kFaultEstop = 128,
+  kFaultOverrun = 256,
+  kFaultEnableTimeout = 512,
+};
+// "following_error,estop" for a mask (static storage per bit; the joined text
+// is built in `buf`, not for the real-time path).
+const char* fault_bit_name(std::uint32_t bit) noexcept;
+
+// A queued trajectory segment: one of the trajectory kinds, by value.
+struct Segment {
+  std::int64_t id = -1;
+  std::variant<std::monostate, ctl::CircleTrajectory, ctl::PointToPoint, StreamTrajectory> traj;
+  Vec3 start = Vec3::Zero(), end = Vec3::Zero();
+  [[nodiscard]] const ctl::Trajectory* get() const noexcept;
+};
+
+// Command codes (= control_command_t.CMD_* and ack_t sources).
+enum class CommandKind : std::uint8_t {
+  none = 0, enable = 1, disable = 2, stop = 3, reset = 4, select_controller = 5, load_model = 6,
+  ping = 7, segment = 16,
+};
+
+// A command the non-real-time side has decoded and validated, for the loop.
+struct Command {
+  CommandKind kind = CommandKind::none;
+  std::int64_t id = 0;
+  std::int8_t source = 1;        // ack_t.source
+  std::int8_t code = 0;          // the original CMD_* or KIND_*
+  std::optional<ctl::Controller> controller;  // select_controller, load_model
+  const ctl::Machine* machine = nullptr;      // load_model
+  Segment segment;                            // segment
+};
+
+// The loop's answer to a command. `message` is a string literal.
+struct Ack {
+  std::int64_t id = 0;
+  std::int8_t source = 1, code = 0;
+  bool accepted = false;
+  std::int16_t reason = 0;        // ack_t.REASON_*
+  const char* message = "";
+  Mode mode = Mode::init;
+  std::int16_t queue_depth = 0;
+  const ctl::Machine* retired = nullptr;  // a model the loop no longer uses (load_model)
+  Vec3 queue_end = Vec3::Zero();           // where the next segment must start
+};
+
+// Timing statistics: histograms as in loop_stats_t.
+inline constexpr int kSeriesLatency = 0, kSeriesCycle = 9, kSeries = 10, kBins = 237;
+int histogram_bin(std::int64_t ns) noexcept;
+// Lower edge of bin k (ns).
+std::int64_t histogram_bin_floor(int k) noexcept;
+
+class ControlLoop {
+ public:
+  static constexpr int kQueueCapacity = 32;  // trajectory segments
+
+  // Keeps references to `backend` and `machine`; the controller refers to `machine`.
+  ControlLoop(const DaemonConfig& config, Backend& backend, const ctl::Machine& machine,
+              const ctl::Controller& controller);
+
+  // --- real-time side -------------------------------------------------
+  // One control cycle at nominal time cycle / rate. `latency_ns` is how late
+  // the thread woke (recorded in the statistics).
+  void cycle(std::int64_t cycle, std::int64_t latency_ns) noexcept;
+  // The scheduler's verdict on the cycle just run: whether it overran (ended
+  // after the next slot began) and how many slots it skipped.
+  void record_schedule(bool overrun, std::int64_t skipped) noexcept;
+  // Shut down: disable the drives on the next cycle (from any thread).
+  void request_shutdown() noexcept { shutdown_.store(true, std::memory_order_release); }
+
+  // --- queues to and from the other threads ----------------------------
+  SpscRing<Command, 16>& commands() noexcept { return commands_; }
+  SpscRing<Ack, 64>& acks() noexcept { return acks_; }
+  SpscRing<cpm_msgs::state_t, 4096>& snapshots() noexcept { return snapshots_; }
+  SpscRing<cpm_msgs::loop_stats_t, 4>& stats() noexcept { return stats_out_; }
+  // Cycles completed (the watchdog is fed only while this advances).
+  [[nodiscard]] std::int64_t cycles_done() const noexcept { return cycles_done_.load(std::memory_order_acquire); }
+  // Latest mode (any thread).
+  [[nodiscard]] Mode mode() const noexcept { return mode_atomic_.load(std::memory_order_acquire); }
+  void set_scheduling_info(bool realtime, bool memory_locked) noexcept;
+
+  // Last state as the loop wrote it (test thread only, when no loop thread runs).
+  [[nodiscard]] const cpm_msgs::state_t& last_state() const noexcept { return state_; }
+  [[nodiscard]] const cpm_msgs::loop_stats_t& current_stats() const noexcept { return stats_; }
+  [[nodiscard]] double period() const noexcept { return dt_; }
+
+ private:
+  struct Timer;
+  void handle_commands(std::int64_t k) noexcept;
+  void handle(const Command& c, std::int64_t k) noexcept;
+  void reply(const Command& c, bool ok, std::int16_t reason, const char* msg,
+             const ctl::Machine* retired = nullptr) noexcept;
+  void latch(std::uint32_t bit, int axis, double value, double limit, std::int64_t k) noexcept;
+  void enter(Mode m) noexcept;
+  void flush_queue() noexcept;
+  void start_stop(std::int64_t k) noexcept;
+  bool start_next_segment(std::int64_t k) noexcept;
+  void finish_segment() noexcept;
+  ctl::TrajectorySample reference(std::int64_t k) noexcept;
+  void fill_state(std::int64_t k) noexcept;
+  void add_sample(int series, std::int64_t ns) noexcept;
+
+  DaemonConfig cfg_;
+  Backend* backend_;
+  const ctl::Machine* machine_;
+  ctl::Controller controller_;
+  double dt_;
+
+  // Queues.
+  SpscRing<Command, 16> commands_;
+  SpscRing<Ack, 64> acks_;
+  SpscRing<cpm_msgs::state_t, 4096> snapshots_;
+  SpscRing<cpm_msgs::loop_stats_t, 4> stats_out_;
+
+  // State machine.
+  Mode mode_ = Mode::init;
+  std::atomic<Mode> mode_atomic_{Mode::init};
+  std::uint32_t faults_ = 0;
+  std::uint32_t first_fault_ = 0;
+  int fault_axis_ = -1;
+  double fault_value_ = 0, fault_limit_ = 0;
+  std::int64_t fault_cycle_ = -1;
+  std::int64_t enabling_since_ = 0;
+  bool disable_after_stop_ = false;
+  std::atomic<bool> shutdown_{false};
+  int consecutive_overruns_ = 0;
+  bool overrun_fault_pending_ = false;
+
+  // Trajectory queue (owned by the loop): a ring of segments.
+  std::unique_ptr<std::array<Segment, kQueueCapacity>> queue_;
+  int q_head_ = 0, q_count_ = 0;  // q_head_ = the playing (or next) segment
+  bool playing_ = false;
+  std::int64_t segment_start_cycle_ = 0;
+  Vec3 hold_ = Vec3::Zero();      // hold point = end of the queue when idle
+  Vec3 queue_end_ = Vec3::Zero();
+  // Stop profile.
+  Vec3 stop_p0_ = Vec3::Zero(), stop_dir_ = Vec3::Zero();
+  double stop_v0_ = 0, stop_T_ = 0;
+  std::int64_t stop_start_cycle_ = 0;
+  // Tracking of the playing segment.
+  double seg_sum_e2_ = 0, seg_max_e_ = 0;
+  std::int32_t seg_n_ = 0;
+  std::int64_t last_seg_id_ = -1;
+  double last_seg_rmse_ = 0, last_seg_max_ = 0;
+  std::int32_t last_seg_n_ = 0;
+
+  // Per-cycle data.
+  BackendInput in_;
+  BackendOutput out_;
+  ctl::ControlInput cin_;
+  ctl::ControlOutput cout_;
+  ctl::TaskState est_;
+  ctl::TrajectorySample ref_;
+  Vec3 d_ref_ = Vec3::Zero();
+  bool estimate_ok_ = false;
+  cpm_msgs::state_t state_{};
+  cpm_msgs::loop_stats_t stats_{};
+  std::int64_t dropped_ = 0;
+  std::atomic<std::int64_t> cycles_done_{0};
+};
+
+}  // namespace cpm::daemon

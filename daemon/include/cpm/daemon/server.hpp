@@ -1,0 +1,95 @@
+// The command/state side of cpmd (not real-time): one thread with the LCM
+// handle. It decodes commands, validates trajectories against the model and
+// the configured limits (the expensive checks, with messages that say what
+// and where), hands what passed to the loop through its SPSC queue, and
+// publishes the loop's acknowledgements, state snapshots and statistics.
+#pragma once
+
+#include <atomic>
+#include <map>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <cpm_msgs/ack_t.hpp>
+#include <cpm_msgs/control_command_t.hpp>
+#include <cpm_msgs/trajectory_command_t.hpp>
+
+#include "cpm/daemon/loop.hpp"
+
+namespace lcm {
+class LCM;
+class ReceiveBuffer;
+}  // namespace lcm
+
+namespace cpm::daemon {
+
+// Owns the prepared machine models; the loop holds a pointer to the current one.
+class ModelStore {
+ public:
+  explicit ModelStore(std::unique_ptr<ctl::Machine> first);
+  [[nodiscard]] const ctl::Machine& current() const noexcept { return *current_; }
+  const ctl::Machine* add(std::unique_ptr<ctl::Machine> m);
+  void make_current(const ctl::Machine* m) noexcept { current_ = m; }
+  void release(const ctl::Machine* m);  // free a model the loop no longer uses
+
+ private:
+  std::vector<std::unique_ptr<ctl::Machine>> models_;
+  const ctl::Machine* current_;
+};
+
+// Result of validating a trajectory command: a segment, or a reason.
+struct Validation {
+  bool ok = false;
+  std::int16_t reason = 0;  // ack_t.REASON_*
+  std::string message;
+  Segment segment;
+};
+
+// Build and validate a segment starting at `start` (m) against the model,
+// the soft limits and the velocity/acceleration limits. Pure, for tests.
+Validation validate_segment(const cpm_msgs::trajectory_command_t& cmd, const Vec3& start,
+                            const ctl::Machine& machine, const LimitsConfig& limits, double dt);
+
+class Server {
+ public:
+  Server(const DaemonConfig& cfg, ControlLoop& loop, ModelStore& models);
+  ~Server();
+  // Runs until `stop` is set. Throws Error when LCM cannot start.
+  void run(const std::atomic<bool>& stop);
+  // Publish what the loop queued (acks, snapshots, statistics); returns how many.
+  int drain();
+
+ private:
+  void on_control(const lcm::ReceiveBuffer* rbuf, const std::string& channel,
+                  const cpm_msgs::control_command_t* msg);
+  void on_trajectory(const lcm::ReceiveBuffer* rbuf, const std::string& channel,
+                     const cpm_msgs::trajectory_command_t* msg);
+  void publish_ack(std::int64_t id, std::int8_t source, std::int8_t code, bool ok, std::int16_t reason,
+                   const std::string& message, Mode mode, std::int16_t depth);
+  bool send(Command& c);
+
+  DaemonConfig cfg_;
+  ControlLoop& loop_;
+  ModelStore& models_;
+  std::unique_ptr<lcm::LCM> lcm_;
+  cpm_msgs::state_t latest_{};
+  bool have_state_ = false;
+  int inflight_segments_ = 0;
+  Vec3 planned_end_ = Vec3::Zero();
+  bool ack_newer_than_state_ = false;
+  Vec3 ack_end_ = Vec3::Zero();
+  ctl::ControlLaw law_;
+  ctl::Gains gains_;
+  std::unique_ptr<Command> scratch_;
+  std::map<std::int64_t, const ctl::Machine*> pending_models_;
+  std::map<std::int64_t, std::pair<ctl::ControlLaw, ctl::Gains>> pending_laws_;  // a Command is large: build it off the stack
+};
+
+// systemd's notification protocol ($NOTIFY_SOCKET), without libsystemd.
+// Returns false when not run by systemd or when sending failed.
+bool sd_notify(const std::string& message);
+// The watchdog interval systemd asks for (s), 0 when none.
+double sd_watchdog_interval();
+
+}  // namespace cpm::daemon

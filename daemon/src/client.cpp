@@ -1,0 +1,122 @@
+#include "cpm/daemon/client.hpp"
+
+#include <unistd.h>
+
+#include <chrono>
+#include <lcm/lcm-cpp.hpp>
+#include <random>
+
+#include "cpm/daemon/loop.hpp"
+
+namespace cpm::daemon {
+
+using Clock = std::chrono::steady_clock;
+
+const char* mode_text(std::int8_t mode) noexcept {
+  if (mode < 0 || mode > static_cast<std::int8_t>(Mode::fault)) return "unknown";
+  return mode_name(static_cast<Mode>(mode));
+}
+
+std::string fault_text(std::int32_t mask) {
+  std::string s;
+  for (std::uint32_t bit = 1; bit != 0 && bit <= static_cast<std::uint32_t>(mask); bit <<= 1)
+    if (static_cast<std::uint32_t>(mask) & bit) {
+      if (!s.empty()) s.push_back(',');
+      s.append(fault_bit_name(bit));
+    }
+  return s;
+}
+
+Client::Client(const LcmConfig& cfg) : cfg_(cfg) {
+  lcm_ = std::make_unique<lcm::LCM>(cfg_.url);
+  if (!lcm_->good()) throw Error("lcm: cannot open '" + cfg_.url + "'");
+  lcm_->subscribe(cfg_.ack_channel, &Client::on_ack, this);
+  lcm_->subscribe(cfg_.state_channel, &Client::on_state_msg, this);
+  lcm_->subscribe(cfg_.stats_channel, &Client::on_stats_msg, this);
+  std::random_device rd;
+  next_id_ = (static_cast<std::int64_t>(rd() & 0x7fffffu) << 32) ^ (static_cast<std::int64_t>(::getpid()) << 8);
+}
+
+Client::~Client() = default;
+
+std::int64_t Client::next_id() { return ++next_id_; }
+
+void Client::on_ack(const lcm::ReceiveBuffer*, const std::string&, const cpm_msgs::ack_t* m) { acks_[m->id] = *m; }
+void Client::on_state_msg(const lcm::ReceiveBuffer*, const std::string&, const cpm_msgs::state_t* m) {
+  last_state_ = *m;
+  if (state_cb_) state_cb_(*m);
+}
+void Client::on_stats_msg(const lcm::ReceiveBuffer*, const std::string&, const cpm_msgs::loop_stats_t* m) {
+  last_stats_ = *m;
+}
+
+int Client::handle(double timeout_s) {
+  const auto end = Clock::now() + std::chrono::duration<double>(timeout_s);
+  int n = 0;
+  for (;;) {
+    const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(end - Clock::now()).count();
+    if (left <= 0) break;
+    const int rc = lcm_->handleTimeout(static_cast<int>(left));
+    if (rc < 0) throw Error("lcm: receive failed");
+    if (rc == 0) break;
+    ++n;
+  }
+  return n;
+}
+
+cpm_msgs::ack_t Client::wait_ack(std::int64_t id, double timeout_s) {
+  const auto end = Clock::now() + std::chrono::duration<double>(timeout_s);
+  while (Clock::now() < end) {
+    if (auto it = acks_.find(id); it != acks_.end()) {
+      cpm_msgs::ack_t a = it->second;
+      acks_.erase(it);
+      return a;
+    }
+    lcm_->handleTimeout(20);
+  }
+  if (auto it = acks_.find(id); it != acks_.end()) return it->second;
+  throw Error("no answer from cpmd within " + std::to_string(timeout_s) + " s (is it running? LCM URL " +
+              cfg_.url + ", channel " + cfg_.control_channel + ")");
+}
+
+cpm_msgs::ack_t Client::control(cpm_msgs::control_command_t cmd, double timeout_s) {
+  cmd.id = next_id();
+  cmd.utime = std::chrono::duration_cast<std::chrono::microseconds>(
+                  std::chrono::system_clock::now().time_since_epoch()).count();
+  lcm_->publish(cfg_.control_channel, &cmd);
+  return wait_ack(cmd.id, timeout_s);
+}
+
+cpm_msgs::ack_t Client::control(std::int8_t command, double timeout_s) {
+  cpm_msgs::control_command_t c{};
+  c.command = command;
+  return control(c, timeout_s);
+}
+
+std::int64_t Client::send_trajectory(cpm_msgs::trajectory_command_t cmd) {
+  if (cmd.id == 0) cmd.id = next_id();
+  cmd.utime = std::chrono::duration_cast<std::chrono::microseconds>(
+                  std::chrono::system_clock::now().time_since_epoch()).count();
+  lcm_->publish(cfg_.trajectory_channel, &cmd);
+  return cmd.id;
+}
+
+cpm_msgs::ack_t Client::trajectory(cpm_msgs::trajectory_command_t cmd, double timeout_s) {
+  return wait_ack(send_trajectory(cmd), timeout_s);
+}
+
+std::optional<cpm_msgs::state_t> Client::state(double timeout_s) {
+  last_state_.reset();
+  const auto end = Clock::now() + std::chrono::duration<double>(timeout_s);
+  while (!last_state_ && Clock::now() < end) lcm_->handleTimeout(20);
+  return last_state_;
+}
+
+std::optional<cpm_msgs::loop_stats_t> Client::stats(double timeout_s) {
+  last_stats_.reset();
+  const auto end = Clock::now() + std::chrono::duration<double>(timeout_s);
+  while (!last_stats_ && Clock::now() < end) lcm_->handleTimeout(50);
+  return last_stats_;
+}
+
+}  // namespace cpm::daemon

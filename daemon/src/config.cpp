@@ -1,0 +1,240 @@
+#include "cpm/daemon/config.hpp"
+
+#include <yaml-cpp/yaml.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <set>
+#include <sstream>
+
+#ifdef CPM_HAVE_IO
+#include "cpm/io/model_file.hpp"
+#endif
+
+namespace cpm::daemon {
+namespace {
+
+// Walks the YAML tree, refusing what it does not know, with file:line:col and key path.
+class Reader {
+ public:
+  explicit Reader(std::string name) : name_(std::move(name)) {}
+
+  [[noreturn]] void fail(const YAML::Node& n, const std::string& path, const std::string& why) const {
+    std::ostringstream os;
+    os << name_;
+    if (n.IsDefined() && n.Mark().line >= 0) os << ':' << n.Mark().line + 1 << ':' << n.Mark().column + 1;
+    os << ": " << path << ": " << why;
+    throw Error(os.str());
+  }
+
+  // The map at `path`, with exactly the keys of `required` and any of `optional`.
+  YAML::Node map(const YAML::Node& n, const std::string& path, const std::set<std::string>& required,
+                 const std::set<std::string>& optional = {}) const {
+    if (!n.IsMap()) fail(n, path.empty() ? "(top level)" : path, "expected a mapping of keys");
+    for (const auto& kv : n) {
+      const std::string key = kv.first.as<std::string>();
+      if (!required.count(key) && !optional.count(key)) {
+        std::string known;
+        for (const auto& k : required) known += (known.empty() ? "" : ", ") + k;
+        for (const auto& k : optional) known += (known.empty() ? "" : ", ") + k;
+        fail(kv.first, join(path, key), "unknown key (known here: " + known + ")");
+      }
+    }
+    for (const auto& k : required)
+      if (!n[k]) fail(n, join(path, k), "missing (required)");
+    return n;
+  }
+
+  static std::string join(const std::string& a, const std::string& b) { return a.empty() ? b : a + "." + b; }
+
+  double number(const YAML::Node& n, const std::string& path, double lo, double hi, const char* unit) const {
+    if (!n.IsScalar()) fail(n, path, "expected a number");
+    double v = 0;
+    try {
+      v = n.as<double>();
+    } catch (const YAML::Exception&) {
+      fail(n, path, "expected a number, got '" + n.Scalar() + "'");
+    }
+    if (!std::isfinite(v) || v < lo || v > hi) {
+      std::ostringstream os;
+      os << "must be within " << lo << " .. " << hi << ' ' << unit << ", got " << n.Scalar();
+      fail(n, path, os.str());
+    }
+    return v;
+  }
+  // Strictly positive variant: (0, hi].
+  double positive(const YAML::Node& n, const std::string& path, double hi, const char* unit) const {
+    const double v = number(n, path, 0.0, hi, unit);
+    if (!(v > 0.0)) fail(n, path, std::string("must be > 0 ") + unit + ", got " + n.Scalar());
+    return v;
+  }
+  long integer(const YAML::Node& n, const std::string& path, long lo, long hi) const {
+    if (!n.IsScalar()) fail(n, path, "expected an integer");
+    long v = 0;
+    try {
+      v = n.as<long>();
+    } catch (const YAML::Exception&) {
+      fail(n, path, "expected an integer, got '" + n.Scalar() + "'");
+    }
+    if (v < lo || v > hi)
+      fail(n, path, "must be within " + std::to_string(lo) + " .. " + std::to_string(hi) + ", got " + n.Scalar());
+    return v;
+  }
+  bool boolean(const YAML::Node& n, const std::string& path) const {
+    if (!n.IsScalar()) fail(n, path, "expected true or false");
+    try {
+      return n.as<bool>();
+    } catch (const YAML::Exception&) {
+      fail(n, path, "expected true or false, got '" + n.Scalar() + "'");
+    }
+  }
+  std::string text(const YAML::Node& n, const std::string& path) const {
+    if (!n.IsScalar() || n.Scalar().empty()) fail(n, path, "expected a non-empty string");
+    return n.Scalar();
+  }
+  Vec3 vec3(const YAML::Node& n, const std::string& path, double lo, double hi, const char* unit) const {
+    if (!n.IsSequence() || n.size() != 3) fail(n, path, std::string("expected a list of three numbers [x, y, z] in ") + unit);
+    Vec3 v;
+    for (int i = 0; i < 3; ++i) v[i] = number(n[i], path + "[" + std::to_string(i) + "]", lo, hi, unit);
+    return v;
+  }
+
+ private:
+  std::string name_;
+};
+
+std::string resolve(const std::string& base, const std::string& p) {
+  if (p.rfind("builtin:", 0) == 0) return p;
+  std::filesystem::path fp(p);
+  if (fp.is_absolute()) return p;
+  return (std::filesystem::path(base) / fp).lexically_normal().string();
+}
+
+}  // namespace
+
+DaemonConfig parse_config(const std::string& text, const std::string& name, const std::string& base_dir) {
+  YAML::Node root;
+  try {
+    root = YAML::Load(text);
+  } catch (const YAML::ParserException& e) {
+    throw Error(name + ":" + std::to_string(e.mark.line + 1) + ":" + std::to_string(e.mark.column + 1) +
+                ": not valid YAML: " + e.msg);
+  }
+  const Reader r(name);
+  DaemonConfig c;
+  c.source = name;
+  r.map(root, "", {"model_file", "backend", "loop", "controller", "limits", "lcm"}, {"sim"});
+
+  c.model_file = resolve(base_dir, r.text(root["model_file"], "model_file"));
+  c.backend = r.text(root["backend"], "backend");
+  if (c.backend != "sim" && c.backend != "canopen")
+    r.fail(root["backend"], "backend", "must be sim or canopen, got '" + c.backend + "'");
+  if (c.backend == "canopen")
+    r.fail(root["backend"], "backend", "the canopen backend is not built yet (issue 6); use sim");
+  if (c.backend == "sim" && !root["sim"]) r.fail(root, "sim", "missing (required with backend: sim)");
+
+  if (root["sim"]) {
+    const auto s = r.map(root["sim"], "sim", {"truth_model_file", "initial_position"},
+                         {"substeps", "enable_delay", "encoder"});
+    c.sim.truth_model_file = resolve(base_dir, r.text(s["truth_model_file"], "sim.truth_model_file"));
+    c.sim.initial_position = r.vec3(s["initial_position"], "sim.initial_position", 0.0, 2.0, "m");
+    if (s["substeps"]) c.sim.plant.substeps = static_cast<int>(r.integer(s["substeps"], "sim.substeps", 1, 1000));
+    if (s["enable_delay"]) c.sim.enable_delay = r.number(s["enable_delay"], "sim.enable_delay", 0.0, 10.0, "s");
+    if (s["encoder"]) {
+      const auto e = r.map(s["encoder"], "sim.encoder", {},
+                           {"resolution", "position_noise", "velocity_noise", "seed"});
+      auto& enc = c.sim.plant.encoder;
+      if (e["resolution"]) enc.resolution = r.number(e["resolution"], "sim.encoder.resolution", 0.0, 1e-3, "m");
+      if (e["position_noise"])
+        enc.position_noise = r.number(e["position_noise"], "sim.encoder.position_noise", 0.0, 1e-3, "m");
+      if (e["velocity_noise"])
+        enc.velocity_noise = r.number(e["velocity_noise"], "sim.encoder.velocity_noise", 0.0, 1.0, "m/s");
+      if (e["seed"]) enc.seed = static_cast<std::uint64_t>(r.integer(e["seed"], "sim.encoder.seed", 0, 1L << 62));
+    }
+  }
+
+  const auto l = r.map(root["loop"], "loop", {"rate_hz"},
+                       {"priority", "cpu", "lock_memory", "max_consecutive_overruns"});
+  c.loop.rate_hz = r.number(l["rate_hz"], "loop.rate_hz", 10.0, 10000.0, "Hz");
+  if (l["priority"]) c.loop.priority = static_cast<int>(r.integer(l["priority"], "loop.priority", 0, 99));
+  if (l["cpu"]) c.loop.cpu = static_cast<int>(r.integer(l["cpu"], "loop.cpu", -1, 1023));
+  if (l["lock_memory"]) c.loop.lock_memory = r.boolean(l["lock_memory"], "loop.lock_memory");
+  if (l["max_consecutive_overruns"])
+    c.loop.max_consecutive_overruns =
+        static_cast<int>(r.integer(l["max_consecutive_overruns"], "loop.max_consecutive_overruns", 1, 100000));
+
+  const auto k = r.map(root["controller"], "controller", {"law"}, {"kp", "kd"});
+  const std::string law = r.text(k["law"], "controller.law");
+  const auto lw = ctl::law_from_name(law);
+  if (!lw) r.fail(k["law"], "controller.law", "must be pd, pd_gravity, pd_feedforward or computed_torque, got '" + law + "'");
+  c.controller.law = *lw;
+  c.controller.gains = ctl::table3_gains(*lw);
+  if (k["kp"].IsDefined() != k["kd"].IsDefined())
+    r.fail(k, "controller", "give both kp and kd, or neither (Table 3 gains)");
+  if (k["kp"]) {
+    c.controller.gains.kp = r.vec3(k["kp"], "controller.kp", 0.0, 1e9, "(N/m, or 1/s^2 for computed_torque)");
+    c.controller.gains.kd = r.vec3(k["kd"], "controller.kd", 0.0, 1e7, "(N s/m, or 1/s for computed_torque)");
+  }
+  try {
+    c.controller.gains.validate();
+  } catch (const Error& e) {
+    r.fail(k, "controller", e.what());
+  }
+
+  const auto m = r.map(root["limits"], "limits",
+                       {"workspace_min", "workspace_max", "velocity", "acceleration", "force", "following_error"},
+                       {"overspeed", "stop_deceleration", "enable_timeout"});
+  auto& L = c.limits;
+  L.workspace_min = r.vec3(m["workspace_min"], "limits.workspace_min", 0.0, 2.0, "m");
+  L.workspace_max = r.vec3(m["workspace_max"], "limits.workspace_max", 0.0, 2.0, "m");
+  for (int i = 0; i < 3; ++i)
+    if (!(L.workspace_min[i] < L.workspace_max[i]))
+      r.fail(m["workspace_max"], "limits.workspace_max[" + std::to_string(i) + "]",
+             "must be greater than limits.workspace_min[" + std::to_string(i) + "]");
+  L.velocity = r.positive(m["velocity"], "limits.velocity", 5.0, "m/s");
+  L.acceleration = r.positive(m["acceleration"], "limits.acceleration", 100.0, "m/s^2");
+  L.force = r.positive(m["force"], "limits.force", 10000.0, "N");
+  L.following_error = r.positive(m["following_error"], "limits.following_error", 0.1, "m");
+  L.overspeed = m["overspeed"] ? r.positive(m["overspeed"], "limits.overspeed", 10.0, "m/s") : 1.6 * L.velocity;
+  if (L.overspeed <= L.velocity) r.fail(m["overspeed"], "limits.overspeed", "must be greater than limits.velocity");
+  if (m["stop_deceleration"])
+    L.stop_deceleration = r.positive(m["stop_deceleration"], "limits.stop_deceleration", 100.0, "m/s^2");
+  if (m["enable_timeout"]) L.enable_timeout = r.positive(m["enable_timeout"], "limits.enable_timeout", 60.0, "s");
+
+  const auto n = r.map(root["lcm"], "lcm", {"url"}, {"channels", "state_decimation"});
+  c.lcm.url = r.text(n["url"], "lcm.url");
+  if (c.lcm.url.find("://") == std::string::npos)
+    r.fail(n["url"], "lcm.url", "expected an LCM URL such as udpm://239.255.76.67:7667?ttl=0");
+  if (n["state_decimation"])
+    c.lcm.state_decimation = static_cast<int>(r.integer(n["state_decimation"], "lcm.state_decimation", 1, 1000));
+  if (n["channels"]) {
+    const auto ch = r.map(n["channels"], "lcm.channels", {}, {"state", "stats", "trajectory", "control", "ack"});
+    if (ch["state"]) c.lcm.state_channel = r.text(ch["state"], "lcm.channels.state");
+    if (ch["stats"]) c.lcm.stats_channel = r.text(ch["stats"], "lcm.channels.stats");
+    if (ch["trajectory"]) c.lcm.trajectory_channel = r.text(ch["trajectory"], "lcm.channels.trajectory");
+    if (ch["control"]) c.lcm.control_channel = r.text(ch["control"], "lcm.channels.control");
+    if (ch["ack"]) c.lcm.ack_channel = r.text(ch["ack"], "lcm.channels.ack");
+  }
+  return c;
+}
+
+DaemonConfig load_config(const std::string& path) {
+  std::ifstream f(path);
+  if (!f) throw Error(path + ": cannot read the configuration file");
+  std::stringstream ss;
+  ss << f.rdbuf();
+  const std::string base = std::filesystem::path(path).parent_path().string();
+  return parse_config(ss.str(), path, base.empty() ? "." : base);
+}
+
+ctl::MachineModel load_model(const std::string& path) {
+  if (path == "builtin:elkady") return ctl::MachineModel::elkady();
+#ifdef CPM_HAVE_IO
+  return io::load_model_file(path).model;
+#else
+  throw Error(path + ": this build has no model-file loader (cpm_io); use builtin:elkady");
+#endif
+}
+
+}  // namespace cpm::daemon

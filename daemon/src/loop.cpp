@@ -1,0 +1,563 @@
+#include "cpm/daemon/loop.hpp"
+
+#include <time.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+
+#include <cpm_msgs/ack_t.hpp>
+
+namespace cpm::daemon {
+
+using cpm_msgs::ack_t;
+using cpm_msgs::state_t;
+
+const char* mode_name(Mode m) noexcept {
+  switch (m) {
+    case Mode::init: return "init";
+    case Mode::disabled: return "disabled";
+    case Mode::enabling: return "enabling";
+    case Mode::holding: return "holding";
+    case Mode::moving: return "moving";
+    case Mode::stopping: return "stopping";
+    case Mode::fault: return "fault";
+  }
+  return "?";
+}
+
+const char* fault_bit_name(std::uint32_t bit) noexcept {
+  switch (bit) {
+    case kFaultFollowingError: return "following_error";
+    case kFaultSoftLimit: return "soft_limit";
+    case kFaultOverspeed: return "overspeed";
+    case kFaultController: return "controller";
+    case kFaultEstimate: return "estimate";
+    case kFaultDrive: return "drive";
+    case kFaultBackendIo: return "backend_io";
+    case kFaultEstop: return "estop";
+    case kFaultOverrun: return "overrun";
+    case kFaultEnableTimeout: return "enable_timeout";
+    default: return "unknown";
+  }
+}
+
+const ctl::Trajectory* Segment::get() const noexcept {
+  if (auto* c = std::get_if<ctl::CircleTrajectory>(&traj)) return c;
+  if (auto* p = std::get_if<ctl::PointToPoint>(&traj)) return p;
+  if (auto* s = std::get_if<StreamTrajectory>(&traj)) return s;
+  return nullptr;
+}
+
+int histogram_bin(std::int64_t ns) noexcept {
+  if (ns < 0) ns = 0;
+  const std::int64_t us = ns / 1000;
+  if (us < 200) return static_cast<int>(us);
+  if (us < 2000) return 200 + static_cast<int>((us - 200) / 50);
+  return kBins - 1;
+}
+
+std::int64_t histogram_bin_floor(int k) noexcept {
+  if (k < 200) return std::int64_t{k} * 1000;
+  return (200 + std::int64_t{k - 200} * 50) * 1000;
+}
+
+namespace {
+
+std::int64_t now_ns() noexcept {
+  timespec ts{};
+  clock_gettime(CLOCK_MONOTONIC, &ts);  // vDSO: no system call
+  return std::int64_t{ts.tv_sec} * 1000000000 + ts.tv_nsec;
+}
+
+void put(double* dst, const Vec3& v) noexcept {
+  dst[0] = v.x();
+  dst[1] = v.y();
+  dst[2] = v.z();
+}
+
+bool inside(const Vec3& p, const Vec3& lo, const Vec3& hi, int& axis, double& value, double& limit) noexcept {
+  for (int i = 0; i < 3; ++i) {
+    if (p[i] < lo[i]) { axis = i; value = p[i]; limit = lo[i]; return false; }
+    if (p[i] > hi[i]) { axis = i; value = p[i]; limit = hi[i]; return false; }
+  }
+  return true;
+}
+
+}  // namespace
+
+ControlLoop::ControlLoop(const DaemonConfig& config, Backend& backend, const ctl::Machine& machine,
+                         const ctl::Controller& controller)
+    : cfg_(config),
+      backend_(&backend),
+      machine_(&machine),
+      controller_(controller),
+      dt_(1.0 / config.loop.rate_hz),
+      queue_(std::make_unique<std::array<Segment, kQueueCapacity>>()) {
+  stats_.rate_hz = config.loop.rate_hz;
+  for (int s = 0; s < kSeries; ++s) stats_.min_ns[s] = 0;
+  state_.mode = static_cast<std::int8_t>(Mode::init);
+  state_.segment_id = -1;
+  state_.last_segment_id = -1;
+  state_.fault_axis = -1;
+  state_.fault_cycle = -1;
+}
+
+void ControlLoop::set_scheduling_info(bool realtime, bool memory_locked) noexcept {
+  stats_.realtime = realtime ? 1 : 0;
+  stats_.memory_locked = memory_locked ? 1 : 0;
+}
+
+void ControlLoop::add_sample(int s, std::int64_t ns) noexcept {
+  if (ns < 0) ns = 0;
+  const auto v = static_cast<std::int32_t>(std::min<std::int64_t>(ns, INT32_MAX));
+  if (stats_.count[s] == 0 || v < stats_.min_ns[s]) stats_.min_ns[s] = v;
+  if (v > stats_.max_ns[s]) stats_.max_ns[s] = v;
+  stats_.count[s]++;
+  stats_.sum_ns[s] += static_cast<double>(v);
+  stats_.histogram[s][histogram_bin(ns)]++;
+}
+
+void ControlLoop::enter(Mode m) noexcept {
+  mode_ = m;
+  mode_atomic_.store(m, std::memory_order_release);
+}
+
+void ControlLoop::latch(std::uint32_t bit, int axis, double value, double limit, std::int64_t k) noexcept {
+  if (faults_ == 0) {
+    first_fault_ = bit;
+    fault_axis_ = axis;
+    fault_value_ = value;
+    fault_limit_ = limit;
+    fault_cycle_ = k;
+  }
+  faults_ |= bit;
+  if (mode_ != Mode::fault) {
+    if (playing_) finish_segment();
+    flush_queue();
+    disable_after_stop_ = false;
+    enter(Mode::fault);
+  }
+}
+
+void ControlLoop::flush_queue() noexcept {
+  for (int i = 0; i < q_count_; ++i) (*queue_)[(q_head_ + i) % kQueueCapacity].traj = std::monostate{};
+  q_head_ = 0;
+  q_count_ = 0;
+  playing_ = false;
+}
+
+void ControlLoop::finish_segment() noexcept {
+  last_seg_id_ = (*queue_)[q_head_].id;
+  last_seg_n_ = seg_n_;
+  last_seg_rmse_ = seg_n_ > 0 ? std::sqrt(seg_sum_e2_ / seg_n_) : 0.0;
+  last_seg_max_ = seg_max_e_;
+  (*queue_)[q_head_].traj = std::monostate{};
+  q_head_ = (q_head_ + 1) % kQueueCapacity;
+  q_count_--;
+  playing_ = false;
+}
+
+bool ControlLoop::start_next_segment(std::int64_t k) noexcept {
+  if (q_count_ == 0) return false;
+  playing_ = true;
+  segment_start_cycle_ = k;
+  seg_sum_e2_ = 0;
+  seg_max_e_ = 0;
+  seg_n_ = 0;
+  return true;
+}
+
+void ControlLoop::start_stop(std::int64_t k) noexcept {
+  // Decelerate along the reference's current direction of motion at the
+  // configured rate, from where the reference is now.
+  stop_p0_ = ref_.p;
+  const double v = ref_.v.norm();
+  stop_v0_ = v;
+  stop_dir_ = v > 1e-12 ? Vec3(ref_.v / v) : Vec3::Zero();
+  stop_T_ = v / cfg_.limits.stop_deceleration;
+  stop_start_cycle_ = k;
+  if (playing_) finish_segment();
+  flush_queue();
+  enter(Mode::stopping);
+}
+
+void ControlLoop::reply(const Command& c, bool ok, std::int16_t reason, const char* msg,
+                        const ctl::Machine* retired) noexcept {
+  Ack a;
+  a.id = c.id;
+  a.source = c.source;
+  a.code = c.code;
+  a.accepted = ok;
+  a.reason = reason;
+  a.message = msg;
+  a.mode = mode_;
+  a.queue_depth = static_cast<std::int16_t>(q_count_);
+  a.retired = retired;
+  a.queue_end = queue_end_;
+  // The LCM thread drains 64 acks per millisecond at least; a full ring
+  // would lose only the ack, never the command's effect.
+  (void)acks_.push(a);
+}
+
+void ControlLoop::handle(const Command& c, std::int64_t k) noexcept {
+  constexpr std::int16_t kIllegal = ack_t::REASON_ILLEGAL_IN_MODE;
+  switch (c.kind) {
+    case CommandKind::ping:
+      reply(c, true, 0, "pong");
+      return;
+    case CommandKind::enable:
+      if (mode_ == Mode::disabled) {
+        hold_ = est_.p;  // resynchronise: hold where the platform is
+        queue_end_ = hold_;
+        enabling_since_ = k;
+        enter(Mode::enabling);
+        reply(c, true, 0, "enabling");
+      } else if (mode_ == Mode::fault) {
+        reply(c, false, ack_t::REASON_FAULT_ACTIVE, "a fault is latched: reset first");
+      } else {
+        reply(c, false, kIllegal, "enable is legal only when disabled");
+      }
+      return;
+    case CommandKind::disable:
+      if (mode_ == Mode::enabling || mode_ == Mode::holding) {
+        flush_queue();
+        enter(Mode::disabled);
+        reply(c, true, 0, "disabled");
+      } else if (mode_ == Mode::moving) {
+        start_stop(k);
+        disable_after_stop_ = true;
+        reply(c, true, 0, "stopping, then disabling");
+      } else if (mode_ == Mode::stopping) {
+        disable_after_stop_ = true;
+        reply(c, true, 0, "disabling once stopped");
+      } else if (mode_ == Mode::fault) {
+        reply(c, false, kIllegal, "in fault the drives are already off");
+      } else {
+        reply(c, false, kIllegal, "already disabled");
+      }
+      return;
+    case CommandKind::stop:
+      if (mode_ == Mode::moving) {
+        start_stop(k);
+        reply(c, true, 0, "stopping");
+      } else if (mode_ == Mode::holding || mode_ == Mode::stopping) {
+        flush_queue();
+        reply(c, true, 0, "already at rest or stopping; queue cleared");
+      } else {
+        reply(c, false, kIllegal, "stop needs the drives enabled (holding, moving or stopping)");
+      }
+      return;
+    case CommandKind::reset:
+      if (mode_ != Mode::fault) {
+        reply(c, false, kIllegal, "no fault latched");
+        return;
+      }
+      if (in_.estop) {
+        reply(c, false, ack_t::REASON_FAULT_ACTIVE, "the e-stop chain is still open");
+        return;
+      }
+      if (in_.drive_fault[0] || in_.drive_fault[1] || in_.drive_fault[2]) {
+        reply(c, false, ack_t::REASON_FAULT_ACTIVE, "a drive still reports a fault");
+        return;
+      }
+      faults_ = 0;
+      first_fault_ = 0;
+      fault_axis_ = -1;
+      fault_value_ = fault_limit_ = 0;
+      fault_cycle_ = -1;
+      consecutive_overruns_ = 0;
+      overrun_fault_pending_ = false;
+      hold_ = est_.p;
+      queue_end_ = hold_;
+      enter(Mode::disabled);
+      reply(c, true, 0, "fault reset; disabled, setpoint at the measured position");
+      return;
+    case CommandKind::select_controller:
+      if (mode_ == Mode::disabled || mode_ == Mode::holding) {
+        controller_ = *c.controller;
+        reply(c, true, 0, "controller selected");
+      } else {
+        reply(c, false, kIllegal, "select the controller when disabled or holding");
+      }
+      return;
+    case CommandKind::load_model:
+      if (mode_ == Mode::disabled) {
+        const ctl::Machine* old = machine_;
+        machine_ = c.machine;
+        controller_ = *c.controller;
+        reply(c, true, 0, "model loaded", old);
+      } else {
+        // Hand the unused model back so that it is freed.
+        reply(c, false, kIllegal, "load a model only when disabled", c.machine);
+      }
+      return;
+    case CommandKind::segment: {
+      if (mode_ != Mode::holding && mode_ != Mode::moving) {
+        reply(c, false, kIllegal, "trajectories are accepted only when holding or moving");
+        return;
+      }
+      if (q_count_ >= kQueueCapacity) {
+        reply(c, false, ack_t::REASON_QUEUE_FULL, "the trajectory queue is full");
+        return;
+      }
+      if ((c.segment.start - queue_end_).norm() > 1e-6) {
+        reply(c, false, ack_t::REASON_NOT_CONTINUOUS,
+              "the segment does not start where the queue ends (the state changed meanwhile)");
+        return;
+      }
+      (*queue_)[(q_head_ + q_count_) % kQueueCapacity] = c.segment;
+      q_count_++;
+      queue_end_ = c.segment.end;
+      if (mode_ == Mode::holding) {
+        enter(Mode::moving);
+        start_next_segment(k);
+      }
+      reply(c, true, 0, "queued");
+      return;
+    }
+    case CommandKind::none:
+      return;
+  }
+}
+
+void ControlLoop::handle_commands(std::int64_t k) noexcept {
+  // A bounded number per cycle keeps the cycle's time bounded.
+  for (int n = 0; n < 4; ++n) {
+    const Command* c = commands_.front();
+    if (!c) return;
+    handle(*c, k);
+    commands_.release();
+  }
+}
+
+ctl::TrajectorySample ControlLoop::reference(std::int64_t k) noexcept {
+  ctl::TrajectorySample r;
+  switch (mode_) {
+    case Mode::moving: {
+      while (playing_) {
+        const Segment& s = (*queue_)[q_head_];
+        const ctl::Trajectory* tr = s.get();
+        const double t = static_cast<double>(k - segment_start_cycle_) * dt_;
+        // [0, duration): the end sample itself is the hold that follows.
+        if (t < tr->duration() - 1e-9) return tr->sample(t);
+        // Finished: the next segment starts now, at its own t = 0.
+        hold_ = s.end;
+        finish_segment();
+        if (!start_next_segment(k)) break;
+      }
+      enter(Mode::holding);
+      r.p = hold_;
+      return r;
+    }
+    case Mode::stopping: {
+      const double t = std::min(static_cast<double>(k - stop_start_cycle_) * dt_, stop_T_);
+      const double a = cfg_.limits.stop_deceleration;
+      r.p = stop_p0_ + stop_dir_ * (stop_v0_ * t - 0.5 * a * t * t);
+      r.v = stop_dir_ * (stop_v0_ - a * t);
+      r.a = t < stop_T_ ? Vec3(-a * stop_dir_) : Vec3::Zero();
+      if (static_cast<double>(k - stop_start_cycle_) * dt_ >= stop_T_) {
+        hold_ = r.p;
+        queue_end_ = hold_;
+        r.v.setZero();
+        enter(disable_after_stop_ ? Mode::disabled : Mode::holding);
+        disable_after_stop_ = false;
+      }
+      return r;
+    }
+    case Mode::holding:
+      r.p = hold_;
+      return r;
+    default:
+      // Drives off: the setpoint follows the measurement, so enabling starts from it.
+      r.p = estimate_ok_ ? est_.p : hold_;
+      hold_ = r.p;
+      queue_end_ = hold_;
+      return r;
+  }
+}
+
+void ControlLoop::record_schedule(bool overrun, std::int64_t skipped) noexcept {
+  stats_.skipped += skipped;
+  if (overrun) {
+    stats_.overruns++;
+    if (++consecutive_overruns_ >= cfg_.loop.max_consecutive_overruns) overrun_fault_pending_ = true;
+  } else {
+    consecutive_overruns_ = 0;
+  }
+}
+
+void ControlLoop::cycle(std::int64_t k, std::int64_t latency_ns) noexcept {
+  add_sample(kSeriesLatency, latency_ns);
+  const std::int64_t t0 = now_ns();
+  if (mode_ == Mode::init) enter(Mode::disabled);
+
+  // 1. Read the backend.
+  const BackendResult rr = backend_->read(k, in_);
+  const std::int64_t t1 = now_ns();
+
+  // 2. Estimate the platform state through the calibrated kinematics.
+  cin_.d = Vec3(in_.position[0], in_.position[1], in_.position[2]);
+  cin_.d_dot = Vec3(in_.velocity[0], in_.velocity[1], in_.velocity[2]);
+  for (int i = 0; i < 3; ++i)
+    if (std::abs(cin_.d_dot[i]) > 1e-6) cin_.kin.dir[i] = cin_.d_dot[i] > 0 ? 1 : -1;
+  cin_.kin.t = static_cast<double>(k) * dt_;
+  const Status se = rr == BackendResult::ok ? machine_->task_state(cin_.d, cin_.d_dot, cin_.kin, est_)
+                                            : Status::failure(Fault::not_finite);
+  estimate_ok_ = se.ok();
+  if (shutdown_.load(std::memory_order_acquire) && mode_ != Mode::fault && mode_ != Mode::disabled) {
+    flush_queue();
+    enter(Mode::disabled);
+  }
+  handle_commands(k);
+  const std::int64_t t2 = now_ns();
+
+  // 3. Trajectory at the cycle's nominal time.
+  ref_ = reference(k);
+  const std::int64_t t3 = now_ns();
+
+  // 4. Calibrated inverse kinematics of the reference.
+  const Status sik = kin::inverse(machine_->kinematics(), ref_.p, cin_.kin, d_ref_);
+  const std::int64_t t4 = now_ns();
+
+  // 5. Controller.
+  const bool powered = mode_ == Mode::enabling || mode_ == Mode::holding || mode_ == Mode::moving ||
+                       mode_ == Mode::stopping;
+  Status sc;
+  if (powered) {
+    cin_.ref = ref_;
+    sc = controller_.step(cin_, cout_);
+  } else {
+    cout_.force.setZero();
+    cout_.force_unlimited.setZero();
+    cout_.saturated = {false, false, false};
+    cout_.d_ref = d_ref_;
+    cout_.d_dot_ref.setZero();
+  }
+  const std::int64_t t5 = now_ns();
+
+  // 6. Safety: conditions become latched faults.
+  if (rr != BackendResult::ok) latch(kFaultBackendIo, -1, static_cast<double>(rr), 0, k);
+  for (int i = 0; i < 3; ++i)
+    if (in_.drive_fault[i]) latch(kFaultDrive, i, in_.statusword[i], 0, k);
+  if (in_.estop) latch(kFaultEstop, -1, 1, 0, k);
+  if (overrun_fault_pending_) {
+    latch(kFaultOverrun, -1, consecutive_overruns_, cfg_.loop.max_consecutive_overruns, k);
+    overrun_fault_pending_ = false;
+  }
+  if (rr == BackendResult::ok && !se.ok()) latch(kFaultEstimate, se.index, se.value, se.limit, k);
+  if (powered && mode_ != Mode::fault) {
+    if (!sik.ok()) latch(kFaultController, sik.index, sik.value, sik.limit, k);
+    else if (!sc.ok()) latch(kFaultController, sc.index, sc.value, sc.limit, k);
+    const Vec3 e = ref_.p - est_.p;
+    const double en = e.norm();
+    int axis = -1;
+    double v = 0, lim = 0;
+    if (en > cfg_.limits.following_error) latch(kFaultFollowingError, -1, en, cfg_.limits.following_error, k);
+    if (!inside(est_.p, cfg_.limits.workspace_min, cfg_.limits.workspace_max, axis, v, lim))
+      latch(kFaultSoftLimit, axis, v, lim, k);
+    if (est_.p_dot.norm() > cfg_.limits.overspeed)
+      latch(kFaultOverspeed, -1, est_.p_dot.norm(), cfg_.limits.overspeed, k);
+    if (mode_ == Mode::enabling) {
+      if (in_.drive_enabled[0] && in_.drive_enabled[1] && in_.drive_enabled[2]) {
+        enter(Mode::holding);
+      } else if (static_cast<double>(k - enabling_since_) * dt_ > cfg_.limits.enable_timeout) {
+        latch(kFaultEnableTimeout, -1, static_cast<double>(k - enabling_since_) * dt_,
+              cfg_.limits.enable_timeout, k);
+      }
+    }
+    if (playing_) {
+      seg_sum_e2_ += en * en;
+      seg_max_e_ = std::max(seg_max_e_, en);
+      seg_n_++;
+    }
+  }
+  const bool drive_on = mode_ == Mode::enabling || mode_ == Mode::holding || mode_ == Mode::moving ||
+                        mode_ == Mode::stopping;
+  const std::int64_t t6 = now_ns();
+
+  // 7. Write the backend.
+  for (int i = 0; i < 3; ++i) out_.force[i] = drive_on ? cout_.force[i] : 0.0;
+  out_.enable = drive_on;
+  const BackendResult rw = backend_->write(k, out_);
+  if (rw != BackendResult::ok) {
+    latch(kFaultBackendIo, -1, static_cast<double>(rw), 0, k);
+  }
+  const std::int64_t t7 = now_ns();
+
+  // 8. Publish a snapshot.
+  fill_state(k);
+  if (cfg_.lcm.state_decimation <= 1 || k % cfg_.lcm.state_decimation == 0) {
+    if (!snapshots_.push(state_)) dropped_++;
+  }
+  const std::int64_t t8 = now_ns();
+  add_sample(1, t1 - t0);
+  add_sample(2, t2 - t1);
+  add_sample(3, t3 - t2);
+  add_sample(4, t4 - t3);
+  add_sample(5, t5 - t4);
+  add_sample(6, t6 - t5);
+  add_sample(7, t7 - t6);
+  add_sample(8, t8 - t7);
+  add_sample(kSeriesCycle, t8 - t0);
+  stats_.cycles++;
+  // Statistics once a second (copied whole; the ring holds a few).
+  const auto per_second = static_cast<std::int64_t>(std::lround(cfg_.loop.rate_hz));
+  if (per_second > 0 && (k + 1) % per_second == 0) (void)stats_out_.push(stats_);
+  cycles_done_.store(stats_.cycles, std::memory_order_release);
+}
+
+void ControlLoop::fill_state(std::int64_t k) noexcept {
+  state_t& s = state_;
+  s.utime = 0;  // stamped by the publisher with the wall clock
+  s.cycle = k;
+  s.t = static_cast<double>(k) * dt_;
+  s.mode = static_cast<std::int8_t>(mode_);
+  s.controller = static_cast<std::int8_t>(controller_.law());
+  put(s.position, est_.p);
+  put(s.velocity, est_.p_dot);
+  put(s.position_ref, ref_.p);
+  put(s.velocity_ref, ref_.v);
+  put(s.acceleration_ref, ref_.a);
+  const Vec3 e = ref_.p - est_.p;
+  put(s.position_error, e);
+  s.position_error_norm = e.norm();
+  put(s.d, cin_.d);
+  put(s.d_dot, cin_.d_dot);
+  put(s.d_ref, d_ref_);
+  put(s.d_dot_ref, cout_.d_dot_ref);
+  for (int i = 0; i < 3; ++i) {
+    s.force[i] = out_.force[i];
+    s.saturated[i] = out_.enable && cout_.saturated[i];
+  }
+  s.faults = static_cast<std::int32_t>(faults_);
+  s.first_fault = static_cast<std::int32_t>(first_fault_);
+  s.fault_axis = static_cast<std::int8_t>(fault_axis_);
+  s.fault_value = fault_value_;
+  s.fault_limit = fault_limit_;
+  s.fault_cycle = fault_cycle_;
+  if (playing_) {
+    const Segment& seg = (*queue_)[q_head_];
+    s.segment_id = seg.id;
+    s.segment_elapsed = static_cast<double>(k - segment_start_cycle_) * dt_;
+    s.segment_duration = seg.get()->duration();
+  } else {
+    s.segment_id = -1;
+    s.segment_elapsed = 0;
+    s.segment_duration = 0;
+  }
+  s.queue_depth = static_cast<std::int16_t>(playing_ ? q_count_ - 1 : q_count_);
+  put(s.queue_end, queue_end_);
+  s.last_segment_id = last_seg_id_;
+  s.last_segment_rmse = last_seg_rmse_;
+  s.last_segment_max = last_seg_max_;
+  s.last_segment_cycles = last_seg_n_;
+  s.cycles = stats_.cycles + 1;
+  s.overruns = stats_.overruns;
+  s.skipped = stats_.skipped;
+  s.max_latency_ns = stats_.max_ns[kSeriesLatency];
+  s.max_cycle_ns = stats_.max_ns[kSeriesCycle];
+  s.dropped_snapshots = dropped_;
+}
+
+}  // namespace cpm::daemon

@@ -1,0 +1,176 @@
+// cpmd: the motion controller daemon. See docs/daemon.md.
+//   cpmd --config FILE [--check] [--duration S] [--stats-json FILE]
+#include <signal.h>
+#include <time.h>
+
+#include <chrono>
+#include <cstdio>
+#include <cstring>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <thread>
+
+#include "cpm/daemon/rt.hpp"
+#include "cpm/daemon/server.hpp"
+#include "cpm/daemon/sim_backend.hpp"
+
+namespace {
+
+using namespace cpm;
+using namespace cpm::daemon;
+
+void usage() {
+  std::fprintf(stderr,
+               "usage: cpmd --config FILE [--check] [--duration S] [--stats-json FILE]\n"
+               "  --config FILE      the daemon's YAML configuration (config/sim.yaml)\n"
+               "  --check            validate the configuration and the model files, then exit\n"
+               "  --duration S       run S seconds, then shut down (latency runs)\n"
+               "  --stats-json FILE  at exit, write the loop statistics as JSON\n");
+}
+
+std::string stats_json(const cpm_msgs::loop_stats_t& s) {
+  static const char* names[kSeries] = {"wakeup_latency", "read", "estimate", "trajectory", "inverse_kinematics",
+                                       "controller", "safety", "write", "publish", "cycle"};
+  std::ostringstream os;
+  os << "{\"rate_hz\": " << s.rate_hz << ", \"cycles\": " << s.cycles << ", \"overruns\": " << s.overruns
+     << ", \"skipped\": " << s.skipped << ", \"realtime\": " << (s.realtime ? "true" : "false")
+     << ", \"memory_locked\": " << (s.memory_locked ? "true" : "false") << ", \"series\": {";
+  for (int i = 0; i < kSeries; ++i) {
+    os << (i ? ", " : "") << '"' << names[i] << "\": {\"count\": " << s.count[i] << ", \"min_ns\": " << s.min_ns[i]
+       << ", \"max_ns\": " << s.max_ns[i] << ", \"mean_ns\": " << (s.count[i] ? s.sum_ns[i] / s.count[i] : 0.0)
+       << ", \"histogram_us\": {";
+    bool first = true;
+    for (int b = 0; b < kBins; ++b)
+      if (s.histogram[i][b]) {
+        os << (first ? "" : ", ") << '"' << histogram_bin_floor(b) / 1000 << "\": " << s.histogram[i][b];
+        first = false;
+      }
+    os << "}}";
+  }
+  os << "}}\n";
+  return os.str();
+}
+
+int run(int argc, char** argv) {
+  std::string config_path, stats_path;
+  double duration = -1;
+  bool check = false;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    auto value = [&]() -> std::string {
+      if (i + 1 >= argc) throw Error("option " + a + " needs a value");
+      return argv[++i];
+    };
+    if (a == "--config") config_path = value();
+    else if (a == "--stats-json") stats_path = value();
+    else if (a == "--duration") duration = std::stod(value());
+    else if (a == "--check") check = true;
+    else if (a == "--help" || a == "-h") { usage(); return 0; }
+    else { usage(); throw Error("unknown option '" + a + "'"); }
+  }
+  if (config_path.empty()) { usage(); return 2; }
+
+  const DaemonConfig cfg = load_config(config_path);
+  ctl::MachineModel model = load_model(cfg.model_file);
+  model.force_limit = std::min(model.force_limit, cfg.limits.force);
+  auto models = std::make_unique<ModelStore>(std::make_unique<ctl::Machine>(model));
+  const ctl::Controller controller(models->current(), cfg.controller.law, cfg.controller.gains);
+  std::unique_ptr<Backend> backend;
+  if (cfg.backend == "sim") {
+    SimBackendOptions so;
+    so.plant = cfg.sim.plant;
+    so.initial_position = cfg.sim.initial_position;
+    so.enable_delay = cfg.sim.enable_delay;
+    backend = std::make_unique<SimBackend>(std::make_unique<ctl::Machine>(load_model(cfg.sim.truth_model_file)), so);
+  }
+  if (check) {
+    std::printf("%s: configuration and model files are valid\n", config_path.c_str());
+    return 0;
+  }
+  const double period = 1.0 / cfg.loop.rate_hz;
+  backend->start(period);
+
+  // Block the termination signals in every thread; the main thread waits for them.
+  sigset_t sigs;
+  sigemptyset(&sigs);
+  sigaddset(&sigs, SIGINT);
+  sigaddset(&sigs, SIGTERM);
+  pthread_sigmask(SIG_BLOCK, &sigs, nullptr);
+
+  auto loop = std::make_unique<ControlLoop>(cfg, *backend, models->current(), controller);
+  Server server(cfg, *loop, *models);  // LCM up before the loop runs
+  RtThread rt(*loop, cfg.loop);
+  rt.start();
+  for (const auto& w : rt.setup().warnings) std::fprintf(stderr, "cpmd: warning: %s\n", w.c_str());
+  std::fprintf(stderr, "cpmd: %s backend, %.0f Hz, %s, model %s, LCM %s\n", backend->name(), cfg.loop.rate_hz,
+               rt.setup().realtime ? "SCHED_FIFO" : "normal scheduling", cfg.model_file.c_str(),
+               cfg.lcm.url.c_str());
+  std::atomic<bool> stop_server{false};
+  std::thread lcm_thread([&] {
+    try {
+      server.run(stop_server);
+    } catch (const std::exception& e) {
+      std::fprintf(stderr, "cpmd: LCM thread: %s\n", e.what());
+    }
+  });
+
+  // Housekeeping: READY once the loop runs, the watchdog fed only while it advances.
+  sd_notify("READY=1\nSTATUS=running");
+  const double wd = sd_watchdog_interval();
+  const double tick = wd > 0 ? std::min(0.25, wd / 4) : 0.25;
+  const auto started = std::chrono::steady_clock::now();
+  std::int64_t last_cycles = -1;
+  Mode last_mode = Mode::init;
+  for (;;) {
+    timespec ts{};
+    ts.tv_sec = static_cast<time_t>(tick);
+    ts.tv_nsec = static_cast<long>((tick - static_cast<double>(ts.tv_sec)) * 1e9);
+    const int sig = sigtimedwait(&sigs, nullptr, &ts);
+    if (sig == SIGINT || sig == SIGTERM) {
+      std::fprintf(stderr, "cpmd: %s: disabling the drives and stopping\n", strsignal(sig));
+      break;
+    }
+    const std::int64_t c = loop->cycles_done();
+    if (c != last_cycles && rt.running()) sd_notify("WATCHDOG=1");
+    last_cycles = c;
+    if (loop->mode() != last_mode) {
+      last_mode = loop->mode();
+      sd_notify(std::string("STATUS=") + mode_name(last_mode));
+    }
+    if (duration >= 0 &&
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count() >= duration)
+      break;
+  }
+  sd_notify("STOPPING=1");
+  loop->request_shutdown();
+  const std::int64_t c0 = loop->cycles_done();
+  while (rt.running() && loop->cycles_done() < c0 + 5) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  rt.request_stop();
+  rt.join();
+  stop_server.store(true);
+  lcm_thread.join();
+  backend->stop();
+  const cpm_msgs::loop_stats_t& st = loop->current_stats();
+  if (!stats_path.empty()) {
+    std::ofstream f(stats_path + ".tmp");
+    f << stats_json(st);
+    f.close();
+    std::rename((stats_path + ".tmp").c_str(), stats_path.c_str());
+  }
+  std::fprintf(stderr, "cpmd: stopped after %lld cycles, %lld overruns, worst wake-up latency %.1f us\n",
+               static_cast<long long>(st.cycles), static_cast<long long>(st.overruns),
+               st.max_ns[kSeriesLatency] * 1e-3);
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  try {
+    return run(argc, argv);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "cpmd: error: %s\n", e.what());
+    return 1;
+  }
+}

@@ -1,0 +1,346 @@
+#include "cpm/daemon/server.hpp"
+
+#include <sys/socket.h>
+#include <sys/un.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <map>
+#include <lcm/lcm-cpp.hpp>
+#include <sstream>
+
+namespace cpm::daemon {
+
+using cpm_msgs::ack_t;
+using cpm_msgs::control_command_t;
+using cpm_msgs::trajectory_command_t;
+
+ModelStore::ModelStore(std::unique_ptr<ctl::Machine> first) : current_(first.get()) {
+  models_.push_back(std::move(first));
+}
+
+const ctl::Machine* ModelStore::add(std::unique_ptr<ctl::Machine> m) {
+  models_.push_back(std::move(m));
+  return models_.back().get();
+}
+
+void ModelStore::release(const ctl::Machine* m) {
+  if (m == current_) return;
+  for (auto it = models_.begin(); it != models_.end(); ++it)
+    if (it->get() == m) {
+      models_.erase(it);
+      return;
+    }
+}
+
+namespace {
+
+std::string mm(const Vec3& p) {
+  char b[96];
+  std::snprintf(b, sizeof b, "(%.3f, %.3f, %.3f) mm", p.x() * 1e3, p.y() * 1e3, p.z() * 1e3);
+  return b;
+}
+
+bool finite3(const double* v) { return std::isfinite(v[0]) && std::isfinite(v[1]) && std::isfinite(v[2]); }
+
+Validation reject(std::int16_t reason, std::string msg) {
+  Validation v;
+  v.reason = reason;
+  v.message = std::move(msg);
+  return v;
+}
+
+// Every sample inside the soft-limit box.
+std::string box_violation(const ctl::Trajectory& tr, const LimitsConfig& L, double dt) {
+  const long n = static_cast<long>(std::ceil(tr.duration() / dt));
+  for (long k = 0; k <= n; ++k) {
+    const double t = std::min(k * dt, tr.duration());
+    const Vec3 p = tr.sample(t).p;
+    for (int i = 0; i < 3; ++i)
+      if (p[i] < L.workspace_min[i] - 1e-9 || p[i] > L.workspace_max[i] + 1e-9) {
+        std::ostringstream os;
+        os << "at t = " << t << " s the platform would be at " << mm(p) << ", outside the soft limits on "
+           << "xyz"[i] << " [" << L.workspace_min[i] * 1e3 << ", " << L.workspace_max[i] * 1e3 << "] mm";
+        return os.str();
+      }
+  }
+  return {};
+}
+
+}  // namespace
+
+Validation validate_segment(const trajectory_command_t& c, const Vec3& start, const ctl::Machine& machine,
+                            const LimitsConfig& L, double dt) {
+  Validation out;
+  out.segment.id = c.id;
+  out.segment.start = start;
+  try {
+    if (c.kind == trajectory_command_t::KIND_MOVE) {
+      if (!finite3(c.target)) return reject(ack_t::REASON_INVALID, "move: target is not finite");
+      if (!std::isfinite(c.max_velocity) || !std::isfinite(c.max_acceleration) || !std::isfinite(c.max_jerk) ||
+          c.max_velocity <= 0 || c.max_acceleration <= 0 || c.max_jerk <= 0)
+        return reject(ack_t::REASON_INVALID, "move: max_velocity, max_acceleration and max_jerk must be finite and > 0");
+      if (c.max_velocity > L.velocity)
+        return reject(ack_t::REASON_LIMIT, "move: max_velocity " + std::to_string(c.max_velocity) +
+                                               " m/s exceeds limits.velocity " + std::to_string(L.velocity) + " m/s");
+      if (c.max_acceleration > L.acceleration)
+        return reject(ack_t::REASON_LIMIT, "move: max_acceleration " + std::to_string(c.max_acceleration) +
+                                               " m/s^2 exceeds limits.acceleration " +
+                                               std::to_string(L.acceleration) + " m/s^2");
+      const Vec3 target(c.target[0], c.target[1], c.target[2]);
+      if (Status s = kin::check_pose(machine.kinematics(), machine.model().strokes, target, {}); !s)
+        return reject(ack_t::REASON_WORKSPACE, "move: target " + mm(target) + " is outside the workspace: " + describe(s));
+      ctl::MotionLimits lim;
+      lim.velocity = c.max_velocity;
+      lim.acceleration = c.max_acceleration;
+      lim.jerk = c.max_jerk;
+      out.segment.traj.emplace<ctl::PointToPoint>(start, target, lim);
+    } else if (c.kind == trajectory_command_t::KIND_CIRCLE) {
+      if (!finite3(c.centre) || !std::isfinite(c.radius) || !std::isfinite(c.angular_speed) ||
+          !std::isfinite(c.start_angle) || !std::isfinite(c.cruise_time) || !std::isfinite(c.ramp_time))
+        return reject(ack_t::REASON_INVALID, "circle: a parameter is not finite");
+      if (c.plane < 0 || c.plane > 2) return reject(ack_t::REASON_INVALID, "circle: plane must be 0 (xy), 1 (yz) or 2 (zx)");
+      const double speed = std::abs(c.radius * c.angular_speed);
+      if (speed > L.velocity)
+        return reject(ack_t::REASON_LIMIT, "circle: speed " + std::to_string(speed) + " m/s exceeds limits.velocity " +
+                                               std::to_string(L.velocity) + " m/s");
+      ctl::CircleSpec s;
+      s.centre = Vec3(c.centre[0], c.centre[1], c.centre[2]);
+      s.radius = c.radius;
+      s.plane = static_cast<ctl::CirclePlane>(c.plane);
+      s.angular_speed = c.angular_speed;
+      s.start_angle = c.start_angle;
+      s.cruise_time = c.cruise_time;
+      s.ramp_time = c.ramp_time;
+      out.segment.traj.emplace<ctl::CircleTrajectory>(s);
+    } else if (c.kind == trajectory_command_t::KIND_STREAM) {
+      if (c.count < 2 || c.count > StreamTrajectory::kMaxPoints)
+        return reject(ack_t::REASON_INVALID, "stream: count must be 2..100, got " + std::to_string(c.count));
+      out.segment.traj.emplace<StreamTrajectory>(c.count, c.time, c.position, c.velocity);
+    } else {
+      return reject(ack_t::REASON_INVALID, "unknown trajectory kind " + std::to_string(c.kind));
+    }
+  } catch (const Error& e) {
+    return reject(ack_t::REASON_INVALID, e.what());
+  }
+  const ctl::Trajectory& tr = *out.segment.get();
+  const Vec3 p0 = tr.sample(0.0).p;
+  if ((p0 - start).norm() > 1e-6)
+    return reject(ack_t::REASON_NOT_CONTINUOUS,
+                  "the segment starts at " + mm(p0) + " but the queue ends at " + mm(start));
+  if (std::string b = box_violation(tr, L, dt); !b.empty()) return reject(ack_t::REASON_WORKSPACE, b);
+  try {
+    ctl::validate_trajectory(tr, machine, dt, L.velocity * (1 + 1e-9), L.acceleration * (1 + 1e-9));
+  } catch (const Error& e) {
+    const std::string m = e.what();
+    const bool limit = m.find("velocity") != std::string::npos || m.find("acceleration") != std::string::npos ||
+                       m.find("speed") != std::string::npos;
+    return reject(limit ? ack_t::REASON_LIMIT : ack_t::REASON_WORKSPACE, m);
+  }
+  out.segment.end = tr.sample(tr.duration()).p;
+  out.ok = true;
+  return out;
+}
+
+Server::Server(const DaemonConfig& cfg, ControlLoop& loop, ModelStore& models)
+    : cfg_(cfg), loop_(loop), models_(models), law_(cfg.controller.law), gains_(cfg.controller.gains),
+      scratch_(std::make_unique<Command>()) {
+  lcm_ = std::make_unique<lcm::LCM>(cfg_.lcm.url);
+  if (!lcm_->good()) throw Error("lcm: cannot open '" + cfg_.lcm.url + "' (is there a multicast route? see docs/daemon.md)");
+  lcm_->subscribe(cfg_.lcm.control_channel, &Server::on_control, this);
+  lcm_->subscribe(cfg_.lcm.trajectory_channel, &Server::on_trajectory, this);
+}
+
+Server::~Server() = default;
+
+void Server::publish_ack(std::int64_t id, std::int8_t source, std::int8_t code, bool ok, std::int16_t reason,
+                         const std::string& message, Mode mode, std::int16_t depth) {
+  ack_t a;
+  a.utime = std::chrono::duration_cast<std::chrono::microseconds>(
+                std::chrono::system_clock::now().time_since_epoch()).count();
+  a.id = id;
+  a.source = source;
+  a.command = code;
+  a.accepted = ok;
+  a.reason = reason;
+  a.message = message;
+  a.mode = static_cast<std::int8_t>(mode);
+  a.queue_depth = depth;
+  lcm_->publish(cfg_.lcm.ack_channel, &a);
+}
+
+bool Server::send(Command& c) {
+  if (loop_.commands().push(c)) return true;
+  publish_ack(c.id, c.source, c.code, false, ack_t::REASON_BUSY, "the loop's command queue is full; retry",
+              loop_.mode(), latest_.queue_depth);
+  return false;
+}
+
+void Server::on_control(const lcm::ReceiveBuffer*, const std::string&, const control_command_t* m) {
+  Command& c = *scratch_;
+  c = Command{};
+  c.id = m->id;
+  c.source = 1;
+  c.code = m->command;
+  auto refuse = [&](std::int16_t reason, const std::string& why) {
+    publish_ack(m->id, 1, m->command, false, reason, why, loop_.mode(), latest_.queue_depth);
+  };
+  switch (m->command) {
+    case control_command_t::CMD_ENABLE: c.kind = CommandKind::enable; break;
+    case control_command_t::CMD_DISABLE: c.kind = CommandKind::disable; break;
+    case control_command_t::CMD_STOP: c.kind = CommandKind::stop; break;
+    case control_command_t::CMD_RESET: c.kind = CommandKind::reset; break;
+    case control_command_t::CMD_PING: c.kind = CommandKind::ping; break;
+    case control_command_t::CMD_SELECT_CONTROLLER: {
+      if (m->law < 0 || m->law > 3) return refuse(ack_t::REASON_INVALID, "law must be 0..3");
+      const auto law = static_cast<ctl::ControlLaw>(m->law);
+      ctl::Gains g = ctl::table3_gains(law);
+      if (!m->use_table3_gains) {
+        g.kp = Vec3(m->kp[0], m->kp[1], m->kp[2]);
+        g.kd = Vec3(m->kd[0], m->kd[1], m->kd[2]);
+      }
+      try {
+        g.validate();
+        c.controller.emplace(models_.current(), law, g);
+      } catch (const Error& e) {
+        return refuse(ack_t::REASON_INVALID, std::string("select_controller: ") + e.what());
+      }
+      c.kind = CommandKind::select_controller;
+      if (loop_.commands().size() < loop_.commands().capacity()) pending_laws_[c.id] = {law, g};
+      break;
+    }
+    case control_command_t::CMD_LOAD_MODEL: {
+      try {
+        ctl::MachineModel model = load_model(m->model_path);
+        model.force_limit = std::min(model.force_limit, cfg_.limits.force);
+        auto machine = std::make_unique<ctl::Machine>(model);
+        c.controller.emplace(*machine, law_, gains_);
+        c.machine = models_.add(std::move(machine));
+      } catch (const std::exception& e) {
+        return refuse(ack_t::REASON_LOAD_FAILED, std::string("load_model: ") + e.what());
+      }
+      c.kind = CommandKind::load_model;
+      pending_models_[c.id] = c.machine;
+      break;
+    }
+    default:
+      return refuse(ack_t::REASON_INVALID, "unknown command " + std::to_string(m->command));
+  }
+  if (!send(c) && c.machine) {
+    pending_models_.erase(c.id);
+    models_.release(c.machine);
+  }
+}
+
+void Server::on_trajectory(const lcm::ReceiveBuffer*, const std::string&, const trajectory_command_t* m) {
+  Vec3 start;
+  if (inflight_segments_ > 0) start = planned_end_;
+  else if (ack_newer_than_state_ || !have_state_) start = ack_end_;
+  else start = Vec3(latest_.queue_end[0], latest_.queue_end[1], latest_.queue_end[2]);
+  Validation v = validate_segment(*m, start, models_.current(), cfg_.limits, 1.0 / cfg_.loop.rate_hz);
+  if (!v.ok) {
+    publish_ack(m->id, 2, m->kind, false, v.reason, v.message, loop_.mode(), latest_.queue_depth);
+    return;
+  }
+  Command& c = *scratch_;
+  c = Command{};
+  c.kind = CommandKind::segment;
+  c.id = m->id;
+  c.source = 2;
+  c.code = m->kind;
+  c.segment = v.segment;
+  if (send(c)) {
+    inflight_segments_++;
+    planned_end_ = v.segment.end;
+  }
+}
+
+int Server::drain() {
+  int n = 0;
+  Ack a;
+  while (loop_.acks().pop(a)) {
+    ++n;
+    if (a.source == 2) inflight_segments_ = std::max(0, inflight_segments_ - 1);
+    ack_newer_than_state_ = true;
+    ack_end_ = a.queue_end;
+    if (a.source == 1 && a.code == control_command_t::CMD_LOAD_MODEL) {
+      const auto it = pending_models_.find(a.id);
+      if (a.accepted && it != pending_models_.end()) models_.make_current(it->second);
+      if (it != pending_models_.end()) pending_models_.erase(it);
+    }
+    if (a.source == 1 && a.code == control_command_t::CMD_SELECT_CONTROLLER) {
+      const auto it = pending_laws_.find(a.id);
+      if (a.accepted && it != pending_laws_.end()) {
+        law_ = it->second.first;
+        gains_ = it->second.second;
+      }
+      if (it != pending_laws_.end()) pending_laws_.erase(it);
+    }
+    // A model the loop no longer uses (the old one after a load, or the new
+    // one of a refused load) is freed here, outside the loop.
+    if (a.retired) models_.release(a.retired);
+    std::string msg = a.message;
+    publish_ack(a.id, a.source, a.code, a.accepted, a.reason, msg, a.mode, a.queue_depth);
+  }
+  const auto* s = loop_.snapshots().front();
+  while (s) {
+    cpm_msgs::state_t st = *s;
+    loop_.snapshots().release();
+    st.utime = std::chrono::duration_cast<std::chrono::microseconds>(
+                   std::chrono::system_clock::now().time_since_epoch()).count();
+    lcm_->publish(cfg_.lcm.state_channel, &st);
+    latest_ = st;
+    have_state_ = true;
+    ack_newer_than_state_ = false;
+    ++n;
+    s = loop_.snapshots().front();
+  }
+  cpm_msgs::loop_stats_t stats;
+  while (loop_.stats().pop(stats)) {
+    stats.utime = std::chrono::duration_cast<std::chrono::microseconds>(
+                      std::chrono::system_clock::now().time_since_epoch()).count();
+    lcm_->publish(cfg_.lcm.stats_channel, &stats);
+    ++n;
+  }
+  return n;
+}
+
+void Server::run(const std::atomic<bool>& stop) {
+  while (!stop.load(std::memory_order_acquire)) {
+    lcm_->handleTimeout(1);
+    drain();
+  }
+  drain();
+}
+
+bool sd_notify(const std::string& message) {
+  const char* path = std::getenv("NOTIFY_SOCKET");
+  if (!path || !*path) return false;
+  sockaddr_un addr{};
+  addr.sun_family = AF_UNIX;
+  const std::size_t len = std::strlen(path);
+  if (len >= sizeof addr.sun_path) return false;
+  std::memcpy(addr.sun_path, path, len);
+  if (path[0] == '@') addr.sun_path[0] = '\0';  // abstract socket
+  const int fd = ::socket(AF_UNIX, SOCK_DGRAM | SOCK_CLOEXEC, 0);
+  if (fd < 0) return false;
+  const auto alen = static_cast<socklen_t>(offsetof(sockaddr_un, sun_path) + len);
+  const bool ok = ::sendto(fd, message.data(), message.size(), MSG_NOSIGNAL,
+                           reinterpret_cast<const sockaddr*>(&addr), alen) == static_cast<ssize_t>(message.size());
+  ::close(fd);
+  return ok;
+}
+
+double sd_watchdog_interval() {
+  const char* usec = std::getenv("WATCHDOG_USEC");
+  if (!usec) return 0.0;
+  const char* pid = std::getenv("WATCHDOG_PID");
+  if (pid && std::atol(pid) != static_cast<long>(::getpid())) return 0.0;
+  return std::atof(usec) * 1e-6;
+}
+
+}  // namespace cpm::daemon

@@ -1,0 +1,242 @@
+// Client subcommands for the state machine: status, enable, disable, stop,
+// reset, controller, load-model, stats. They talk to a running cpmd over LCM.
+#include <cmath>
+#include <sstream>
+#include <thread>
+
+#include "cmd_client_common.hpp"
+#include "cpm/daemon/loop.hpp"
+
+namespace cpm::cli::client {
+
+using cpm_msgs::control_command_t;
+using cpm_msgs::state_t;
+
+Vec3 parse_point(const std::string& what, const std::string& text) {
+  Vec3 v;
+  std::istringstream is(text);
+  std::string part;
+  int n = 0;
+  while (std::getline(is, part, ',')) {
+    char* end = nullptr;
+    const double x = std::strtod(part.c_str(), &end);
+    if (n >= 3 || part.empty() || *end != '\0') throw UsageError(what + ": expected x,y,z in metres, got '" + text + "'");
+    v[n++] = x;  // NaN is passed on: the daemon must refuse it
+  }
+  if (n != 3) throw UsageError(what + ": expected x,y,z in metres, got '" + text + "'");
+  return v;
+}
+
+std::string state_line(const state_t& s) {
+  char b[256];
+  std::snprintf(b, sizeof b, "%-9s p = (%8.3f, %8.3f, %8.3f) mm  err %8.1f um  F = (%6.1f, %6.1f, %6.1f) N%s%s",
+                daemon::mode_text(s.mode), s.position[0] * 1e3, s.position[1] * 1e3, s.position[2] * 1e3,
+                s.position_error_norm * 1e6, s.force[0], s.force[1], s.force[2], s.faults ? "  FAULT " : "",
+                s.faults ? daemon::fault_text(s.faults).c_str() : "");
+  return b;
+}
+
+state_t wait_segment(daemon::Client& c, std::int64_t id, double timeout_s, bool progress) {
+  const auto t_end = std::chrono::steady_clock::now() + std::chrono::duration<double>(timeout_s);
+  state_t last{};
+  bool seen_playing = false;
+  auto last_print = std::chrono::steady_clock::now();
+  while (std::chrono::steady_clock::now() < t_end) {
+    auto s = c.state(1.0);
+    if (!s) throw Error("no state from cpmd for 1 s");
+    last = *s;
+    if (s->segment_id == id) seen_playing = true;
+    if (progress && std::chrono::steady_clock::now() - last_print > std::chrono::milliseconds(100)) {
+      last_print = std::chrono::steady_clock::now();
+      const double f = s->segment_duration > 0 ? std::min(1.0, s->segment_elapsed / s->segment_duration) : 1.0;
+      const int w = 30, fill = static_cast<int>(f * w);
+      std::fprintf(stderr, "\r[%s%s] %5.1f%% %s", std::string(fill, '#').c_str(), std::string(w - fill, '.').c_str(),
+                   100 * f, state_line(*s).c_str());
+    }
+    if (s->last_segment_id == id || s->mode == state_t::MODE_FAULT || s->mode == state_t::MODE_DISABLED ||
+        (seen_playing && s->segment_id != id && s->mode == state_t::MODE_HOLDING))
+      break;
+  }
+  if (progress) std::fprintf(stderr, "\n");
+  return last;
+}
+
+namespace {
+
+std::string json_state(const state_t& s) {
+  auto arr = [](const double* v) {
+    std::string out("[");
+    for (int i = 0; i < 3; ++i) {
+      if (i) out.append(", ");
+      out.append(json_number(v[i]));
+    }
+    out.push_back(']');
+    return out;
+  };
+  std::ostringstream os;
+  os << "{\"mode\": \"" << daemon::mode_text(s.mode) << "\", \"t\": " << json_number(s.t) << ", \"cycle\": " << s.cycle
+     << ", \"position\": " << arr(s.position) << ", \"velocity\": " << arr(s.velocity)
+     << ", \"position_ref\": " << arr(s.position_ref) << ", \"position_error\": " << json_number(s.position_error_norm)
+     << ", \"d\": " << arr(s.d) << ", \"force\": " << arr(s.force) << ", \"faults\": [";
+  const std::string f = daemon::fault_text(s.faults);
+  std::istringstream is(f);
+  std::string part;
+  bool first = true;
+  while (std::getline(is, part, ',')) {
+    os << (first ? "" : ", ") << '"' << part << '"';
+    first = false;
+  }
+  os << "], \"first_fault\": \"" << (s.first_fault ? daemon::fault_bit_name(static_cast<std::uint32_t>(s.first_fault)) : "")
+     << "\", \"controller\": \"" << ctl::law_name(static_cast<ctl::ControlLaw>(s.controller))
+     << "\", \"segment_id\": " << s.segment_id << ", \"queue_depth\": " << s.queue_depth
+     << ", \"last_segment\": {\"id\": " << s.last_segment_id << ", \"rmse\": " << json_number(s.last_segment_rmse)
+     << ", \"max\": " << json_number(s.last_segment_max) << "}, \"loop\": {\"cycles\": " << s.cycles
+     << ", \"overruns\": " << s.overruns << ", \"skipped\": " << s.skipped
+     << ", \"max_latency_ns\": " << s.max_latency_ns << ", \"max_cycle_ns\": " << s.max_cycle_ns << "}}";
+  return os.str();
+}
+
+int status(Args& a) {
+  const bool json = a.flag("json");
+  auto l = lcm_options(a);
+  a.finish();
+  daemon::Client c(l);
+  auto s = c.state(2.0);
+  if (!s) throw Error("no state from cpmd within 2 s (is it running? LCM " + l.url + ", channel " + l.state_channel + ")");
+  if (json) {
+    std::printf("%s\n", json_state(*s).c_str());
+    return 0;
+  }
+  std::printf("%s\n", state_line(*s).c_str());
+  std::printf("controller %s, cycle %lld, overruns %lld, worst wake-up latency %.1f us\n",
+              ctl::law_name(static_cast<ctl::ControlLaw>(s->controller)), static_cast<long long>(s->cycles),
+              static_cast<long long>(s->overruns), s->max_latency_ns * 1e-3);
+  if (s->faults)
+    std::printf("first fault: %s (axis %d, value %g, limit %g)\n",
+                daemon::fault_bit_name(static_cast<std::uint32_t>(s->first_fault)), s->fault_axis + 1, s->fault_value,
+                s->fault_limit);
+  if (s->last_segment_id >= 0)
+    std::printf("last segment %lld: tracking error RMS %.1f um, max %.1f um\n",
+                static_cast<long long>(s->last_segment_id), s->last_segment_rmse * 1e6, s->last_segment_max * 1e6);
+  return 0;
+}
+
+int simple(Args& a, std::int8_t cmd, const char* what) {
+  const bool no_wait = a.flag("no-wait");
+  auto l = lcm_options(a);
+  a.finish();
+  daemon::Client c(l);
+  const auto ack = c.control(cmd);
+  const int rc = report(what, ack);
+  if (rc == 0 && !no_wait && (cmd == control_command_t::CMD_ENABLE || cmd == control_command_t::CMD_STOP)) {
+    // Wait for the drives to be enabled / the stop to finish.
+    for (int i = 0; i < 300; ++i) {
+      auto s = c.state(1.0);
+      if (!s) break;
+      if (s->mode == state_t::MODE_HOLDING || s->mode == state_t::MODE_FAULT || s->mode == state_t::MODE_DISABLED) {
+        std::printf("%s\n", state_line(*s).c_str());
+        return s->mode == state_t::MODE_HOLDING ? 0 : 1;
+      }
+    }
+  }
+  return rc;
+}
+
+int controller(Args& a) {
+  control_command_t cmd{};
+  cmd.command = control_command_t::CMD_SELECT_CONTROLLER;
+  const double kp = a.number("kp", NAN), kd = a.number("kd", NAN);
+  auto l = lcm_options(a);
+  const auto pos = a.positionals();
+  const auto law = pos.empty() ? std::nullopt : ctl::law_from_name(pos[0]);
+  if (pos.size() != 1 || !law) throw UsageError("give one law: pd, pd_gravity, pd_feedforward or computed_torque");
+  cmd.law = static_cast<std::int8_t>(*law);
+  const auto g = ctl::table3_gains(*law);
+  cmd.use_table3_gains = std::isnan(kp) && std::isnan(kd);
+  for (int i = 0; i < 3; ++i) {
+    cmd.kp[i] = std::isnan(kp) ? g.kp[i] : kp;
+    cmd.kd[i] = std::isnan(kd) ? g.kd[i] : kd;
+  }
+  a.finish();
+  daemon::Client c(l);
+  return report("controller", c.control(cmd));
+}
+
+int load_model(Args& a) {
+  auto l = lcm_options(a);
+  const auto pos = a.positionals();
+  if (pos.size() != 1) throw UsageError("give the model file's path (on the daemon's host)");
+  a.finish();
+  control_command_t cmd{};
+  cmd.command = control_command_t::CMD_LOAD_MODEL;
+  cmd.model_path = pos[0];
+  daemon::Client c(l);
+  return report("load-model", c.control(cmd, 10.0));
+}
+
+int stats(Args& a) {
+  const bool json = a.flag("json");
+  auto l = lcm_options(a);
+  a.finish();
+  daemon::Client c(l);
+  auto s = c.stats(3.0);
+  if (!s) throw Error("no statistics from cpmd within 3 s (channel " + l.stats_channel + ")");
+  static const char* names[daemon::kSeries] = {"wake-up latency", "read backend", "estimate", "trajectory",
+                                               "inverse kinematics", "controller", "safety", "write backend",
+                                               "publish", "whole cycle"};
+  auto pct = [&](int k, double q) {
+    const double target = q * static_cast<double>(s->count[k]);
+    double acc = 0;
+    for (int b = 0; b < daemon::kBins; ++b) {
+      acc += s->histogram[k][b];
+      if (acc >= target) return daemon::histogram_bin_floor(b + 1 < daemon::kBins ? b + 1 : b) * 1e-3;
+    }
+    return s->max_ns[k] * 1e-3;
+  };
+  if (json) {
+    std::printf("{\"rate_hz\": %g, \"cycles\": %lld, \"overruns\": %lld, \"skipped\": %lld, \"realtime\": %s, \"series\": {",
+                s->rate_hz, static_cast<long long>(s->cycles), static_cast<long long>(s->overruns),
+                static_cast<long long>(s->skipped), s->realtime ? "true" : "false");
+    for (int k = 0; k < daemon::kSeries; ++k)
+      std::printf("%s\"%s\": {\"mean_us\": %.3f, \"p99_us\": %.0f, \"p999_us\": %.0f, \"max_us\": %.3f}", k ? ", " : "",
+                  names[k], s->count[k] ? s->sum_ns[k] / s->count[k] * 1e-3 : 0.0, pct(k, 0.99), pct(k, 0.999),
+                  s->max_ns[k] * 1e-3);
+    std::printf("}}\n");
+    return 0;
+  }
+  std::printf("loop %.0f Hz, %s, memory %slocked: %lld cycles (%.1f s), %lld overruns, %lld slots skipped\n",
+              s->rate_hz, s->realtime ? "SCHED_FIFO" : "normal scheduling", s->memory_locked ? "" : "NOT ",
+              static_cast<long long>(s->cycles), s->cycles / s->rate_hz, static_cast<long long>(s->overruns),
+              static_cast<long long>(s->skipped));
+  std::printf("%-20s %10s %10s %10s %10s %10s   (us; percentiles to the histogram's 1 us bins)\n", "", "min", "mean",
+              "p99", "p99.9", "max");
+  for (int k = 0; k < daemon::kSeries; ++k)
+    std::printf("%-20s %10.2f %10.2f %10.0f %10.0f %10.2f\n", names[k], s->min_ns[k] * 1e-3,
+                s->count[k] ? s->sum_ns[k] / s->count[k] * 1e-3 : 0.0, pct(k, 0.99), pct(k, 0.999),
+                s->max_ns[k] * 1e-3);
+  return 0;
+}
+
+const Command r1{"status", "print the state of a running cpmd (--json for machines)", status,
+                 "[--json] [--config DAEMON.yaml] [--url LCM_URL]"};
+const Command r2{"enable", "enable the drives (disabled -> enabling -> holding)",
+                 [](Args& a) { return simple(a, control_command_t::CMD_ENABLE, "enable"); },
+                 "[--no-wait] [--config DAEMON.yaml] [--url LCM_URL]"};
+const Command r3{"disable", "disable the drives (a moving machine stops first)",
+                 [](Args& a) { return simple(a, control_command_t::CMD_DISABLE, "disable"); },
+                 "[--config DAEMON.yaml] [--url LCM_URL]"};
+const Command r4{"stop", "stop the motion and clear the trajectory queue",
+                 [](Args& a) { return simple(a, control_command_t::CMD_STOP, "stop"); },
+                 "[--no-wait] [--config DAEMON.yaml] [--url LCM_URL]"};
+const Command r5{"reset", "reset a latched fault (the setpoint resyncs to the measured position)",
+                 [](Args& a) { return simple(a, control_command_t::CMD_RESET, "reset"); },
+                 "[--config DAEMON.yaml] [--url LCM_URL]"};
+const Command r6{"controller", "select the control law and gains of a running cpmd", controller,
+                 "pd|pd_gravity|pd_feedforward|computed_torque [--kp K] [--kd K] [--config DAEMON.yaml] [--url LCM_URL]"};
+const Command r7{"load-model", "load a model file into a running cpmd (when disabled)", load_model,
+                 "MODEL.yaml [--config DAEMON.yaml] [--url LCM_URL]"};
+const Command r8{"stats", "print cpmd's loop timing: wake-up latency and per-phase times", stats,
+                 "[--json] [--config DAEMON.yaml] [--url LCM_URL]"};
+
+}  // namespace
+}  // namespace cpm::cli::client

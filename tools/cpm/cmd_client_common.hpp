@@ -1,0 +1,46 @@
+// Shared by the client subcommands (cmd_client*.cpp): how to reach the
+// daemon, and small helpers. Not a subcommand itself.
+#pragma once
+
+#include <cstdio>
+#include <optional>
+#include <string>
+
+#include "cli.hpp"
+#include "cpm/daemon/client.hpp"
+#include "cpm/daemon/config.hpp"
+
+namespace cpm::cli::client {
+
+// --config FILE (the daemon's config: its lcm section) and/or --url URL.
+inline daemon::LcmConfig lcm_options(Args& a) {
+  daemon::LcmConfig l;
+  if (auto c = a.option("config")) l = daemon::load_config(*c).lcm;
+  if (auto u = a.option("url")) l.url = *u;
+  return l;
+}
+inline const char* kConnUsage = "[--config DAEMON.yaml] [--url LCM_URL]";
+
+// Print an ack; returns 0 when accepted, 1 when rejected.
+inline int report(const char* what, const cpm_msgs::ack_t& a) {
+  if (a.accepted)
+    std::printf("%s: accepted (%s); mode %s, %d queued\n", what, a.message.c_str(), daemon::mode_text(a.mode),
+                a.queue_depth);
+  else
+    std::printf("%s: REJECTED: %s (mode %s)\n", what, a.message.c_str(), daemon::mode_text(a.mode));
+  return a.accepted ? 0 : 1;
+}
+
+inline Vec3 vec3_of(const double* v) { return Vec3(v[0], v[1], v[2]); }
+
+// Parse "x,y,z" (m).
+Vec3 parse_point(const std::string& what, const std::string& text);
+
+// Wait until segment `id` has finished (or the machine left moving), printing
+// a progress bar when `progress`; returns the final state.
+cpm_msgs::state_t wait_segment(daemon::Client& c, std::int64_t id, double timeout_s, bool progress);
+
+// One line of text for a state (mode, position in mm, error in um, faults).
+std::string state_line(const cpm_msgs::state_t& s);
+
+}  // namespace cpm::cli::client

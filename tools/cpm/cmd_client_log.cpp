@@ -1,0 +1,162 @@
+// Client subcommands that look at the state stream: watch (live view),
+// record (state -> motion CSV of data-formats.md), lcm-log-to-csv (the same
+// from an lcm-logger file).
+#include <signal.h>
+
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <iomanip>
+#include <lcm/lcm-cpp.hpp>
+#include <sstream>
+#include <vector>
+
+#include "cmd_client_common.hpp"
+
+namespace cpm::cli::client {
+namespace {
+
+using cpm_msgs::state_t;
+
+std::atomic<bool> g_interrupted{false};
+void on_sigint(int) { g_interrupted.store(true); }
+
+struct MotionRow {
+  double t;
+  double d[3], v[3], f[3];
+};
+
+MotionRow row_of(const state_t& s) {
+  MotionRow r{};
+  r.t = s.t;
+  for (int i = 0; i < 3; ++i) {
+    r.d[i] = s.d[i];
+    r.v[i] = s.d_dot[i];
+    r.f[i] = s.force[i];
+  }
+  return r;
+}
+
+// The motion layout of data-formats.md (kind = motion), written atomically.
+void write_motion_csv(const std::string& path, const std::vector<MotionRow>& rows, double rate, const std::string& note) {
+  std::ostringstream os;
+  os << "# kind = motion\n";
+  if (rate > 0) os << "# rate = " << rate << "\n";
+  os << "# " << note << "\n";
+  os << "t,d1,d2,d3,v1,v2,v3,f1,f2,f3\n" << std::setprecision(17);
+  for (const auto& r : rows) {
+    os << r.t;
+    for (double x : r.d) os << ',' << x;
+    for (double x : r.v) os << ',' << x;
+    for (double x : r.f) os << ',' << x;
+    os << '\n';
+  }
+  write_file_atomically(path, os.str());
+}
+
+int watch(Args& a) {
+  const double duration = a.number("duration", -1);
+  auto l = lcm_options(a);
+  a.finish();
+  daemon::Client c(l);
+  signal(SIGINT, on_sigint);
+  const auto start = std::chrono::steady_clock::now();
+  while (!g_interrupted.load()) {
+    if (duration >= 0 && std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count() > duration) break;
+    auto s = c.state(1.0);
+    if (!s) {
+      std::printf("\r(no state from cpmd)%60s", "");
+      std::fflush(stdout);
+      continue;
+    }
+    std::string bar;
+    if (s->segment_id >= 0 && s->segment_duration > 0) {
+      const double f = std::min(1.0, s->segment_elapsed / s->segment_duration);
+      const int w = 20, fill = static_cast<int>(f * w);
+      char b[64];
+      std::snprintf(b, sizeof b, " seg %lld [%s%s] %3.0f%% +%d", static_cast<long long>(s->segment_id),
+                    std::string(fill, '#').c_str(), std::string(w - fill, '.').c_str(), 100 * f, s->queue_depth);
+      bar = b;
+    }
+    std::printf("\r%s%s   ", state_line(*s).c_str(), bar.c_str());
+    std::fflush(stdout);
+    c.handle(0.1);
+  }
+  std::printf("\n");
+  return 0;
+}
+
+int record(Args& a) {
+  const auto out = a.option("out");
+  if (!out) throw UsageError("--out FILE.csv is required");
+  const double duration = a.number("duration", -1);
+  const bool until_idle = a.flag("until-idle");
+  auto l = lcm_options(a);
+  a.finish();
+  if (duration < 0 && !until_idle) throw UsageError("give --duration S or --until-idle");
+  daemon::Client c(l);
+  std::vector<MotionRow> rows;
+  std::int64_t first = -1, last = -1;
+  bool moved = false, idle = false;
+  c.on_state([&](const state_t& s) {
+    if (first < 0) first = s.cycle;
+    last = s.cycle;
+    rows.push_back(row_of(s));
+    if (s.mode == state_t::MODE_MOVING || s.mode == state_t::MODE_STOPPING) moved = true;
+    if (moved && s.mode != state_t::MODE_MOVING && s.mode != state_t::MODE_STOPPING) idle = true;
+  });
+  signal(SIGINT, on_sigint);
+  const auto start = std::chrono::steady_clock::now();
+  while (!g_interrupted.load() && !(until_idle && idle)) {
+    if (duration >= 0 && std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count() >= duration) break;
+    c.handle(0.05);
+  }
+  if (rows.empty()) throw Error("no state received from cpmd (channel " + l.state_channel + ")");
+  const double rate = rows.size() > 1 ? (rows.size() - 1) / (rows.back().t - rows.front().t) : 0.0;
+  const long expected = static_cast<long>(last - first + 1);
+  char note[160];
+  std::snprintf(note, sizeof note, "recorded by cpm record from %s: %zu states of %ld cycles", l.state_channel.c_str(),
+                rows.size(), expected);
+  write_motion_csv(*out, rows, std::round(rate), note);
+  std::printf("record: %zu rows over %.3f s to %s (%ld cycles, %ld missing)\n", rows.size(),
+              rows.back().t - rows.front().t, out->c_str(), expected, expected - static_cast<long>(rows.size()));
+  return 0;
+}
+
+int log_to_csv(Args& a) {
+  const auto out = a.option("out");
+  if (!out) throw UsageError("--out FILE.csv is required");
+  const std::string channel = a.option_or("channel", "CPMD_STATE");
+  const auto pos = a.positionals();
+  if (pos.size() != 1) throw UsageError("give the lcm-logger file");
+  a.finish();
+  lcm::LogFile log(pos[0], "r");
+  if (!log.good()) throw Error(pos[0] + ": cannot open as an LCM log");
+  std::vector<MotionRow> rows;
+  long bad = 0;
+  for (const lcm::LogEvent* ev = log.readNextEvent(); ev; ev = log.readNextEvent()) {
+    if (ev->channel != channel) continue;
+    state_t s;
+    if (s.decode(ev->data, 0, ev->datalen) < 0) {
+      ++bad;
+      continue;
+    }
+    rows.push_back(row_of(s));
+  }
+  if (rows.empty()) throw Error(pos[0] + ": no decodable state_t on channel " + channel);
+  const double rate = rows.size() > 1 ? (rows.size() - 1) / (rows.back().t - rows.front().t) : 0.0;
+  write_motion_csv(*out, rows, std::round(rate), "converted by cpm lcm-log-to-csv from " + pos[0] + " channel " + channel);
+  std::printf("lcm-log-to-csv: %zu rows to %s%s\n", rows.size(), out->c_str(),
+              bad ? (" (" + std::to_string(bad) + " undecodable events skipped)").c_str() : "");
+  return 0;
+}
+
+const Command r1{"watch", "live text view of a running cpmd's state, with trajectory progress", watch,
+                 "[--duration S] [--config DAEMON.yaml] [--url LCM_URL]"};
+const Command r2{"record", "record cpmd's state to a motion CSV (data-formats.md, kind = motion)", record,
+                 "--out FILE.csv (--duration S | --until-idle) [--config DAEMON.yaml] [--url LCM_URL]"};
+const Command r3{"lcm-log-to-csv", "convert an lcm-logger file of cpmd's state channel to a motion CSV", log_to_csv,
+                 "LOGFILE --out FILE.csv [--channel CPMD_STATE]"};
+
+}  // namespace
+}  // namespace cpm::cli::client

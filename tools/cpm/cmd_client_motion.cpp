@@ -1,0 +1,201 @@
+// Client subcommands that send trajectories to a running cpmd: move, circle, stream.
+#include <cmath>
+#include <fstream>
+#include <sstream>
+#include <thread>
+#include <vector>
+
+#include "cmd_client_common.hpp"
+
+namespace cpm::cli::client {
+namespace {
+
+using cpm_msgs::ack_t;
+using cpm_msgs::state_t;
+using cpm_msgs::trajectory_command_t;
+
+void print_result(const state_t& s, std::int64_t id) {
+  if (s.last_segment_id == id)
+    std::printf("tracking error over the segment: RMS %.1f um, max %.1f um (%d cycles)\n", s.last_segment_rmse * 1e6,
+                s.last_segment_max * 1e6, s.last_segment_cycles);
+  else
+    std::printf("the segment did not finish: %s\n", state_line(s).c_str());
+}
+
+trajectory_command_t move_cmd(const Vec3& to, double v, double a, double j) {
+  trajectory_command_t m{};
+  m.kind = trajectory_command_t::KIND_MOVE;
+  for (int i = 0; i < 3; ++i) m.target[i] = to[i];
+  m.max_velocity = v;
+  m.max_acceleration = a;
+  m.max_jerk = j;
+  return m;
+}
+
+int move(Args& a) {
+  const double v = a.number("vmax", 0.1), acc = a.number("amax", 1.0), j = a.number("jmax", 50.0);
+  const bool no_wait = a.flag("no-wait");
+  auto l = lcm_options(a);
+  const auto pos = a.positionals();  // after the options: they consume their values
+  if (pos.size() != 1) throw UsageError("give the target X,Y,Z (m)");
+  const Vec3 to = parse_point("target", pos[0]);
+  a.finish();
+  daemon::Client c(l);
+  const auto ack = c.trajectory(move_cmd(to, v, acc, j));
+  if (report("move", ack) != 0) return 1;
+  if (no_wait) return 0;
+  const state_t s = wait_segment(c, ack.id, 600.0, true);
+  print_result(s, ack.id);
+  return s.last_segment_id == ack.id ? 0 : 1;
+}
+
+int circle(Args& a) {
+  const bool paper = a.flag("paper");
+  trajectory_command_t m{};
+  m.kind = trajectory_command_t::KIND_CIRCLE;
+  ctl::CircleSpec spec;  // Elkady's circle by default
+  if (!paper) spec.ramp_time = a.number("ramp", 0.5);
+  if (auto cen = a.option("centre")) spec.centre = parse_point("--centre", *cen);
+  spec.radius = a.number("radius", spec.radius);
+  spec.angular_speed = a.number("speed", spec.angular_speed);
+  if (a.flag("cw")) spec.angular_speed = -std::abs(spec.angular_speed);
+  spec.cruise_time = a.number("time", spec.cruise_time);
+  spec.start_angle = a.number("start-angle", spec.start_angle);
+  const std::string plane = a.option_or("plane", "xy");
+  const int pl = plane == "xy" ? 0 : plane == "yz" ? 1 : plane == "zx" ? 2 : -1;
+  if (pl < 0) throw UsageError("--plane must be xy, yz or zx");
+  const bool approach = !a.flag("no-approach");
+  const double vapp = a.number("approach-vmax", 0.1);
+  const bool no_wait = a.flag("no-wait");
+  auto l = lcm_options(a);
+  a.finish();
+  for (int i = 0; i < 3; ++i) m.centre[i] = spec.centre[i];
+  m.radius = spec.radius;
+  m.plane = static_cast<std::int8_t>(pl);
+  m.angular_speed = spec.angular_speed;
+  m.start_angle = spec.start_angle;
+  m.cruise_time = spec.cruise_time;
+  m.ramp_time = spec.ramp_time;
+  spec.plane = static_cast<ctl::CirclePlane>(pl);
+  const Vec3 start = ctl::CircleTrajectory(spec).sample(0.0).p;
+
+  daemon::Client c(l);
+  auto s = c.state(2.0);
+  if (!s) throw Error("no state from cpmd within 2 s");
+  const Vec3 end = vec3_of(s->queue_end);
+  if (approach && (end - start).norm() > 1e-6) {
+    std::printf("approach: moving to the circle's start (%.3f, %.3f, %.3f) mm\n", start.x() * 1e3, start.y() * 1e3,
+                start.z() * 1e3);
+    const auto ack = c.trajectory(move_cmd(start, vapp, 1.0, 50.0));
+    if (report("approach move", ack) != 0) return 1;
+    const state_t r = wait_segment(c, ack.id, 600.0, false);
+    if (r.last_segment_id != ack.id) {
+      print_result(r, ack.id);
+      return 1;
+    }
+    // Let the platform settle at the start, as the paper's test starts at rest.
+    std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  }
+  const auto ack = c.trajectory(m);
+  if (report(paper ? "paper circle" : "circle", ack) != 0) return 1;
+  if (no_wait) return 0;
+  const state_t r = wait_segment(c, ack.id, 600.0, true);
+  print_result(r, ack.id);
+  return r.last_segment_id == ack.id ? 0 : 1;
+}
+
+// CSV with columns t,x,y,z and optionally vx,vy,vz (SI).
+int stream(Args& a) {
+  const bool no_wait = a.flag("no-wait");
+  auto l = lcm_options(a);
+  const auto pos = a.positionals();
+  if (pos.size() != 1) throw UsageError("give a CSV file with columns t,x,y,z[,vx,vy,vz] (s, m, m/s)");
+  a.finish();
+  std::ifstream f(pos[0]);
+  if (!f) throw Error(pos[0] + ": cannot read");
+  std::string line;
+  std::vector<std::string> cols;
+  std::vector<std::array<double, 7>> rows;
+  int lineno = 0;
+  while (std::getline(f, line)) {
+    ++lineno;
+    if (line.empty() || line[0] == '#') continue;
+    std::vector<std::string> cells;
+    std::istringstream is(line);
+    std::string cell;
+    while (std::getline(is, cell, ',')) cells.push_back(cell);
+    if (cols.empty()) {
+      cols = cells;
+      continue;
+    }
+    std::array<double, 7> r{0, 0, 0, 0, NAN, NAN, NAN};
+    const char* names[7] = {"t", "x", "y", "z", "vx", "vy", "vz"};
+    for (int k = 0; k < 7; ++k)
+      for (std::size_t j = 0; j < cols.size() && j < cells.size(); ++j)
+        if (cols[j] == names[k]) {
+          char* end = nullptr;
+          r[k] = std::strtod(cells[j].c_str(), &end);
+          if (*end != '\0' || !std::isfinite(r[k]))
+            throw Error(pos[0] + ":" + std::to_string(lineno) + ": column " + names[k] + ": not a finite number");
+        }
+    rows.push_back(r);
+  }
+  for (const char* need : {"t", "x", "y", "z"})
+    if (std::find(cols.begin(), cols.end(), need) == cols.end())
+      throw Error(pos[0] + ": missing column '" + need + "'");
+  if (rows.size() < 2) throw Error(pos[0] + ": needs at least two setpoints");
+  const std::size_t n = rows.size();
+  // Velocities: given, or central differences (rest at both ends).
+  for (std::size_t i = 0; i < n; ++i)
+    for (int k = 0; k < 3; ++k)
+      if (std::isnan(rows[i][4 + k]))
+        rows[i][4 + k] = (i == 0 || i + 1 == n) ? 0.0
+                                                : (rows[i + 1][1 + k] - rows[i - 1][1 + k]) / (rows[i + 1][0] - rows[i - 1][0]);
+  daemon::Client c(l);
+  std::int64_t last_id = -1;
+  int segments = 0;
+  for (std::size_t s0 = 0; s0 + 1 < n; s0 += 99) {
+    const std::size_t cnt = std::min<std::size_t>(100, n - s0);
+    trajectory_command_t m{};
+    m.kind = trajectory_command_t::KIND_STREAM;
+    m.count = static_cast<std::int16_t>(cnt);
+    for (std::size_t i = 0; i < cnt; ++i) {
+      m.time[i] = rows[s0 + i][0] - rows[s0][0];
+      for (int k = 0; k < 3; ++k) {
+        m.position[i][k] = rows[s0 + i][1 + k];
+        m.velocity[i][k] = rows[s0 + i][4 + k];
+      }
+    }
+    for (;;) {
+      const auto ack = c.trajectory(m);
+      if (ack.accepted) {
+        last_id = ack.id;
+        ++segments;
+        break;
+      }
+      if (ack.reason == ack_t::REASON_QUEUE_FULL || ack.reason == ack_t::REASON_BUSY) {
+        c.handle(0.05);
+        continue;
+      }
+      std::printf("stream: segment starting at row %zu REJECTED: %s\n", s0 + 1, ack.message.c_str());
+      return 1;
+    }
+  }
+  std::printf("stream: %zu setpoints sent as %d segments\n", n, segments);
+  if (no_wait) return 0;
+  const state_t r = wait_segment(c, last_id, 3600.0, true);
+  print_result(r, last_id);
+  return r.last_segment_id == last_id ? 0 : 1;
+}
+
+const Command r1{"move", "move a running cpmd's platform to X,Y,Z (jerk-limited straight line)", move,
+                 "X,Y,Z [--vmax M/S] [--amax M/S2] [--jmax M/S3] [--no-wait] [--config DAEMON.yaml] [--url LCM_URL]"};
+const Command r2{"circle", "run a circle on a running cpmd (--paper: Elkady's test) and print the tracking error", circle,
+                 "[--paper] [--centre X,Y,Z] [--radius M] [--speed RAD/S] [--cw] [--time S] [--ramp S]\n"
+                 "       [--plane xy|yz|zx] [--start-angle RAD] [--no-approach] [--approach-vmax M/S] [--no-wait]\n"
+                 "       [--config DAEMON.yaml] [--url LCM_URL]"};
+const Command r3{"stream", "stream timed setpoints from a CSV (t,x,y,z[,vx,vy,vz]) to a running cpmd", stream,
+                 "FILE.csv [--no-wait] [--config DAEMON.yaml] [--url LCM_URL]"};
+
+}  // namespace
+}  // namespace cpm::cli::client
