@@ -98,10 +98,26 @@ void write_file_atomically(const std::string& path, const std::string& text) {
 }
 
 std::string sha256_file(const std::string& path) {
-  const std::string bytes = detail::read_whole_file(path);
+  // Streamed, so that a large log is hashed without holding it in memory.
+  Fd f{::open(path.c_str(), O_RDONLY | O_CLOEXEC)};
+  if (f.fd < 0) throw Error(path + ": cannot read: " + errno_text(errno));
+  std::unique_ptr<EVP_MD_CTX, decltype(&EVP_MD_CTX_free)> ctx(EVP_MD_CTX_new(), EVP_MD_CTX_free);
+  if (!ctx || EVP_DigestInit_ex(ctx.get(), EVP_sha256(), nullptr) != 1)
+    throw Error(path + ": SHA-256 failed (OpenSSL)");
+  char buf[1 << 16];
+  for (;;) {
+    const ssize_t n = ::read(f.fd, buf, sizeof buf);
+    if (n < 0) {
+      if (errno == EINTR) continue;
+      throw Error(path + ": cannot read: " + errno_text(errno));
+    }
+    if (n == 0) break;
+    if (EVP_DigestUpdate(ctx.get(), buf, static_cast<std::size_t>(n)) != 1)
+      throw Error(path + ": SHA-256 failed (OpenSSL)");
+  }
   unsigned char md[EVP_MAX_MD_SIZE];
   unsigned int len = 0;
-  if (EVP_Digest(bytes.data(), bytes.size(), md, &len, EVP_sha256(), nullptr) != 1 || len != 32)
+  if (EVP_DigestFinal_ex(ctx.get(), md, &len) != 1 || len != 32)
     throw Error(path + ": SHA-256 failed (OpenSSL)");
   static const char* hex = "0123456789abcdef";
   std::string out(64, '0');

@@ -11,6 +11,7 @@
 #include <cstring>
 #include <optional>
 #include <sstream>
+#include <type_traits>
 
 #include "cpm/io/model_file.hpp"
 #include "util.hpp"
@@ -424,6 +425,17 @@ MotionData to_motion(Table& tb) {
   out.f = vec3s(tb, c_f1, c_f2, c_f3);
   out.a = vec3s(tb, c_a1, c_a2, c_a3);
   out.run = runs(tb);
+  // Time that runs backwards inside a run breaks every filter of the tools:
+  // say where, without refusing a log that may be several joined on purpose.
+  std::size_t backwards = 0, first = 0;
+  for (std::size_t k = 1; k < out.t.size(); ++k)
+    if (out.t[k] <= out.t[k - 1] && (out.run.empty() || out.run[k] == out.run[k - 1]))
+      if (backwards++ == 0) first = k;
+  if (backwards)
+    tb.info.warnings.push_back(tb.name + ":" + std::to_string(tb.info.line_of_row[first]) +
+                               ": t does not increase (" + detail::format_double(out.t[first - 1]) +
+                               " s, then " + detail::format_double(out.t[first]) + " s) within a run; " +
+                               std::to_string(backwards) + " such step(s) in the file");
   out.info = std::move(tb.info);
   return out;
 }
@@ -563,7 +575,7 @@ std::string vec_text(const Vec3& v) {
 
 }  // namespace
 
-void write_ballbar(const std::string& path, const BallbarData& data) {
+std::string render_ballbar(const BallbarData& data, const std::string& path) {
   const std::size_t n = data.d.size();
   check_rows(path, n);
   check_size(path, "length", data.length.size(), n);
@@ -590,10 +602,10 @@ void write_ballbar(const std::string& path, const BallbarData& data) {
     out.erase(mark, 1);  // the leading comma
     out.push_back('\n');
   }
-  write_file_atomically(path, out);
+  return out;
 }
 
-void write_position(const std::string& path, const PositionData& data) {
+std::string render_position(const PositionData& data, const std::string& path) {
   const std::size_t n = data.d.size();
   check_rows(path, n);
   check_size(path, "px,py,pz", data.p.size(), n);
@@ -619,10 +631,10 @@ void write_position(const std::string& path, const PositionData& data) {
     out.erase(mark, 1);
     out.push_back('\n');
   }
-  write_file_atomically(path, out);
+  return out;
 }
 
-void write_motion(const std::string& path, const MotionData& data) {
+std::string render_motion(const MotionData& data, const std::string& path) {
   const std::size_t n = data.t.size();
   check_rows(path, n);
   check_size(path, "d1,d2,d3", data.d.size(), n);
@@ -654,7 +666,49 @@ void write_motion(const std::string& path, const MotionData& data) {
     out.erase(mark, 1);
     out.push_back('\n');
   }
-  write_file_atomically(path, out);
+  return out;
+}
+
+void write_ballbar(const std::string& path, const BallbarData& data) {
+  write_file_atomically(path, render_ballbar(data, path));
+}
+void write_position(const std::string& path, const PositionData& data) {
+  write_file_atomically(path, render_position(data, path));
+}
+void write_motion(const std::string& path, const MotionData& data) {
+  write_file_atomically(path, render_motion(data, path));
+}
+
+DataKind kind_of(const DataSet& data) noexcept {
+  if (std::holds_alternative<BallbarData>(data)) return DataKind::ballbar;
+  if (std::holds_alternative<PositionData>(data)) return DataKind::position;
+  return DataKind::motion;
+}
+
+std::size_t sample_count(const DataSet& data) noexcept {
+  return std::visit(
+      [](const auto& d) -> std::size_t {
+        using T = std::decay_t<decltype(d)>;
+        if constexpr (std::is_same_v<T, MotionData>)
+          return d.t.size();
+        else
+          return d.d.size();
+      },
+      data);
+}
+
+void write_data_file(const std::string& path, const DataSet& data) {
+  std::visit(
+      [&](const auto& d) {
+        using T = std::decay_t<decltype(d)>;
+        if constexpr (std::is_same_v<T, BallbarData>)
+          write_ballbar(path, d);
+        else if constexpr (std::is_same_v<T, PositionData>)
+          write_position(path, d);
+        else
+          write_motion(path, d);
+      },
+      data);
 }
 
 }  // namespace cpm::io

@@ -179,6 +179,11 @@ void load_limb(const Loader& ld, const Map& parent, int i, ctl::MachineModel& m)
     std::ostringstream os;
     os.precision(17);
     os << "the plane normal must be a unit vector; its length is " << pl.normal.norm();
+    if (pl.normal.norm() > 0.0) {
+      const Vec3 u = pl.normal.normalized();
+      os << " (normalized: [" << detail::format_double(u.x()) << ", " << detail::format_double(u.y())
+         << ", " << detail::format_double(u.z()) << "])";
+    }
     ld.fail(limb.get("normal"), limb.path("normal"), os.str());
   }
   if (!(pl.normal[i] > 0.5))
@@ -535,7 +540,12 @@ void save_model_file(const std::string& path, const ModelFile& m, const std::str
   }
   const std::string text = render_model_file(m);
   // Never write a file that would not load: the same checks as a reader.
-  parse_model_file(text, path);
+  try {
+    parse_model_file(text, path);
+  } catch (const Error& e) {
+    throw Error(std::string("refusing to save a model that would not load back (nothing written): ") +
+                e.what());
+  }
   write_file_atomically(path, text);
 }
 

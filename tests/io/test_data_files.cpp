@@ -408,3 +408,36 @@ TEST(DataFiles, WriteThatFailsHalfwayLeavesTheOldFileIntact) {
 
 }  // namespace
 }  // namespace cpm::io
+
+namespace cpm::io {
+namespace {
+
+TEST(DataFiles, RenderParseInMemoryAndGenericWriter) {
+  PositionData p;
+  p.d = {Vec3(0.1, 0.2, 0.3), Vec3(0.2, 0.2, 0.2)};
+  p.p = {Vec3(0.3, 0.4, 0.5), Vec3(0.4, 0.4, 0.4)};
+  const DataSet back = parse_data(render_position(p), "mem");
+  EXPECT_EQ(kind_of(back), DataKind::position);
+  EXPECT_EQ(sample_count(back), 2u);
+  EXPECT_EQ(std::get<PositionData>(back).p[1], p.p[1]);
+  ScratchDir dir;
+  write_data_file(dir.path("x.csv"), back);
+  EXPECT_EQ(test::read_text(dir.path("x.csv")), render_position(p));
+}
+
+TEST(DataFiles, TimeGoingBackwardsInARunIsWarnedAbout) {
+  const std::string head = "# kind = motion\nt,d1,d2,d3,v1,v2,v3,f1,f2,f3,run\n";
+  const auto m = std::get<MotionData>(parse_data(head +
+                                                 "0,0,0,0,0,0,0,0,0,0,1\n"
+                                                 "0.001,0,0,0,0,0,0,0,0,0,1\n"
+                                                 "0,0,0,0,0,0,0,0,0,0,2\n"       // a new run may restart t
+                                                 "0.001,0,0,0,0,0,0,0,0,0,2\n"
+                                                 "0.001,0,0,0,0,0,0,0,0,0,2\n",  // not within a run
+                                                 "m.csv"));
+  ASSERT_EQ(m.info.warnings.size(), 1u);
+  EXPECT_THAT(m.info.warnings[0], HasSubstr("m.csv:7: t does not increase (0.001 s, then 0.001 s) within a run; 1 such"));
+  EXPECT_EQ(m.t.size(), 5u);  // warned about, not dropped
+}
+
+}  // namespace
+}  // namespace cpm::io

@@ -214,6 +214,11 @@ TEST(ModelFile, OutOfRangeValuesAreRefused) {
   EXPECT_THAT(err("    scale: 1 ", "    scale: 2 "), HasSubstr("kinematics.limb1.scale: 2"));
   EXPECT_THAT(err("normal: [1, 0, 0]", "normal: [1, 0.1, 0]"),
               HasSubstr("kinematics.limb1.normal: the plane normal must be a unit vector"));
+  // The message offers the normalized vector, and that vector is accepted.
+  const std::string e = err("normal: [1, 0, 0]", "normal: [1, 0.1, 0]");
+  const auto b = e.find("normalized: ["), close = e.find(']', b);
+  ASSERT_NE(b, std::string::npos);
+  EXPECT_EQ(err("normal: [1, 0, 0]", "normal: " + e.substr(b + 12, close - b - 11)), "");
   EXPECT_THAT(err("normal: [1, 0, 0]", "normal: [0, 1, 0]"), HasSubstr("must point along the limb's own axis"));
   EXPECT_THAT(err("assembly_mode: 1", "assembly_mode: 0"), HasSubstr("kinematics.limb1.assembly_mode: must be 1 or -1"));
   EXPECT_THAT(err("stroke: [0, 0.4]", "stroke: [0.4, 0]"), HasSubstr("kinematics.limb1.stroke: min must be below max"));

@@ -85,5 +85,16 @@ DataSet parse_data(const std::string& text, const std::string& name);
 void write_ballbar(const std::string& path, const BallbarData& data);
 void write_position(const std::string& path, const PositionData& data);
 void write_motion(const std::string& path, const MotionData& data);
+// Whichever kind `data` holds.
+void write_data_file(const std::string& path, const DataSet& data);
+// The text the writers write (`name` is used in messages), e.g. for
+// parse_data round trips in memory.
+std::string render_ballbar(const BallbarData& data, const std::string& name = "ballbar data");
+std::string render_position(const PositionData& data, const std::string& name = "position data");
+std::string render_motion(const MotionData& data, const std::string& name = "motion data");
+
+// The kind a DataSet holds, and its number of samples (rows).
+DataKind kind_of(const DataSet& data) noexcept;
+std::size_t sample_count(const DataSet& data) noexcept;
 
 }  // namespace cpm::io
