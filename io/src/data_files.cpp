@@ -40,6 +40,35 @@ constexpr const char* kColName[c_count] = {
     "t",  "d1", "d2", "d3", "length", "px", "py", "pz", "v1",   "v2",   "v3",
     "f1", "f2", "f3", "a1", "a2",     "a3", "dir1", "dir2", "dir3", "run"};
 
+// The SI unit of each column, which a header may state: "d1 (m)", "f1 [N]".
+constexpr const char* kColUnit[c_count] = {"s", "m", "m", "m", "m", "m", "m", "m", "m/s", "m/s", "m/s",
+                                           "N", "N", "N", "m/s^2", "m/s^2", "m/s^2", "1", "1", "1", "1"};
+
+bool unit_matches(std::string_view given, const char* si) {
+  std::string g;
+  for (char ch : given)
+    if (ch != ' ') g.push_back(ch);
+  const std::string want = si;
+  if (g == want) return true;
+  if (want == "m/s^2") return g == "m/s2" || g == "m/s\xC2\xB2" || g == "m*s^-2";
+  if (want == "1") return g.empty() || g == "-";
+  return false;
+}
+
+// "d1 (m)" -> name "d1", unit "m"; "d1" -> name "d1", no unit.
+void split_unit(std::string_view field, std::string_view& name, std::optional<std::string_view>& unit) {
+  name = field;
+  unit.reset();
+  if (field.empty()) return;
+  const char close = field.back();
+  const char open = close == ')' ? '(' : close == ']' ? '[' : 0;
+  if (!open) return;
+  const std::size_t at = field.rfind(open);
+  if (at == std::string_view::npos || at == 0) return;
+  name = trim(field.substr(0, at));
+  unit = trim(field.substr(at + 1, field.size() - at - 2));
+}
+
 struct Layout {
   std::vector<Col> required;
   std::vector<Col> optional;
@@ -199,10 +228,19 @@ void parse_rows(Table& tb) {
     for (std::size_t k = 0; k < j; ++k)
       if (tb.header_fields[k] == nm)
         tb.fail(tb.header.number, "column '" + std::string(nm) + "' appears twice in the header");
+    std::string_view base;
+    std::optional<std::string_view> unit;
+    split_unit(nm, base, unit);
     int c = -1;
     for (int k = 0; k < c_count; ++k)
-      if (nm == kColName[k]) c = k;
+      if (base == kColName[k]) c = k;
     if (c >= 0 && known(static_cast<Col>(c))) {
+      if (unit && !unit_matches(*unit, kColUnit[c]))
+        tb.fail(tb.header.number, "column '" + std::string(nm) + "': the unit '" + std::string(*unit) +
+                                      "' is not " + kColName[c] + "'s SI unit (" + kColUnit[c] +
+                                      "); these files are in SI units, convert the column");
+      if (tb.present[c])
+        tb.fail(tb.header.number, "column '" + std::string(base) + "' appears twice in the header");
       slot[j] = c;
       tb.present[c] = true;
     } else {
@@ -211,8 +249,23 @@ void parse_rows(Table& tb) {
                                  " layout; ignored");
     }
   }
+  if (tb.header_fields.size() == 1) {
+    for (const char sep : {';', '\t', ' '})
+      if (tb.header.text.find(sep) != std::string_view::npos)
+        tb.fail(tb.header.number, std::string("the header is not comma separated (it holds '") +
+                                      (sep == '\t' ? "\\t" : std::string(1, sep)) +
+                                      "'): columns are separated by commas");
+  }
   for (Col r : lay.required)
-    if (!tb.present[r])
+    if (!tb.present[r]) {
+      for (const auto f : tb.header_fields) {
+        std::string low(f);
+        for (char& ch : low) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
+        if (low == kColName[r])
+          tb.fail(tb.header.number, std::string("required column '") + kColName[r] +
+                                        "' is missing (the header has '" + std::string(f) +
+                                        "': column names are lower case)");
+      }
       tb.fail(tb.header.number, std::string("required column '") + kColName[r] + "' is missing (a " +
                                     kind_name(*tb.kind) + " file needs " + [&] {
                                       std::string s;
@@ -222,6 +275,7 @@ void parse_rows(Table& tb) {
                                       }
                                       return s;
                                     }() + ")");
+    }
   // Columns that only mean something together.
   for (const auto& group : {std::array<Col, 3>{c_dir1, c_dir2, c_dir3}, std::array<Col, 3>{c_a1, c_a2, c_a3}}) {
     const int n = tb.present[group[0]] + tb.present[group[1]] + tb.present[group[2]];

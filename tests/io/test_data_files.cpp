@@ -441,3 +441,32 @@ TEST(DataFiles, TimeGoingBackwardsInARunIsWarnedAbout) {
 
 }  // namespace
 }  // namespace cpm::io
+
+namespace cpm::io {
+namespace {
+
+TEST(DataFiles, HeaderUnitsAreAcceptedWhenSiAndRefusedOtherwise) {
+  const auto m = std::get<MotionData>(parse_data(
+      "# kind = motion\nt (s),d1 [m],d2 (m),d3(m),v1 (m/s),v2,v3,f1 (N),f2,f3,a1 (m/s^2),a2 (m/s²),a3 [m/s2]\n"
+      "0.5,1,2,3,4,5,6,7,8,9,10,11,12\n",
+      "u.csv"));
+  EXPECT_EQ(m.t[0], 0.5);
+  EXPECT_EQ(m.d[0], Vec3(1, 2, 3));
+  EXPECT_EQ(m.a[0], Vec3(10, 11, 12));
+  EXPECT_TRUE(m.info.warnings.empty());
+  EXPECT_EQ(error_of([] { parse_data(kBallbarHead + "d1 (mm),d2,d3,length\n1,2,3,100\n", "u.csv"); }),
+            "u.csv:3: column 'd1 (mm)': the unit 'mm' is not d1's SI unit (m); these files are in SI "
+            "units, convert the column");
+  EXPECT_THAT(error_of([] { parse_data(kBallbarHead + "d1 (m),d1,d2,d3,length\n1,1,2,3,0.1\n", "u.csv"); }),
+              HasSubstr("u.csv:3: column 'd1' appears twice"));
+}
+
+TEST(DataFiles, CommonHeaderMistakesAreExplained) {
+  EXPECT_THAT(error_of([] { parse_data(kBallbarHead + "d1;d2;d3;length\n1;2;3;0.1\n", "s.csv"); }),
+              HasSubstr("s.csv:3: the header is not comma separated (it holds ';')"));
+  EXPECT_THAT(error_of([] { parse_data(kBallbarHead + "D1,d2,d3,length\n1,2,3,0.1\n", "s.csv"); }),
+              HasSubstr("s.csv:3: required column 'd1' is missing (the header has 'D1': column names are lower case)"));
+}
+
+}  // namespace
+}  // namespace cpm::io
