@@ -306,7 +306,9 @@ void ControlLoop::handle(const Command& c, std::int64_t k) noexcept {
               "the segment does not start where the queue ends (the state changed meanwhile)");
         return;
       }
-      (*queue_)[(q_head_ + q_count_) % kQueueCapacity] = c.segment;
+      Segment& slot = (*queue_)[(q_head_ + q_count_) % kQueueCapacity];
+      slot = c.segment;
+      slot.id = c.id;  // the command's id is the segment's
       q_count_++;
       queue_end_ = c.segment.end;
       if (mode_ == Mode::holding) {
