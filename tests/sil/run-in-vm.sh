@@ -110,14 +110,15 @@ host_ok() {
   { [ $need_can = 0 ] || host_can_ok; } && { [ $need_gpio = 0 ] || host_gpio_ok; }
 }
 
+HOST_GPIO_DEV=""
 run_on_host() {
-  local gpio_dev="" rc=0
+  local rc=0
   # shellcheck source=sil-env.sh
   . "$SIL_DIR/sil-env.sh"
   if [ $need_gpio = 1 ]; then
-    gpio_dev=cpm-sil-$$
-    trap 'sil_gpio_down "$gpio_dev"' EXIT
-    sil_gpio_up "$gpio_dev" || die "gpio-sim set-up failed on the host"
+    HOST_GPIO_DEV=cpm-sil-$$
+    trap 'sil_gpio_down "$HOST_GPIO_DEV"' EXIT
+    sil_gpio_up "$HOST_GPIO_DEV" || die "gpio-sim set-up failed on the host"
   fi
   local u=(unshare --net); [ "$(id -u)" -eq 0 ] || u=(unshare --user --map-root-user --net)
   # A fresh network namespace per run: vcan0 and LCM's multicast are private
@@ -326,6 +327,12 @@ run_in_vm() {
   local run; run=$(mktemp -d "${TMPDIR:-/tmp}/cpm-sil.XXXXXX")
   cp "$SIL_DIR/sil-env.sh" "$SIL_DIR/sil-guest.sh" "$run/"
   [ ${#RW_DIRS[@]} -gt 0 ] || { [ "$PWD" != / ] && RW_DIRS=("$PWD"); } || true
+  # The guest's /tmp and /run are its own tmpfs (sockets, locks, speed); a
+  # command that lives under them on the host is shared in explicitly.
+  local exe; exe=$(command -v -- "$1" 2>/dev/null || true)
+  case $exe in
+    /tmp/*|/run/*) RW_DIRS+=("$(dirname "$(readlink -f "$exe")")") ;;
+  esac
   local rw_lines="" virtfs=() i=0 d
   for d in "${RW_DIRS[@]}"; do
     rw_lines+="rw$i $d"$'\n'

@@ -45,7 +45,24 @@ expect "a VM that dies without a result fails with 125" 125 "$?"
 bash "$RUNNER" --vm --needs can --timeout 6 -- sleep 600 >/dev/null 2>&1
 expect "a run over --timeout fails with 124" 124 "$?"
 
-# 5. Usage errors are the runner's (125), before any VM is booted.
+# 6. The host path, exercised inside the VM (whose kernel has vcan and
+#    gpio-sim, as a developer's PC would): --auto picks the host, both smoke
+#    programs pass there, and the per-run gpio-sim chip is removed afterwards.
+if [ $# -ge 2 ]; then
+  out=$(bash "$RUNNER" --vm --needs can --rw "$work" --rw "$(dirname "$1")" --rw "$(dirname "$RUNNER")" -- bash -c '
+    r=$1
+    bash "$r" --auto -- sh -c "echo mode=\$CPM_SIL"
+    bash "$r" --host --needs can -- "$2" >/dev/null && echo can=ok
+    bash "$r" --host --needs gpio -- "$3" >/dev/null && echo gpio=ok
+    echo chips=$(ls /sys/kernel/config/gpio-sim)' sil "$RUNNER" "$1" "$2" 2>&1)
+  grep -q "^mode=host" <<<"$out" || printf "%s\n" "$out" | sed "s/^/  guest: /"
+  expect "--auto uses a host that has vcan and gpio-sim" 1 "$(grep -c '^mode=host' <<<"$out")"
+  expect "smoke_can passes on the host path" 1 "$(grep -c '^can=ok' <<<"$out")"
+  expect "smoke_gpio passes on the host path" 1 "$(grep -c '^gpio=ok' <<<"$out")"
+  expect "the host path removes its gpio-sim chip" "chips=cpm-sil" "$(grep '^chips=' <<<"$out")"
+fi
+
+# 7. Usage errors are the runner's (125), before any VM is booted.
 bash "$RUNNER" --needs bogus -- true >/dev/null 2>&1
 expect "an unknown --needs is refused" 125 "$?"
 
