@@ -137,4 +137,15 @@ std::string utc_now_iso8601() {
   return buf;
 }
 
+Provenance make_provenance(const std::string& tool, const std::string& data_file,
+                           const std::string& note) {
+  Provenance p;
+  p.tool = tool;
+  p.data_file = data_file;
+  if (!data_file.empty()) p.data_sha256 = sha256_file(data_file);
+  p.date = utc_now_iso8601();
+  p.note = note;
+  return p;
+}
+
 }  // namespace cpm::io

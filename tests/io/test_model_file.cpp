@@ -309,6 +309,17 @@ TEST(ModelFile, Sha256MatchesTheStandardVectors) {
   EXPECT_THAT(error_of([&] { sha256_file(dir.path("none")); }), HasSubstr("none: cannot read"));
 }
 
+TEST(ModelFile, ProvenanceHashesTheDataFile) {
+  ScratchDir dir;
+  write_text(dir.path("abc.csv"), "abc");
+  const Provenance p = make_provenance("cpm calibrate", dir.path("abc.csv"), "note");
+  EXPECT_EQ(p.data_sha256, "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad");
+  EXPECT_EQ(p.tool, "cpm calibrate");
+  EXPECT_EQ(p.note, "note");
+  EXPECT_EQ(p.date.size(), 20u);
+  EXPECT_EQ(make_provenance("cpm model init", "").data_sha256, "");
+}
+
 TEST(ModelFile, NowIsIso8601Utc) {
   EXPECT_TRUE(std::regex_match(utc_now_iso8601(), std::regex(R"(\d{4}-\d\d-\d\dT\d\d:\d\d:\d\dZ)")));
 }

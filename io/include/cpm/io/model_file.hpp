@@ -58,6 +58,10 @@ void save_model_file(const std::string& path, const ModelFile& m,
 std::string sha256_file(const std::string& path);
 // Now as ISO 8601 UTC, e.g. "2026-11-22T05:20:00Z".
 std::string utc_now_iso8601();
+// The history entry of a tool that fitted `data_file` now: its SHA-256 and
+// today's date filled in (data_file may be empty: no hash then).
+Provenance make_provenance(const std::string& tool, const std::string& data_file,
+                           const std::string& note = "");
 
 // Write text to path atomically: temporary file beside it, fsync, rename.
 // On any failure the old file is left intact and Error says why.
