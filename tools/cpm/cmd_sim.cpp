@@ -4,6 +4,7 @@
 #include <sstream>
 
 #include "cli.hpp"
+#include "cpm/io/model_file.hpp"
 #include "cpm/sim/closed_loop.hpp"
 
 namespace cpm::cli {
@@ -94,7 +95,14 @@ int run(Args& a) {
   const double kp = a.number("kp", gains.kp.x()), kd = a.number("kd", gains.kd.x());
   gains.kp.setConstant(kp);
   gains.kd.setConstant(kd);
-  ctl::MachineModel truth_model = ctl::MachineModel::elkady();
+  // The controller's model and the true machine: model files (data-formats.md),
+  // the nominal machine when none is given; --truth-effect adds to the truth.
+  const auto model_path = a.option("model");
+  const auto truth_path = a.option("truth");
+  const ctl::MachineModel controller_model =
+      model_path ? io::load_model_file(*model_path).model : ctl::MachineModel::elkady();
+  ctl::MachineModel truth_model =
+      truth_path ? io::load_model_file(*truth_path).model : ctl::MachineModel::elkady();
   for (const std::string& spec : a.options("truth-effect")) apply_effect(truth_model, spec);
   sim::PlantOptions po;
   po.substeps = static_cast<int>(a.integer("substeps", po.substeps));
@@ -110,7 +118,7 @@ int run(Args& a) {
   auto traj = make_trajectory(a);
   a.finish();
 
-  const ctl::Machine model(ctl::MachineModel::elkady());
+  const ctl::Machine model(controller_model);
   const ctl::Machine truth(truth_model);
   ctl::validate_trajectory(*traj, model, 1e-3);
   const ctl::Controller controller(model, *law, gains);
@@ -152,7 +160,7 @@ const Command reg{
     "       [--trajectory paper-circle|circle|p2p] [--centre X,Y,Z] [--radius R] [--speed RAD/S]\n"
     "       [--plane xy|yz|zx] [--cw] [--time S] [--ramp S] [--from X,Y,Z --to X,Y,Z]\n"
     "       [--vmax M/S] [--amax M/S2] [--jmax M/S3] [--rate HZ] [--substeps N] [--duration S]\n"
-    "       [--truth-effect NAME:AXIS:V1,V2,...]... [--encoder-resolution M] [--encoder-noise M]\n"
+    "       [--model MODEL.yaml] [--truth MODEL.yaml] [--truth-effect NAME:AXIS:V1,V2,...]... [--encoder-resolution M] [--encoder-noise M]\n"
     "       [--velocity-noise M/S] [--seed N] [--log FILE.csv] [--json FILE]"};
 
 }  // namespace
