@@ -34,6 +34,8 @@ environment:
   CPM_SIL_KERNEL_ABI  pinned kernel ABI, e.g. 6.1.0-50 (package linux-image-<ABI>-amd64)
   CPM_SIL_KERNEL_VERSION  its Debian version, e.g. 6.1.176-1 (also linux-source-6.1's)
   CPM_SIL_KEEP=1      same as --keep
+  CPM_SIL_KERNEL_ARGS extra kernel command line (default "quiet loglevel=3"; set to
+                      "loglevel=7" to see the whole boot in the serial console log)
 
 COMMAND sees: CPM_SIL=vm|host, CPM_SIL_CAN=vcan0, CPM_SIL_GPIO_CHIP=/dev/gpiochipN,
 CPM_SIL_GPIO_SYSFS=<dir with sim_gpioN/{pull,value}>, CPM_SIL_GPIO_LABEL, CPM_SIL_GPIO_LINES.
@@ -353,7 +355,7 @@ run_in_vm() {
   local qemu=(qemu-system-x86_64 -accel tcg -cpu max -m "$MEM" -smp "$SMP"
     -nodefaults -no-user-config -display none -no-reboot
     -kernel "$KDIR/vmlinux" -initrd "$INITRD"
-    -append "console=ttyS0 panic=-1 quiet loglevel=3"
+    -append "console=ttyS0 panic=-1 ${CPM_SIL_KERNEL_ARGS:-quiet loglevel=3}"
     -chardev "file,id=con,path=$run/console.log" -serial chardev:con
     -chardev "file,id=out,path=$run/output.log" -serial chardev:out
     -virtfs "local,path=/,mount_tag=hostroot,security_model=none,readonly=on,multidevs=remap"

@@ -24,6 +24,7 @@ mount -t 9p -o trans=virtio,version=9p2000.L,ro,msize=512000,cache=loose hostroo
 mount -t proc proc $R/proc || fail "proc"
 mount -t sysfs sysfs $R/sys || fail "sysfs"
 mount -t configfs configfs $R/sys/kernel/config 2>/dev/null
+mount -t debugfs debugfs $R/sys/kernel/debug 2>/dev/null
 mount -t devtmpfs devtmpfs $R/dev || fail "devtmpfs"
 mkdir -p $R/dev/pts $R/dev/shm
 mount -t devpts devpts $R/dev/pts
