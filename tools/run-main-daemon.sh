@@ -11,8 +11,8 @@ if [ -z "${CPMD_IN_NETNS:-}" ]; then
     exec unshare -n env CPMD_IN_NETNS=1 bash -c 'ip link set lo up; ip route add 224.0.0.0/4 dev lo; exec bash "$0"' "$0"
   fi
 fi
-B=build/bin
-log=build/cpmd.log
+B=${CPMD_BUILD_DIR:-build}/bin
+log=$(mktemp /tmp/cpmd.XXXXXX.log)
 "$B/cpmd" --config config/sim.yaml 2>"$log" &
 pid=$!
 trap 'kill $pid 2>/dev/null; wait $pid 2>/dev/null || true' EXIT

@@ -112,7 +112,8 @@ int record(Args& a) {
     c.handle(0.05);
   }
   if (rows.empty()) throw Error("no state received from cpmd (channel " + l.state_channel + ")");
-  const double rate = rows.size() > 1 ? (rows.size() - 1) / (rows.back().t - rows.front().t) : 0.0;
+  // Nominal rate from the cycle numbers (missing states do not change it).
+  const double rate = last > first ? static_cast<double>(last - first) / (rows.back().t - rows.front().t) : 0.0;
   const long expected = static_cast<long>(last - first + 1);
   char note[160];
   std::snprintf(note, sizeof note, "recorded by cpm record from %s: %zu states of %ld cycles", l.state_channel.c_str(),
