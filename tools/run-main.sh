@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
-# The main job: set up, build, and run the machine on its simulator.
+# The main job: set up, build, start cpmd on its simulator backend, run the
+# paper's circle through `cpm`, print the tracking error, stop.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-bash tools/build.sh >/dev/null
-exec build/bin/cpm sim --controller computed_torque --trajectory paper-circle --log build/paper-circle.csv
+exec bash tools/run-main-daemon.sh
