@@ -31,8 +31,15 @@ function(cpm_add_sil_test)
     add_test(NAME sil.prepare COMMAND bash ${CPM_SIL_RUNNER} --prepare --needs can,gpio)
     set_tests_properties(sil.prepare PROPERTIES LABELS sil TIMEOUT 1200 FIXTURES_SETUP cpm_sil_image)
   endif()
+  # The guest has its own /tmp and /run: a tree under them is shared in.
+  set(share "")
+  foreach(dir ${PROJECT_SOURCE_DIR} ${CMAKE_BINARY_DIR})
+    if(dir MATCHES "^/(tmp|run)/")
+      list(APPEND share --rw ${dir})
+    endif()
+  endforeach()
   add_test(NAME ${ARG_NAME}
-           COMMAND bash ${CPM_SIL_RUNNER} --needs ${ARG_NEEDS} --timeout ${ARG_TIMEOUT} -- ${ARG_COMMAND}
+           COMMAND bash ${CPM_SIL_RUNNER} --needs ${ARG_NEEDS} --timeout ${ARG_TIMEOUT} ${share} -- ${ARG_COMMAND}
            WORKING_DIRECTORY ${CMAKE_BINARY_DIR})
   # CTest's own limit sits above the runner's, so that the runner reports
   # the time-out (with the serial log) rather than being killed.

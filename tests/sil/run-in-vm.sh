@@ -23,8 +23,9 @@ options:
   --host            always run on the host (fails if the host lacks vcan / gpio-sim)
   --needs LIST      what COMMAND needs: can, gpio or can,gpio (default can,gpio)
   --timeout S       limit for the whole run, boot included (default 300 s)
-  --rw DIR          make host folder DIR writable inside the VM (repeatable;
-                    default: the current folder). The rest of the host is read-only.
+  --rw DIR          make host folder DIR writable inside the VM (repeatable). The
+                    current folder always is; the rest of the host is read-only,
+                    and the guest has its own /tmp and /run.
   --keep            keep the run folder (serial console log, output) even on success
   -h, --help        this text
 
@@ -131,7 +132,7 @@ run_on_host() {
 }
 
 # --- VM image: download, build, cache ---------------------------------------
-apt_has() { apt-cache show "$1=$2" >/dev/null 2>&1; }
+apt_has() { apt-cache madison "$1" 2>/dev/null | awk -v v="$2" '$3 == v { f = 1 } END { exit !f }'; }
 
 download() {  # download DEST PKG=VER...
   local dest=$1; shift
@@ -328,7 +329,7 @@ run_in_vm() {
   prepare_vm
   local run; run=$(mktemp -d "${TMPDIR:-/tmp}/cpm-sil.XXXXXX")
   cp "$SIL_DIR/sil-env.sh" "$SIL_DIR/sil-guest.sh" "$run/"
-  [ ${#RW_DIRS[@]} -gt 0 ] || { [ "$PWD" != / ] && RW_DIRS=("$PWD"); } || true
+  [ "$PWD" = / ] || RW_DIRS+=("$PWD")
   # The guest's /tmp and /run are its own tmpfs (sockets, locks, speed); a
   # command that lives under them on the host is shared in explicitly.
   local exe; exe=$(command -v -- "$1" 2>/dev/null || true)
@@ -336,9 +337,12 @@ run_in_vm() {
     /tmp/*|/run/*) RW_DIRS+=("$(dirname "$(readlink -f "$exe")")") ;;
   esac
   local rw_lines="" virtfs=() i=0 d
-  for d in "${RW_DIRS[@]}"; do
+  # Parents before children, so that a share never hides another; once each.
+  local sorted=()
+  [ ${#RW_DIRS[@]} -eq 0 ] || mapfile -t sorted < <(printf '%s\n' "${RW_DIRS[@]}" | sort -u | awk '{ print length($0) "\t" $0 }' | sort -n -s -k1,1 | cut -f2-)
+  for d in "${sorted[@]}"; do
     rw_lines+="rw$i $d"$'\n'
-    virtfs+=(-virtfs "local,path=$d,mount_tag=rw$i,security_model=none,multidevs=remap")
+    virtfs+=(-virtfs "local,path=${d//,/,,},mount_tag=rw$i,security_model=none,multidevs=remap")
     i=$((i + 1))
   done
   { printf 'RUN_PATH=%q\n' "$run"; printf 'RW_MOUNTS=%q\n' "$rw_lines"; } > "$run/config"
@@ -359,7 +363,7 @@ run_in_vm() {
     -chardev "file,id=con,path=$run/console.log" -serial chardev:con
     -chardev "file,id=out,path=$run/output.log" -serial chardev:out
     -virtfs "local,path=/,mount_tag=hostroot,security_model=none,readonly=on,multidevs=remap"
-    -virtfs "local,path=$run,mount_tag=silrun,security_model=none"
+    -virtfs "local,path=${run//,/,,},mount_tag=silrun,security_model=none"
     "${virtfs[@]}")
   local t0=$SECONDS qrc=0
   timeout -k 5 "$TIMEOUT" "${qemu[@]}" </dev/null >"$run/qemu.log" 2>&1 &
