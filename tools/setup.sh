@@ -11,7 +11,7 @@ packages=(
   libssl-dev               # SHA-256 of data files (libcrypto), model file provenance
   liblcm-dev liblcm-bin    # LCM transport and lcm-gen
   libgpiod-dev             # GPIO (v1 API, libgpiod 1.6)
-  qemu-system-x86          # SIL tests: boots Debian's kernel (vcan, gpio-sim) when the host has none
+  qemu-system-x86 xz-utils # SIL tests: boots Debian's kernel (vcan, gpio-sim) when the host has none
 )
 missing=()
 for p in "${packages[@]}"; do
