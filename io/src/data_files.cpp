@@ -266,15 +266,13 @@ void parse_rows(Table& tb) {
                                         "' is missing (the header has '" + std::string(f) +
                                         "': column names are lower case)");
       }
+      std::string needs;
+      for (Col q : lay.required) {
+        if (!needs.empty()) needs.push_back(',');
+        needs.append(kColName[q]);
+      }
       tb.fail(tb.header.number, std::string("required column '") + kColName[r] + "' is missing (a " +
-                                    kind_name(*tb.kind) + " file needs " + [&] {
-                                      std::string s;
-                                      for (Col q : lay.required) {
-                                        if (!s.empty()) s.push_back(',');
-                                        s.append(kColName[q]);
-                                      }
-                                      return s;
-                                    }() + ")");
+                                    kind_name(*tb.kind) + " file needs " + needs + ")");
     }
   // Columns that only mean something together.
   for (const auto& group : {std::array<Col, 3>{c_dir1, c_dir2, c_dir3}, std::array<Col, 3>{c_a1, c_a2, c_a3}}) {

@@ -4,6 +4,7 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 #include <sys/resource.h>
+#include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -401,9 +402,13 @@ TEST(DataFiles, WriteThatFailsHalfwayLeavesTheOldFileIntact) {
   EXPECT_EQ(WEXITSTATUS(status), 0);
   EXPECT_EQ(test::read_text(path), before);
   EXPECT_EQ(dir.entries(), 1);  // the temporary file was removed
-  // And without the limit the same write succeeds and replaces the file.
+  // And without the limit the same write succeeds, replaces the file and
+  // keeps its permissions.
+  ASSERT_EQ(::chmod(path.c_str(), 0600), 0);
   write_ballbar(path, big);
   EXPECT_EQ(read_ballbar(path).d.size(), big.d.size());
+  EXPECT_EQ(std::filesystem::status(path).permissions(),
+            std::filesystem::perms::owner_read | std::filesystem::perms::owner_write);
 }
 
 }  // namespace

@@ -277,6 +277,9 @@ TEST(ModelFile, SaveNeverOverwritesTheInput) {
   const std::string other = (dir.dir() / "." / "sub" / ".." / "in.yaml").string();
   std::filesystem::create_directory(dir.path("sub"));
   EXPECT_THAT(error_of([&] { save_model_file(other, changed, in); }), HasSubstr("refusing"));
+  // Through a symbolic link.
+  std::filesystem::create_symlink(in, dir.path("link.yaml"));
+  EXPECT_THAT(error_of([&] { save_model_file(dir.path("link.yaml"), changed, in); }), HasSubstr("refusing"));
   EXPECT_EQ(test::read_text(in), before);
   // Another file is fine.
   save_model_file(dir.path("out.yaml"), changed, in);
