@@ -195,22 +195,23 @@ build_kernel() {  # vmlinux and the guest's modules, from linux-image
   if [ -n "$off" ]; then
     tail -c +$((off + 1)) "$bz" | xz -dcq > "$x/vmlinux" 2>/dev/null || true
   fi
-  if [ -s "$x/vmlinux" ] && [ "$(head -c4 "$x/vmlinux" | od -An -tx1 | tr -d ' ')" = 7f454c46 ]; then
-    mv "$x/vmlinux" "$KDIR/vmlinux"
-  else
+  if ! [ -s "$x/vmlinux" ] || [ "$(head -c4 "$x/vmlinux" | od -An -tx1 | tr -d ' ')" != 7f454c46 ]; then
     note "could not extract an ELF vmlinux; booting the bzImage (slower)"
-    cp "$bz" "$KDIR/vmlinux"
+    cp "$bz" "$x/vmlinux"
   fi
   local ko base
   while IFS= read -r ko; do
     base=$(basename "$ko" .ko); MOD_PATH[${base//-/_}]=$ko
   done < <(find "$x/lib/modules/$KREL" -name '*.ko')
   for m in "${GUEST_MODULES[@]}"; do mod_resolve "$m"; done
-  rm -rf "$KDIR/modules"; mkdir -p "$KDIR/modules"
-  : > "$KDIR/modules/order"
+  mkdir -p "$x/modules"
   for ko in "${MOD_ORDER[@]}"; do
-    cp "$ko" "$KDIR/modules/"; basename "$ko" >> "$KDIR/modules/order"
+    cp "$ko" "$x/modules/"; basename "$ko" >> "$x/modules/order"
   done
+  # Into the cache only when complete (an interrupted run leaves no half image).
+  rm -rf "$KDIR/modules" "$KDIR/vmlinux"
+  mv "$x/modules" "$KDIR/modules"
+  mv "$x/vmlinux" "$KDIR/vmlinux"
   rm -rf "$x"
 }
 
@@ -240,7 +241,7 @@ build_gpio_sim() {
   if ! make -s -C "$hdr" M="$x/mod" modules > "$x/build.log" 2>&1; then
     cat "$x/build.log" >&2; die "building gpio-sim.ko failed (log above; needs gcc-12 and make)"
   fi
-  cp "$x/mod/gpio-sim.ko" "$KDIR/gpio-sim.ko"
+  mv "$x/mod/gpio-sim.ko" "$KDIR/gpio-sim.ko"
   rm -rf "$x"
 }
 
@@ -368,7 +369,7 @@ run_in_vm() {
   local t0=$SECONDS qrc=0
   timeout -k 5 "$TIMEOUT" "${qemu[@]}" </dev/null >"$run/qemu.log" 2>&1 &
   local qpid=$!
-  tail -n +1 -f --pid=$qpid "$run/output.log" &
+  tail -n +1 -s 0.2 -f --pid=$qpid "$run/output.log" &
   local tpid=$!
   wait $qpid || qrc=$?
   wait $tpid 2>/dev/null || true
