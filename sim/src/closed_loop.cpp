@@ -1,9 +1,6 @@
 #include "cpm/sim/closed_loop.hpp"
 
 #include <cmath>
-#include <cstdio>
-#include <fstream>
-#include <iomanip>
 
 namespace cpm::sim {
 
@@ -74,26 +71,22 @@ RunResult run_closed_loop(const ctl::Controller& controller, Plant& plant,
   return r;
 }
 
-void write_motion_log(const std::string& path, const std::vector<LogRow>& log, double rate_hz) {
-  const std::string tmp = path + ".tmp";
-  {
-    std::ofstream f(tmp);
-    if (!f) throw Error("motion log: cannot write " + tmp);
-    f << "# kind = motion\n# rate = " << rate_hz << "\n# written by cpm sim\n";
-    f << "t,d1,d2,d3,v1,v2,v3,f1,f2,f3\n";
-    f << std::setprecision(17);
-    for (const LogRow& r : log) {
-      f << r.t;
-      for (int i = 0; i < 3; ++i) f << ',' << r.d[i];
-      for (int i = 0; i < 3; ++i) f << ',' << r.d_dot[i];
-      for (int i = 0; i < 3; ++i) f << ',' << r.force[i];
-      f << '\n';
-    }
-    f.flush();
-    if (!f) throw Error("motion log: write to " + tmp + " failed (disk full?)");
+io::MotionData to_motion_data(const std::vector<LogRow>& log, double rate_hz) {
+  io::MotionData m;
+  m.rate = rate_hz;
+  m.info.metadata["source"] = "cpm sim";
+  m.t.reserve(log.size());
+  for (const LogRow& r : log) {
+    m.t.push_back(r.t);
+    m.d.push_back(r.d);
+    m.v.push_back(r.d_dot);
+    m.f.push_back(r.force);
   }
-  if (std::rename(tmp.c_str(), path.c_str()) != 0)
-    throw Error("motion log: cannot rename " + tmp + " to " + path);
+  return m;
+}
+
+void write_motion_log(const std::string& path, const std::vector<LogRow>& log, double rate_hz) {
+  io::write_motion(path, to_motion_data(log, rate_hz));
 }
 
 }  // namespace cpm::sim

@@ -2,27 +2,8 @@
 // this test binary by one that counts, and the cycles of every mode
 // (disabled, enabling, holding, moving through a circle and a move, stopping,
 // fault, reset) run with the counter armed.
-#include <atomic>
-#include <cstdlib>
-#include <new>
-
 #include "loop_fixture.hpp"
-
-namespace {
-std::atomic<long> g_allocations{0};
-std::atomic<bool> g_counting{false};
-}  // namespace
-
-void* operator new(std::size_t n) {
-  if (g_counting.load(std::memory_order_relaxed)) g_allocations.fetch_add(1, std::memory_order_relaxed);
-  if (void* p = std::malloc(n ? n : 1)) return p;
-  throw std::bad_alloc();
-}
-void* operator new[](std::size_t n) { return operator new(n); }
-void operator delete(void* p) noexcept { std::free(p); }
-void operator delete[](void* p) noexcept { std::free(p); }
-void operator delete(void* p, std::size_t) noexcept { std::free(p); }
-void operator delete[](void* p, std::size_t) noexcept { std::free(p); }
+#include "support/allocation_counter.hpp"
 
 namespace cpm::daemon::test {
 namespace {
@@ -31,11 +12,9 @@ namespace {
 long counted(LoopHarness& h, int n) {
   long total = 0;
   for (int i = 0; i < n; ++i) {
-    g_allocations = 0;
-    g_counting = true;
+    const cpm::test::CountAllocations count;
     h.loop->cycle(h.k++, 0);
-    g_counting = false;
-    total += g_allocations.load();
+    total += static_cast<long>(count.count());
     h.drain_snapshots();
   }
   return total;
@@ -43,12 +22,10 @@ long counted(LoopHarness& h, int n) {
 
 TEST(NoAllocation, CountingWorks) {
   // The counter itself must see an allocation, or the test below proves nothing.
-  g_allocations = 0;
-  g_counting = true;
+  const cpm::test::CountAllocations count;
   auto* p = new std::vector<double>(100);
-  g_counting = false;
   delete p;
-  EXPECT_GE(g_allocations.load(), 1);
+  EXPECT_GE(count.count(), 1u);
 }
 
 TEST(NoAllocation, EveryModeOfTheCycle) {

@@ -2,31 +2,9 @@
 // (and the fake bus under them) with every global allocation counted.
 #include <gtest/gtest.h>
 
-#include <atomic>
-#include <cstdlib>
-#include <new>
-
 #include "cpm/hal/digital_io.hpp"
 #include "rig.hpp"
-
-namespace {
-std::atomic<long> g_allocations{0};
-}  // namespace
-
-void* operator new(std::size_t n) {
-  ++g_allocations;
-  if (void* p = std::malloc(n ? n : 1)) return p;
-  throw std::bad_alloc();
-}
-void* operator new[](std::size_t n) {
-  ++g_allocations;
-  if (void* p = std::malloc(n ? n : 1)) return p;
-  throw std::bad_alloc();
-}
-void operator delete(void* p) noexcept { std::free(p); }
-void operator delete[](void* p) noexcept { std::free(p); }
-void operator delete(void* p, std::size_t) noexcept { std::free(p); }
-void operator delete[](void* p, std::size_t) noexcept { std::free(p); }
+#include "support/allocation_counter.hpp"
 
 using namespace cpm::hal;
 using namespace cpm::hal::test;
@@ -38,10 +16,10 @@ TEST(Allocation, MasterCycleAllocatesNothingEvenUnderFaults) {
   ASSERT_GE(r.until_all(cia402::State::operation_enabled), 0);
   for (std::size_t i = 0; i < 3; ++i) r.cmd.drive[i].force_n = 10.0 * static_cast<double>(i + 1);
   // The counter must see allocations at all, or the test proves nothing.
-  const long before_probe = g_allocations.load();
+  const long before_probe = static_cast<long>(cpm::test::allocations_on_this_thread());
   void* probe = ::operator new(16);  // a direct call: never elided
   ::operator delete(probe);
-  ASSERT_EQ(g_allocations.load(), before_probe + 1);
+  ASSERT_EQ(static_cast<long>(cpm::test::allocations_on_this_thread()), before_probe + 1);
 
   long in_cycle = 0;
   for (int k = 0; k < 200; ++k) {
@@ -50,10 +28,10 @@ TEST(Allocation, MasterCycleAllocatesNothingEvenUnderFaults) {
     if (k == 81) r.net.set_bus_off(false);
     if (k == 100) r.drives[2]->stop_heartbeat(true);
     if (k == 120) r.cmd.drive[0].force_n = 1e12;            // saturation
-    const long a0 = g_allocations.load();
+    const long a0 = static_cast<long>(cpm::test::allocations_on_this_thread());
     r.master->read(r.fb);
     r.master->write(r.cmd);
-    in_cycle += g_allocations.load() - a0;
+    in_cycle += static_cast<long>(cpm::test::allocations_on_this_thread()) - a0;
     r.clock.wait(r.period_ns());  // the drives (test side) may allocate
   }
   EXPECT_EQ(in_cycle, 0);
@@ -61,10 +39,10 @@ TEST(Allocation, MasterCycleAllocatesNothingEvenUnderFaults) {
 
   FakeDigitalIo io;
   DigitalInputs in;
-  const long a0 = g_allocations.load();
+  const long a0 = static_cast<long>(cpm::test::allocations_on_this_thread());
   for (int k = 0; k < 100; ++k) {
     io.read(in);
     io.write(DigitalOutputs{true, true});
   }
-  EXPECT_EQ(g_allocations.load() - a0, 0);
+  EXPECT_EQ(static_cast<long>(cpm::test::allocations_on_this_thread()) - a0, 0);
 }

@@ -5,8 +5,7 @@
 #include <fstream>
 #include <sstream>
 
-#include <fcntl.h>
-#include <unistd.h>
+#include "cpm/io/model_file.hpp"
 
 namespace cpm::cli {
 
@@ -101,27 +100,23 @@ std::string json_number(double v) {
 }
 
 void write_file_atomically(const std::string& path, const std::string& text) {
-  const std::string tmp = path + ".tmp";
-  const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-  if (fd < 0) throw std::runtime_error("cannot write " + tmp);
-  std::size_t off = 0;
-  while (off < text.size()) {
-    const ssize_t n = ::write(fd, text.data() + off, text.size() - off);
-    if (n <= 0) {
-      ::close(fd);
-      ::unlink(tmp.c_str());
-      throw std::runtime_error("write to " + tmp + " failed (disk full?)");
-    }
-    off += static_cast<std::size_t>(n);
+  io::write_file_atomically(path, text);
+}
+
+Vec3 parse_point(const std::string& what, const std::string& text, bool allow_non_finite) {
+  Vec3 v;
+  std::istringstream is(text);
+  std::string part;
+  int n = 0;
+  while (std::getline(is, part, ',')) {
+    char* end = nullptr;
+    const double x = std::strtod(part.c_str(), &end);
+    if (n >= 3 || part.empty() || *end != '\0' || (!allow_non_finite && !std::isfinite(x)))
+      throw UsageError(what + ": expected three finite numbers x,y,z in metres, got '" + text + "'");
+    v[n++] = x;
   }
-  if (::fsync(fd) != 0 || ::close(fd) != 0) {
-    ::unlink(tmp.c_str());
-    throw std::runtime_error("cannot flush " + tmp);
-  }
-  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
-    ::unlink(tmp.c_str());
-    throw std::runtime_error("cannot rename " + tmp + " to " + path);
-  }
+  if (n != 3) throw UsageError(what + ": expected three numbers x,y,z in metres, got '" + text + "'");
+  return v;
 }
 
 }  // namespace cpm::cli

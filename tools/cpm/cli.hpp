@@ -14,6 +14,8 @@
 #include <string>
 #include <vector>
 
+#include "cpm/kinematics/types.hpp"
+
 namespace cpm::cli {
 
 // Thrown for bad command lines; main prints it with the command's usage.
@@ -58,6 +60,10 @@ std::map<std::string, CommandEntry>& registry();
 
 // Helpers shared by subcommands.
 std::string json_number(double v);                  // finite -> shortest exact text, else null
+// io::write_file_atomically (temporary file, fsync, rename).
 void write_file_atomically(const std::string& path, const std::string& text);
+// "x,y,z" in metres. Non-finite values are refused unless `allow_non_finite`
+// (the daemon client passes them on so that the daemon's refusal can be seen).
+Vec3 parse_point(const std::string& what, const std::string& text, bool allow_non_finite = false);
 
 }  // namespace cpm::cli

@@ -13,18 +13,7 @@ using cpm_msgs::control_command_t;
 using cpm_msgs::state_t;
 
 Vec3 parse_point(const std::string& what, const std::string& text) {
-  Vec3 v;
-  std::istringstream is(text);
-  std::string part;
-  int n = 0;
-  while (std::getline(is, part, ',')) {
-    char* end = nullptr;
-    const double x = std::strtod(part.c_str(), &end);
-    if (n >= 3 || part.empty() || *end != '\0') throw UsageError(what + ": expected x,y,z in metres, got '" + text + "'");
-    v[n++] = x;  // NaN is passed on: the daemon must refuse it
-  }
-  if (n != 3) throw UsageError(what + ": expected x,y,z in metres, got '" + text + "'");
-  return v;
+  return cli::parse_point(what, text, /*allow_non_finite=*/true);  // the daemon must refuse NaN
 }
 
 std::string state_line(const state_t& s) {

@@ -10,22 +10,6 @@
 namespace cpm::cli {
 namespace {
 
-Vec3 parse_vec3(const std::string& what, const std::string& text) {
-  Vec3 v;
-  std::istringstream is(text);
-  std::string part;
-  int n = 0;
-  while (std::getline(is, part, ',')) {
-    char* end = nullptr;
-    const double x = std::strtod(part.c_str(), &end);
-    if (n >= 3 || part.empty() || *end != '\0' || !std::isfinite(x))
-      throw UsageError(what + ": expected three finite numbers x,y,z in metres, got '" + text + "'");
-    v[n++] = x;
-  }
-  if (n != 3) throw UsageError(what + ": expected three numbers x,y,z, got '" + text + "'");
-  return v;
-}
-
 // NAME:AXIS:V1,V2,... (axis 1..3, empty for machine-wide effects).
 void apply_effect(ctl::MachineModel& m, const std::string& spec) {
   const auto c1 = spec.find(':');
@@ -60,7 +44,7 @@ std::unique_ptr<ctl::Trajectory> make_trajectory(Args& a) {
       c.ramp_time = 0.5;
       c.cruise_time = 4.0;
     }
-    if (auto v = a.option("centre")) c.centre = parse_vec3("--centre", *v);
+    if (auto v = a.option("centre")) c.centre = parse_point("--centre", *v);
     c.radius = a.number("radius", c.radius);
     c.angular_speed = a.number("speed", c.angular_speed);
     c.cruise_time = a.number("time", c.cruise_time);
@@ -82,7 +66,7 @@ std::unique_ptr<ctl::Trajectory> make_trajectory(Args& a) {
     lim.velocity = a.number("vmax", lim.velocity);
     lim.acceleration = a.number("amax", lim.acceleration);
     lim.jerk = a.number("jmax", lim.jerk);
-    return std::make_unique<ctl::PointToPoint>(parse_vec3("--from", *from), parse_vec3("--to", *to), lim);
+    return std::make_unique<ctl::PointToPoint>(parse_point("--from", *from), parse_point("--to", *to), lim);
   }
   throw UsageError("--trajectory must be paper-circle, circle or p2p, got '" + kind + "'");
 }

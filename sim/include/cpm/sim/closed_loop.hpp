@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "cpm/control/controller.hpp"
+#include "cpm/io/data_files.hpp"
 #include "cpm/sim/plant.hpp"
 
 namespace cpm::sim {
@@ -52,8 +53,10 @@ struct RunResult {
 RunResult run_closed_loop(const ctl::Controller& controller, Plant& plant,
                           const ctl::Trajectory& trajectory, const LoopOptions& options);
 
-// Motion log of shared/spec/data-formats.md (kind = motion): t, d, v, f.
-// Written atomically: a temporary file beside `path`, then renamed.
+// The log as a motion data set of data-formats.md (t, d, v, f; no acceleration).
+io::MotionData to_motion_data(const std::vector<LogRow>& log, double rate_hz);
+// Motion log of shared/spec/data-formats.md (kind = motion), written
+// atomically (io::write_motion).
 void write_motion_log(const std::string& path, const std::vector<LogRow>& log, double rate_hz);
 
 }  // namespace cpm::sim
