@@ -1,0 +1,128 @@
+// Diagnosis: which effect of shared/spec/effects.md is missing from a model,
+// judged on measurements. For a motion log:
+//  1. the force residual of the model as given (motion.hpp) -> baseline;
+//  2. the base model's own parameters refitted (A, B, C, E and the linear
+//     parameters of the model's own effects) -> inertia_error's score;
+//  3. every dynamic effect the data can show, on every axis, fitted jointly
+//     with the base (nonlinear parameters found by search: the cogging
+//     wavelength by a periodogram over 2-100 mm then golden-section
+//     refinement, the Stribeck speed by a log grid then refinement), with
+//     physical bounds enforced;
+//  4. each scored: RMS after, share explained, nested F-test (corrected for
+//     residual autocorrelation and for the number of candidates and search
+//     trials), BIC, standard errors, confounding with the base and with the
+//     other candidates and the measurement that would separate them;
+//  5. a ranking, a verdict (the missing effect or none, then further
+//     effects by forward selection), and a search of what remains for
+//     structure no library effect explains (structure.hpp).
+#pragma once
+
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "cpm/identification/engine.hpp"
+#include "cpm/identification/motion.hpp"
+
+namespace cpm::ident {
+
+struct ParamEstimate {
+  std::string name, unit;
+  double value = 0.0;
+  double std_error = -1.0;  // < 0: not determined
+  bool at_bound = false;    // held at a physical bound
+};
+
+struct Confounder {
+  std::string with;         // "E" (a base parameter) or "force_gain[axis 3]"
+  std::string effect;       // effect name when `with` is a candidate, empty for base parameters
+  int axis = -1;
+  double correlation = 0.0; // |cos| of the angle between their signatures (0..1)
+  std::string separate_by;  // the measurement that would tell them apart
+};
+
+struct CandidateResult {
+  std::string effect;       // name of effects.md
+  int axis = -1;            // 0..2, -1 for machine-wide effects
+  std::vector<ParamEstimate> params;        // in the order of effects.md
+  std::vector<ParamEstimate> base_after;    // base parameters after the joint refit
+  bool refits_base = true;
+  double rss = 0.0;         // weighted
+  double rms_after = 0.0;   // data units
+  double explained = 0.0;   // share of the baseline mean square removed (0..1)
+  double explained_beyond_base = 0.0;  // share of what the base refit leaves
+  double f_stat = 0.0, p_value = 1.0, p_adjusted = 1.0;
+  double delta_bic = 0.0;   // against its nested parent (< 0 favours the candidate)
+  double score = 0.0;       // BIC against the model as given, for ranking (lower first)
+  int n_params = 0;         // including searched ones
+  double trials = 1.0;      // effective number of independent search trials
+  double n_eff = 0.0;
+  bool identifiable = true;
+  bool significant = false;
+  std::string note;         // why not identifiable / held at a bound / ...
+  std::vector<Confounder> confounded;
+  Eigen::MatrixXd columns;  // unweighted columns at the fitted nonlinear parameters
+  Eigen::VectorXd fitted;   // unweighted contribution of the candidate (data units)
+  Eigen::VectorXd residual_after;
+  [[nodiscard]] std::string label() const;  // "coulomb_friction[axis 2]"
+};
+
+struct StructureFinding {
+  std::string kind;         // "periodic", "step", "bump", "trend", "direction", "periodic_time"
+  int axis = -1;
+  std::string coordinate;   // "d1" (position of axis 1), "t", ...
+  double location = 0.0;    // SI: position (m), time (s) or wavelength (m)
+  double size = 0.0;        // amplitude in data units
+  double z = 0.0;           // significance in standard errors
+  std::string text;         // one sentence for people
+};
+
+struct DiagnoseOptions {
+  MotionOptions motion;
+  double alpha = 0.01;              // family-wise level of "significant"
+  double cogging_lambda_min = 2e-3; // m
+  double cogging_lambda_max = 0.1;  // m
+  std::vector<std::string> effects; // restrict to these names (empty: the whole dynamic library)
+  bool structure_search = true;
+  int max_forward_steps = 3;
+};
+
+struct Diagnosis {
+  std::string kind = "motion";
+  std::string units = "N";
+  std::string data_file, model_file;
+  int samples = 0;                  // rows of the file
+  int rows = 0;                     // residual rows used (3 per kept sample)
+  double baseline_rms = 0.0, baseline_max = 0.0;
+  Vec3 baseline_axis_rms = Vec3::Zero();
+  double base_refit_rms = 0.0;
+  double noise_floor = 0.0;         // estimated from second differences (data units)
+  Vec3 axis_noise = Vec3::Zero();
+  std::vector<CandidateResult> candidates;  // ranked, best first
+  int verdict = -1;                 // index in candidates, -1: none missing
+  bool ambiguous = false;           // the verdict cannot be told apart from another candidate
+  std::vector<int> also;            // further effects by forward selection
+  std::string verdict_text;
+  std::vector<StructureFinding> structure;
+  std::vector<std::string> notes;
+  std::vector<std::string> warnings;
+  Eigen::VectorXd residual_final;   // after the verdict's effects (or the base refit)
+  MotionProblem motion;             // the processed data (plots, summaries)
+};
+
+// Refuses (Error) an effect name that is unknown or that this data kind cannot show.
+void check_effect_for_kind(const std::string& effect, const std::string& kind);
+
+Diagnosis diagnose_motion(const io::MotionData& data, const ctl::Machine& model,
+                          const DiagnoseOptions& options = {});
+
+// The LinearProblem of a motion problem with per-axis weights 1/sigma_i,
+// sigma_i the noise of axis i estimated from the base refit (returned).
+LinearProblem motion_linear_problem(const MotionProblem& P, Vec3* axis_noise = nullptr);
+
+// One candidate evaluated on an engine (used by diagnose and fit).
+CandidateResult evaluate_dynamic_candidate(const MotionProblem& P, const Engine& E,
+                                           const ctl::MachineModel& model, const std::string& effect,
+                                           int axis, const DiagnoseOptions& options);
+
+}  // namespace cpm::ident

@@ -1,0 +1,132 @@
+// The force residual of a model on a motion log (kind = motion):
+//     r = g . F_commanded - ( J^T (M p_dd + G p_dot + K) + model effects )
+// per actuator (N), g the model's drive gain (force_gain effect).
+//
+// Acceleration: from a1..a3 when the log has them; otherwise estimated from
+// the velocities (first derivative) or the positions (second derivative) of
+// a zero-phase Savitzky-Golay fit, whichever adds less noise. The SAME
+// smoothing kernel is applied to both sides of the equation (the commanded
+// force and every regressor column), so the kernel's amplitude response
+// cancels in the regression instead of biasing it; the state side is
+// evaluated half a sample later than the force side, because a force
+// commanded at t_k acts (zero-order hold) over [t_k, t_k+1). What is left:
+// terms nonlinear in the state (M(q), sgn) are evaluated on filtered states
+// (second order in the motion within one kernel width), and the noise the
+// acceleration estimate adds, reported in `accel_noise` / `force_noise`.
+//
+// The filtered rows are decimated by `stride` (default: the kernel half
+// width) so that neighbouring rows are nearly independent; the statistics
+// still correct for what correlation remains (stats.hpp).
+//
+// Rows of every vector and matrix below: 3 per kept sample, row 3 r + i for
+// axis i (0..2).
+#pragma once
+
+#include <array>
+#include <string>
+#include <vector>
+
+#include <Eigen/Dense>
+
+#include "cpm/control/machine.hpp"
+#include "cpm/identification/filter.hpp"
+#include "cpm/io/data_files.hpp"
+
+namespace cpm::ident {
+
+struct MotionOptions {
+  double half_window = 0.012;  // s: half width of the zero-phase kernel
+  int order = 4;               // polynomial degree of the kernel
+  int stride = 0;              // rows kept every `stride` samples; 0 = kernel half width
+  enum class Accel { automatic, velocity, position } accel = Accel::automatic;
+  int min_rows = 30;           // fewer rows after filtering: refuse the file
+  void validate() const;
+};
+
+// A parameter of the base model that diagnosis refits with every candidate:
+// the rigid-body constants and the linear parameters of the model's own effects.
+struct BaseParameter {
+  std::string name;     // "A", "B", "C", "E" or "coulomb_friction[axis 1].f_c"
+  std::string unit;
+  double value = 0.0;   // the model's value
+  int effect = -1;      // index in the model's effect list, -1 for A..E
+  int param = -1;       // parameter index in that effect (or 0..3 for A..E)
+  // Not a model parameter but always fitted: coupling[i<-j] (1), the share of
+  // the platform force along j that actuator i feels beyond the model's J^T,
+  // i.e. plane misalignment the model's kinematics does not know (calibrate).
+  bool nuisance = false;
+};
+
+struct MotionProblem {
+  // Per sample of the log.
+  std::vector<double> t_sample;   // s
+  std::vector<Vec3> d_hat, v_hat; // zero-phase state estimate at each sample (m, m/s)
+  std::vector<Vec3> f_sample;     // commanded forces as logged (N)
+  std::vector<int> line;          // file line of each sample (0 when unknown)
+  std::vector<int> segment_end;   // per sample: one past the last sample of its segment
+  double dt = 0.0;                // sample period (s)
+  int segments = 0;
+
+  // Kept rows (filtered, decimated).
+  std::vector<int> sample;        // sample index of each row
+  std::vector<double> t;          // time of the state of the row: t_k + dt/2 (s)
+  std::vector<Vec3> d, v, a;      // filtered state (m, m/s, m/s^2)
+  std::vector<Vec3> f;            // filtered commanded force (N)
+  std::vector<Vec3> f_smooth;      // the force smoothed 4x longer: the force-gain regressor,
+                                   // nearly free of the noise the controller put into F
+                                   // (which the residual also carries: a shared-noise bias)
+  std::vector<Vec3> platform_force;  // model's M p_dd + G p_dot + K at the row (N)
+  Eigen::VectorXd residual;       // g F - model force (N), 3 rows per kept row
+  Eigen::MatrixXd base;           // columns of the base parameters (N per unit)
+  std::vector<BaseParameter> base_params;
+  Vec3 drive_gain = Vec3::Ones();
+
+  // What the acceleration estimate did.
+  std::string accel_source;       // "measured a1..a3", "velocity (1st derivative)", ...
+  Vec3 velocity_noise = Vec3::Zero();   // estimated white noise of v (m/s)
+  Vec3 position_noise = Vec3::Zero();   // estimated white noise of d (m)
+  Vec3 accel_noise = Vec3::Zero();      // noise the estimate adds at each row (m/s^2)
+  Vec3 force_noise = Vec3::Zero();      // the same through the inertia (N)
+  int half_width = 0;             // kernel half width (samples)
+  int stride = 0;
+  SgKernel smooth_state;          // smoothing at +1/2 sample (state side)
+  SgKernel smooth_force;          // smoothing at 0 (force side)
+  SgKernel accel_kernel;          // the kernel that made the acceleration (its noise dominates)
+  std::vector<std::string> warnings;
+
+  [[nodiscard]] int rows() const noexcept { return static_cast<int>(sample.size()); }
+  // The state-side filter applied to a per-sample quantity of one axis, at the kept rows:
+  // value(k, axis) is called for every sample k in the windows. Returns 3R rows, zero
+  // except on `axis`.
+  template <class F>
+  Eigen::VectorXd filter_axis(int axis, F&& value) const {
+    Eigen::VectorXd out = Eigen::VectorXd::Zero(3 * rows());
+    if (rows() == 0) return out;
+    const int m = smooth_state.half_width;
+    const int k0 = sample.front() - m, k1 = sample.back() + m;
+    std::vector<double> buf(static_cast<std::size_t>(k1 - k0 + 1));
+    // Each sample once (windows overlap), skipping gaps no window covers.
+    std::vector<char> need(buf.size(), 0);
+    for (int k : sample)
+      for (int j = -m; j <= m; ++j) need[static_cast<std::size_t>(k + j - k0)] = 1;
+    for (int k = k0; k <= k1; ++k)
+      if (need[static_cast<std::size_t>(k - k0)]) buf[static_cast<std::size_t>(k - k0)] = value(k, axis);
+    for (int r = 0; r < rows(); ++r)
+      out(3 * r + axis) = smooth_state.apply(&buf[static_cast<std::size_t>(sample[r] - k0)]);
+    return out;
+  }
+  // Column of parameter j of a per-axis dynamic effect (effect_force_gradient), filtered.
+  [[nodiscard]] Eigen::VectorXd effect_column(const ctl::DynamicEffect& e, int j) const;
+  // The effect's force itself, filtered.
+  [[nodiscard]] Eigen::VectorXd effect_force_column(const ctl::DynamicEffect& e) const;
+  // Column of a force-gain change on `axis`: -g F (filtered).
+  [[nodiscard]] Eigen::VectorXd force_gain_column(int axis) const;
+};
+
+// Build the residual and the base columns. Throws Error naming the file and
+// line for data the model cannot follow (outside the workspace), and refuses
+// too few samples, non-increasing time and other unusable input.
+MotionProblem prepare_motion(const io::MotionData& data, const ctl::Machine& model,
+                             const MotionOptions& options = {});
+
+}  // namespace cpm::ident

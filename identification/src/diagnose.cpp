@@ -1,0 +1,686 @@
+#include "cpm/identification/diagnose.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+#include <sstream>
+
+#include "cpm/identification/stats.hpp"
+#include "cpm/identification/structure.hpp"
+#include "cpm/kinematics/kinematic_effects.hpp"
+
+namespace cpm::ident {
+namespace {
+
+using ctl::DynamicEffect;
+using ctl::DynamicEffectType;
+constexpr double kTwoPi = 2.0 * std::numbers::pi;
+
+std::string axis_label(int axis) { return axis >= 0 ? "[axis " + std::to_string(axis + 1) + "]" : ""; }
+
+std::string fmt(double v, int prec = 3) {
+  std::ostringstream os;
+  os.precision(prec);
+  os << v;
+  return os.str();
+}
+
+DynamicEffect make(DynamicEffectType t, int axis, std::array<double, 4> p) {
+  DynamicEffect e;
+  e.type = t;
+  e.axis = static_cast<std::int8_t>(axis);
+  e.param = p;
+  return e;
+}
+
+Eigen::MatrixXd hcat(std::initializer_list<Eigen::VectorXd> cols) {
+  Eigen::MatrixXd X(cols.begin()->size(), static_cast<Eigen::Index>(cols.size()));
+  Eigen::Index j = 0;
+  for (const auto& c : cols) X.col(j++) = c;
+  return X;
+}
+
+// Golden-section minimum of f on [a, b] (f unimodal there, or close to it).
+template <class F>
+double golden(F&& f, double a, double b, int iters, double& fbest) {
+  const double g = (std::sqrt(5.0) - 1.0) / 2.0;
+  double x1 = b - g * (b - a), x2 = a + g * (b - a);
+  double f1 = f(x1), f2 = f(x2);
+  for (int i = 0; i < iters; ++i) {
+    if (f1 < f2) {
+      b = x2; x2 = x1; f2 = f1; x1 = b - g * (b - a); f1 = f(x1);
+    } else {
+      a = x1; x1 = x2; f1 = f2; x2 = a + g * (b - a); f2 = f(x2);
+    }
+  }
+  fbest = std::min(f1, f2);
+  return f1 < f2 ? x1 : x2;
+}
+
+// What each effect's force depends on, for advice on separating two of them.
+struct Depends { bool direction, speed, position, force; };
+Depends depends(const std::string& e) {
+  if (e == "viscous_friction") return {true, true, false, false};
+  if (e == "coulomb_friction") return {true, false, false, false};
+  if (e == "stribeck_friction") return {true, true, false, false};
+  if (e == "cogging" || e == "spring") return {false, false, true, false};
+  return {false, false, false, true};  // force_gain, payload_mass, inertia_error
+}
+
+struct AxisExcitation {
+  Vec3 vmax = Vec3::Zero(), vmin = Vec3::Zero(), span = Vec3::Zero(), fmax = Vec3::Zero();
+};
+
+AxisExcitation excitation(const MotionProblem& P) {
+  AxisExcitation x;
+  Vec3 dmin = Vec3::Constant(1e300), dmax = Vec3::Constant(-1e300);
+  x.vmin.setConstant(1e300);
+  x.vmax.setConstant(-1e300);
+  for (int r = 0; r < P.rows(); ++r)
+    for (int i = 0; i < 3; ++i) {
+      dmin[i] = std::min(dmin[i], P.d[r][i]);
+      dmax[i] = std::max(dmax[i], P.d[r][i]);
+      x.vmin[i] = std::min(x.vmin[i], P.v[r][i]);
+      x.vmax[i] = std::max(x.vmax[i], P.v[r][i]);
+      x.fmax[i] = std::max(x.fmax[i], std::fabs(P.f[r][i]));
+    }
+  x.span = dmax - dmin;
+  return x;
+}
+
+std::string separate_advice(const CandidateResult& a, const CandidateResult& b,
+                            const AxisExcitation& x) {
+  const Depends da = depends(a.effect), db = depends(b.effect);
+  const int ax = a.axis >= 0 ? a.axis : b.axis;
+  const std::string axis_text = ax >= 0 ? "axis " + std::to_string(ax + 1) : "the axes";
+  const bool one_direction = ax >= 0 && (x.vmin[ax] > -1e-3 || x.vmax[ax] < 1e-3);
+  if (da.direction != db.direction && one_direction)
+    return "move " + axis_text + " in both directions";
+  if ((da.direction && db.direction) || (da.speed != db.speed))
+    return "run " + axis_text + " at another feed (a different speed)";
+  if (da.position != db.position)
+    return "cover a longer stroke or another position range on " + axis_text;
+  if (da.force || db.force) return "repeat with another payload or other accelerations";
+  return "measure with other speeds, both directions and another payload";
+}
+
+// Fill the statistics of a fitted candidate.
+void score(CandidateResult& c, const Engine& E, double rss_parent, int q, int k_total,
+           double baseline_ms) {
+  const double N = E.rows();
+  c.rms_after = Engine::rms(c.residual_after);
+  c.explained = baseline_ms > 0.0 ? std::clamp(1.0 - c.rms_after * c.rms_after / baseline_ms, 0.0, 1.0) : 0.0;
+  const double base_ms = E.rows() ? Engine::rms(E.base_fit().residual) : 0.0;
+  c.explained_beyond_base =
+      base_ms > 0.0 ? std::clamp(1.0 - c.rms_after * c.rms_after / (base_ms * base_ms), 0.0, 1.0) : 0.0;
+  const double ne = std::max(c.n_eff, static_cast<double>(k_total) + 2.0);
+  if (!c.identifiable || q <= 0 || c.rss <= 0.0) {
+    c.f_stat = 0.0;
+    c.p_value = 1.0;
+    c.delta_bic = 0.0;
+    return;
+  }
+  const double gain = std::max(0.0, rss_parent - c.rss);
+  c.f_stat = (gain / q) / (c.rss / std::max(1.0, N - k_total)) * (ne / N);
+  c.p_value = f_tail(c.f_stat, q, std::max(1.0, ne - k_total));
+  c.delta_bic = ne * std::log(c.rss / rss_parent) + q * std::log(ne);
+}
+
+}  // namespace
+
+std::string CandidateResult::label() const { return effect + axis_label(axis); }
+
+void check_effect_for_kind(const std::string& effect, const std::string& kind) {
+  const bool dyn = ctl::dynamic_effect_from_name(effect).has_value();
+  const bool kinem = kin::kinematic_effect_from_name(effect).has_value();
+  if (!dyn && !kinem)
+    throw Error("unknown effect '" + effect +
+                "' (the names are those of shared/spec/effects.md, e.g. coulomb_friction, cogging, backlash)");
+  if (kind == "motion" && kinem)
+    throw Error(effect + " is a kinematic effect (it changes where the platform is, not the force): a motion "
+                "log (kind = motion) cannot show it; measure ball-bar lengths or positions");
+  if ((kind == "ballbar" || kind == "position") && dyn)
+    throw Error(effect + " is a dynamic effect (a force): " + kind +
+                " data cannot show it; record a motion log (kind = motion) with the commanded forces");
+}
+
+LinearProblem motion_linear_problem(const MotionProblem& P, Vec3* axis_noise) {
+  LinearProblem L;
+  const int N = 3 * P.rows();
+  L.y = P.residual;
+  L.B = P.base;
+  for (const auto& b : P.base_params) {
+    L.base_names.push_back(b.name);
+    L.base_units.push_back(b.unit);
+    L.base_values.push_back(b.value);
+    L.nuisance.push_back(b.nuisance ? 1 : 0);
+  }
+  L.series.resize(N);
+  for (int r = 0; r < N; ++r) L.series[r] = r % 3;
+  L.n_series = 3;
+  L.w = Eigen::VectorXd::Ones(N);
+  // Per-axis noise from the base refit's residual (second differences: slow
+  // structure and isolated steps do not count as noise).
+  const Engine e0(L);
+  const Eigen::VectorXd& r0 = e0.base_fit().residual;
+  Vec3 sigma;
+  double floor = 0.0;
+  for (int i = 0; i < 3; ++i) {
+    std::vector<double> s;
+    for (int r = 0; r < P.rows(); ++r) s.push_back(r0(3 * r + i));
+    sigma[i] = noise_from_differences(s);
+    floor = std::max(floor, sigma[i]);
+  }
+  // Second differences of white noise filtered by the acceleration kernel are
+  // not those of white noise: correct by the kernel's own autocorrelation at
+  // the row spacing.
+  {
+    const auto& h = P.accel_kernel.h;
+    auto rho = [&](int lag) {
+      double num = 0.0, den = 0.0;
+      for (std::size_t j = 0; j < h.size(); ++j) {
+        den += h[j] * h[j];
+        if (j + static_cast<std::size_t>(lag) < h.size()) num += h[j] * h[j + static_cast<std::size_t>(lag)];
+      }
+      return den > 0.0 ? num / den : 0.0;
+    };
+    const double f = (6.0 - 8.0 * rho(P.stride) + 2.0 * rho(2 * P.stride)) / 6.0;
+    if (f > 0.1) sigma /= std::sqrt(f);
+    floor = sigma.maxCoeff();
+  }
+  const double rms_all = Engine::rms(r0);
+  for (int i = 0; i < 3; ++i) sigma[i] = std::max({sigma[i], 1e-3 * floor, 1e-9 * rms_all, 1e-12});
+  for (int r = 0; r < N; ++r) L.w(r) = 1.0 / sigma[r % 3];
+  if (axis_noise) *axis_noise = sigma;
+  return L;
+}
+
+CandidateResult evaluate_dynamic_candidate(const MotionProblem& P, const Engine& E,
+                                           const ctl::MachineModel& model, const std::string& effect,
+                                           int axis, const DiagnoseOptions& opt) {
+  CandidateResult c;
+  c.effect = effect;
+  c.axis = axis;
+  const auto type = ctl::dynamic_effect_from_name(effect);
+  if (!type) throw Error("unknown dynamic effect '" + effect + "'");
+  const ctl::DynamicEffectInfo& in = ctl::info(*type);
+  const AxisExcitation ex = excitation(P);
+  const int nb = static_cast<int>(P.base_params.size());
+  const int rank = E.base_rank();
+  auto set_not_identifiable = [&](const std::string& why) {
+    c.identifiable = false;
+    c.note = why;
+    c.rss = E.rss_base();
+    c.residual_after = E.base_fit().residual;
+    c.fitted = Eigen::VectorXd::Zero(E.rows());
+    for (int j = 0; j < in.n_params; ++j) c.params.push_back({in.params[j].name, in.params[j].unit, 0.0, -1.0, false});
+  };
+  auto base_after = [&](const JointFit& f, bool with_base) {
+    for (int b = 0; b < nb; ++b)
+      c.base_after.push_back({P.base_params[b].name, P.base_params[b].unit,
+                              P.base_params[b].value + (with_base ? f.base_delta(b) : 0.0), -1.0, false});
+  };
+  auto finish = [&](const Eigen::MatrixXd& X, const JointFit& f, const Eigen::MatrixXd& jac,
+                    const std::vector<double>& values, bool with_base) {
+    c.columns = X;
+    c.rss = f.rss;
+    c.n_eff = f.n_eff;
+    c.residual_after = f.residual;
+    c.fitted = X.cols() ? Eigen::VectorXd(X * f.beta) : Eigen::VectorXd::Zero(E.rows());
+    const Eigen::MatrixXd cov = E.covariance(jac, f, (with_base ? rank : 0) + static_cast<int>(jac.cols()), with_base);
+    for (int j = 0; j < in.n_params; ++j) {
+      const double se = j < cov.rows() ? std::sqrt(std::max(0.0, cov(j, j))) : -1.0;
+      c.params.push_back({in.params[j].name, in.params[j].unit, values[j], se, false});
+    }
+    base_after(f, with_base);
+    if (X.cols()) {
+      const Eigen::VectorXd share = E.base_share(X);
+      const Eigen::MatrixXd cosb = E.base_cosines(X);
+      if (!f.full_rank || share.minCoeff() > 0.995) {
+        c.identifiable = false;
+        std::string with;
+        for (Eigen::Index j = 0; j < X.cols(); ++j) {
+          Eigen::Index bi = 0;
+          cosb.row(j).cwiseAbs().maxCoeff(&bi);
+          if (cosb.cols()) with = P.base_params[static_cast<std::size_t>(bi)].name;
+        }
+        c.note = "in these data it cannot be told apart from the base model" +
+                 (with.empty() ? std::string() : " (parameter " + with + ")");
+      }
+      for (Eigen::Index j = 0; j < X.cols(); ++j) {
+        if (share(j) < 0.81 || cosb.cols() == 0) continue;
+        Eigen::Index bi = 0;
+        cosb.row(j).cwiseAbs().maxCoeff(&bi);
+        Confounder cf;
+        cf.with = P.base_params[static_cast<std::size_t>(bi)].name;
+        cf.correlation = std::sqrt(share(j));
+        const Depends d = depends(effect);
+        cf.separate_by = d.direction && axis >= 0 && (ex.vmin[axis] > -1e-3 || ex.vmax[axis] < 1e-3)
+                             ? "move axis " + std::to_string(axis + 1) + " in both directions"
+                             : "vary the accelerations, speeds and poses more widely";
+        bool dup = false;
+        for (const auto& o : c.confounded) dup |= o.with == cf.with;
+        if (!dup) c.confounded.push_back(cf);
+      }
+    }
+  };
+
+  const bool per_axis = in.per_axis;
+  if (per_axis && (axis < 0 || axis > 2)) throw Error(effect + ": needs an axis 1..3");
+  if (!per_axis && axis >= 0) throw Error(effect + " acts on all axes together; give no axis");
+  for (const auto& e : model.effects)
+    if (per_axis && e.type == *type && e.axis == axis) {
+      c.note = "already in the model: refitted with the base parameters";
+      set_not_identifiable(c.note);
+      return c;
+    }
+  const double vabs = axis >= 0 ? std::max(std::fabs(ex.vmin[axis]), std::fabs(ex.vmax[axis])) : 0.0;
+  c.n_params = in.n_params;
+
+  switch (*type) {
+    case DynamicEffectType::viscous_friction:
+    case DynamicEffectType::coulomb_friction:
+    case DynamicEffectType::force_gain: {
+      Eigen::MatrixXd X;
+      if (*type == DynamicEffectType::force_gain) {
+        if (ex.fmax[axis] < 1e-6) {
+          set_not_identifiable("no force was commanded on axis " + std::to_string(axis + 1));
+          break;
+        }
+        X = hcat({P.force_gain_column(axis)});
+      } else {
+        if (vabs < 1e-4) {
+          set_not_identifiable("axis " + std::to_string(axis + 1) + " does not move in these data");
+          break;
+        }
+        X = hcat({P.effect_column(make(*type, axis, {1.0, 0, 0, 0}), 0)});
+      }
+      JointFit f = E.fit(X);
+      double b = f.beta(0);
+      const double lo = in.params[0].lower, hi = in.params[0].upper;
+      bool held = false;
+      if (b < lo || b > hi) {
+        b = std::clamp(b, lo, hi);
+        held = true;
+        f = E.fit(Eigen::MatrixXd(X.rows(), 0));
+        if (b != 0.0) {  // a bound other than 0: the column at its bound is fixed, refit the base
+          LinearProblem L = E.problem();
+          L.y -= X.col(0) * b;
+          f = Engine(L).base_fit();
+        }
+        f.beta = Eigen::VectorXd::Constant(1, b);
+      }
+      finish(X, f, X, {b}, true);
+      if (held) {
+        c.params[0].at_bound = true;
+        c.note = "the best fit (" + fmt(f.beta(0)) + ") is outside the physical range; held at " + fmt(b);
+        c.identifiable = c.identifiable && b != 0.0;
+      }
+      break;
+    }
+    case DynamicEffectType::spring: {
+      if (ex.span[axis] < 1e-4) {
+        set_not_identifiable("axis " + std::to_string(axis + 1) + " does not move in these data");
+        break;
+      }
+      const DynamicEffect unit = make(*type, axis, {1.0, 0.0, 0, 0});
+      const Eigen::MatrixXd X = hcat({P.effect_column(unit, 0), P.effect_column(unit, 1)});
+      JointFit f = E.fit(X);
+      double k = f.beta(0), dref = std::fabs(k) > 0.0 ? f.beta(1) / k : 1e300;
+      bool held = false;
+      Eigen::MatrixXd Xf = X;
+      if (!(std::fabs(dref) <= 1.0)) {
+        held = true;
+        dref = std::clamp(dref, -1.0, 1.0);
+        Xf = hcat({P.effect_force_column(make(*type, axis, {1.0, dref, 0, 0}))});
+        f = E.fit(Xf);
+        k = f.beta(0);
+      }
+      k = std::clamp(k, in.params[0].lower, in.params[0].upper);
+      const DynamicEffect fe = make(*type, axis, {k, dref, 0, 0});
+      const Eigen::MatrixXd jac = hcat({P.effect_column(fe, 0), P.effect_column(fe, 1)});
+      finish(Xf, f, held ? Eigen::MatrixXd(jac.col(0)) : jac, {k, dref}, true);
+      if (held) {
+        c.params[1].at_bound = true;
+        c.params[1].std_error = -1.0;
+        c.note = "the spring's rest position is outside [-1, 1] m; held at the bound";
+      }
+      break;
+    }
+    case DynamicEffectType::stribeck_friction: {
+      const double lo = 2.0 * ctl::kSignEpsilon, hi = std::min(in.params[1].upper, vabs);
+      if (vabs < 1e-4 || hi <= lo * 1.5) {
+        set_not_identifiable("axis " + std::to_string(axis + 1) + " does not move fast enough in these data");
+        break;
+      }
+      auto cols = [&](double vs) {
+        return hcat({P.effect_column(make(*type, axis, {1.0, vs, 0, 0}), 0)});
+      };
+      auto cost = [&](double logvs) {
+        const Eigen::MatrixXd X = cols(std::exp(logvs));
+        const JointFit f = E.fit(X);
+        return f.beta(0) >= 0.0 ? f.rss : E.rss_base();
+      };
+      const int G = 16;
+      double best = 1e300, bx = std::log(lo);
+      const double step = (std::log(hi) - std::log(lo)) / (G - 1);
+      for (int g = 0; g < G; ++g) {
+        const double x = std::log(lo) + g * step;
+        const double v = cost(x);
+        if (v < best) { best = v; bx = x; }
+      }
+      double fb = 0.0;
+      const double xr = golden(cost, std::max(std::log(lo), bx - step), std::min(std::log(hi), bx + step), 12, fb);
+      if (fb < best) bx = xr;
+      const double vs = std::exp(bx);
+      const Eigen::MatrixXd X = cols(vs);
+      JointFit f = E.fit(X);
+      double fs = f.beta(0);
+      const bool held = fs < 0.0;
+      if (held) {
+        fs = 0.0;
+        f = E.base_fit();
+        f.beta = Eigen::VectorXd::Zero(1);
+      }
+      const DynamicEffect fe = make(*type, axis, {fs, vs, 0, 0});
+      const Eigen::MatrixXd jac = hcat({P.effect_column(fe, 0), P.effect_column(fe, 1)});
+      finish(X, f, held ? Eigen::MatrixXd(jac.col(0)) : jac, {fs, vs}, true);
+      c.trials = std::max(1.0, std::log(hi / lo) / std::log(3.0));
+      if (held) {
+        c.params[0].at_bound = true;
+        c.identifiable = false;
+        c.note = "the best fit is a negative breakaway force (unphysical); held at 0";
+      }
+      break;
+    }
+    case DynamicEffectType::cogging: {
+      const double span = ex.span[axis];
+      const double lmin = std::max(opt.cogging_lambda_min, in.params[1].lower);
+      const double lmax = std::min({opt.cogging_lambda_max, in.params[1].upper, span / 1.5});
+      if (vabs < 1e-4 || lmax <= lmin) {
+        set_not_identifiable("axis " + std::to_string(axis + 1) + " moves over " + fmt(span * 1e3) +
+                             " mm only: too little to see a force periodic in position (wavelength >= " +
+                             fmt(lmin * 1e3) + " mm)");
+        break;
+      }
+      // Periodogram of the base-refit residual against this axis' position;
+      // each wavenumber's column is damped by the filter's response at the
+      // row's temporal frequency |v| k.
+      const int R = P.rows();
+      const Eigen::VectorXd& yb = E.base_fit().residual;
+      const Eigen::VectorXd& w = E.problem().w;
+      const double kmin = 1.0 / lmax, kmax = 1.0 / lmin, dk = 1.0 / (4.0 * span);
+      const int K = static_cast<int>((kmax - kmin) / dk) + 1;
+      std::vector<double> ph_c(R), ph_s(R), rot_c(R), rot_s(R), yr(R), wr(R), damp(R);
+      std::vector<double> power(K);
+      for (int r = 0; r < R; ++r) {
+        const double x = P.d[r][axis];
+        ph_c[r] = std::cos(kTwoPi * kmin * x);
+        ph_s[r] = std::sin(kTwoPi * kmin * x);
+        rot_c[r] = std::cos(kTwoPi * dk * x);
+        rot_s[r] = std::sin(kTwoPi * dk * x);
+        wr[r] = w(3 * r + axis) * w(3 * r + axis);
+        yr[r] = yb(3 * r + axis);
+      }
+      for (int q = 0; q < K; ++q) {
+        const double kq = kmin + q * dk;
+        double cc = 0, cs = 0, ss = 0, cy = 0, sy = 0;
+        for (int r = 0; r < R; ++r) {
+          const double h = P.smooth_force.response(std::min(0.5, std::fabs(P.v[r][axis]) * kq * P.dt));
+          const double cv = h * ph_c[r], sv = h * ph_s[r], ww = wr[r];
+          cc += ww * cv * cv; cs += ww * cv * sv; ss += ww * sv * sv;
+          cy += ww * cv * yr[r]; sy += ww * sv * yr[r];
+          const double nc = ph_c[r] * rot_c[r] - ph_s[r] * rot_s[r];
+          ph_s[r] = ph_s[r] * rot_c[r] + ph_c[r] * rot_s[r];
+          ph_c[r] = nc;
+        }
+        const double det = cc * ss - cs * cs;
+        power[q] = det > 1e-300 ? (ss * cy * cy - 2 * cs * cy * sy + cc * sy * sy) / det : 0.0;
+      }
+      std::vector<int> peaks;
+      for (int q = 0; q < K; ++q)
+        if ((q == 0 || power[q] >= power[q - 1]) && (q == K - 1 || power[q] >= power[q + 1])) peaks.push_back(q);
+      std::sort(peaks.begin(), peaks.end(), [&](int a, int b) { return power[a] > power[b]; });
+      if (peaks.size() > 3) peaks.resize(3);
+      auto cols = [&](double lambda) {
+        return hcat({P.effect_column(make(*type, axis, {1.0, lambda, 0.0, 0}), 0),
+                     P.effect_column(make(*type, axis, {1.0, lambda, 0.5 * std::numbers::pi, 0}), 0)});
+      };
+      double best = 1e300, blam = 1.0 / (kmin + (peaks.empty() ? 0 : peaks[0]) * dk);
+      for (int q : peaks) {
+        const double k0 = kmin + q * dk;
+        double fb = 0.0;
+        const double kk = golden([&](double kx) { return E.rss(cols(1.0 / kx)); },
+                                 std::max(kmin, k0 - dk), std::min(kmax, k0 + dk), 12, fb);
+        if (fb < best) { best = fb; blam = 1.0 / kk; }
+      }
+      const Eigen::MatrixXd X = cols(blam);
+      const JointFit f = E.fit(X);
+      const double a = std::hypot(f.beta(0), f.beta(1));
+      const double phi = std::atan2(f.beta(1), f.beta(0));
+      const DynamicEffect fe = make(*type, axis, {a, blam, phi, 0});
+      const Eigen::MatrixXd jac = hcat({P.effect_column(fe, 0), P.effect_column(fe, 1), P.effect_column(fe, 2)});
+      finish(X, f, jac, {a, blam, phi}, true);
+      c.trials = std::max(1.0, span * (kmax - kmin));
+      break;
+    }
+    case DynamicEffectType::payload_mass: {
+      c.refits_base = false;
+      const Eigen::MatrixXd X = hcat({0.5 * P.base.col(0) + ctl::kGravity * P.base.col(3)});
+      JointFit f = E.fit(X, false);
+      double dm = f.beta(0);
+      if (dm < in.params[0].lower || dm > in.params[0].upper) {
+        dm = std::clamp(dm, in.params[0].lower, in.params[0].upper);
+        LinearProblem L = E.problem();
+        L.y -= X.col(0) * dm;
+        const Engine e2(L);
+        f = e2.fit(Eigen::MatrixXd(X.rows(), 0), false);
+        f.beta = Eigen::VectorXd::Constant(1, dm);
+        c.note = "the best fit is outside the physical range; held at " + fmt(dm) + " kg";
+      }
+      c.columns = X;
+      c.rss = f.rss;
+      c.n_eff = f.n_eff;
+      c.residual_after = f.residual;
+      c.fitted = X * f.beta;
+      const Eigen::MatrixXd cov = E.covariance(X, f, 1, false);
+      c.params.push_back({"dm", "kg", dm, std::sqrt(std::max(0.0, cov(0, 0))), false});
+      base_after(f, false);
+      break;
+    }
+    case DynamicEffectType::inertia_error: {
+      c.refits_base = true;
+      const JointFit& f = E.base_fit();
+      c.columns = Eigen::MatrixXd(E.rows(), 0);
+      c.rss = f.rss;
+      c.n_eff = f.n_eff;
+      c.residual_after = f.residual;
+      c.fitted = E.problem().y - f.residual;
+      const Eigen::MatrixXd cov = E.covariance(P.base.leftCols(4), f, rank, false);
+      const auto& un = E.unidentifiable_base();
+      for (int j = 0; j < 4; ++j) {
+        const bool undet = std::find(un.begin(), un.end(), j) != un.end();
+        c.params.push_back({in.params[j].name, in.params[j].unit, f.base_delta(j),
+                            undet ? -1.0 : std::sqrt(std::max(0.0, cov(j, j))), false});
+      }
+      base_after(f, true);
+      c.n_params = rank;
+      if (!un.empty()) {
+        std::string names;
+        for (int j : un) names += (names.empty() ? "" : ", ") + P.base_params[j].name;
+        c.note = "these data cannot determine " + names + " (kept at the model's value)";
+      }
+      break;
+    }
+  }
+  return c;
+}
+
+Diagnosis diagnose_motion(const io::MotionData& data, const ctl::Machine& model,
+                          const DiagnoseOptions& opt) {
+  for (const auto& e : opt.effects) check_effect_for_kind(e, "motion");
+  Diagnosis D;
+  D.data_file = data.info.path;
+  D.samples = static_cast<int>(data.t.size());
+  D.motion = prepare_motion(data, model, opt.motion);
+  const MotionProblem& P = D.motion;
+  D.warnings = P.warnings;
+  for (const auto& w : data.info.warnings) D.warnings.push_back(w);
+  LinearProblem L = motion_linear_problem(P, &D.axis_noise);
+  const Engine E(std::move(L));
+  D.rows = E.rows();
+  D.baseline_rms = Engine::rms(P.residual);
+  D.baseline_max = P.residual.cwiseAbs().maxCoeff();
+  for (int i = 0; i < 3; ++i) {
+    double s = 0.0;
+    for (int r = 0; r < P.rows(); ++r) s += P.residual(3 * r + i) * P.residual(3 * r + i);
+    D.baseline_axis_rms[i] = std::sqrt(s / P.rows());
+  }
+  D.base_refit_rms = Engine::rms(E.base_fit().residual);
+  D.noise_floor = std::sqrt(D.axis_noise.squaredNorm() / 3.0);
+  const double baseline_ms = D.baseline_rms * D.baseline_rms;
+
+  // The candidates: every dynamic effect (or those asked for) on every axis.
+  std::vector<std::pair<std::string, int>> todo;
+  for (int t = 0; t < ctl::kDynamicEffectTypes; ++t) {
+    const auto& in = ctl::info(static_cast<DynamicEffectType>(t));
+    if (!opt.effects.empty() && std::find(opt.effects.begin(), opt.effects.end(), in.name) == opt.effects.end())
+      continue;
+    if (in.per_axis)
+      for (int i = 0; i < 3; ++i) todo.emplace_back(in.name, i);
+    else
+      todo.emplace_back(in.name, -1);
+  }
+  const int rank = E.base_rank();
+  for (const auto& [name, axis] : todo) {
+    CandidateResult c = evaluate_dynamic_candidate(P, E, model.model(), name, axis, opt);
+    if (name == "payload_mass") score(c, E, E.rss_given(), 1, 1, baseline_ms);
+    else if (name == "inertia_error") score(c, E, E.rss_given(), rank, rank, baseline_ms);
+    else score(c, E, E.rss_base(), c.n_params, rank + c.n_params, baseline_ms);
+    D.candidates.push_back(std::move(c));
+  }
+  // Look-elsewhere: the family of candidates and the search trials within each.
+  const double family = static_cast<double>(D.candidates.size());
+  double ne_ref = 0.0;
+  for (const auto& c : D.candidates) ne_ref = std::max(ne_ref, c.n_eff);
+  for (auto& c : D.candidates) {
+    c.p_adjusted = std::min(1.0, c.p_value * c.trials * family);
+    c.significant = c.identifiable && c.p_adjusted < opt.alpha && c.delta_bic < 0.0 &&
+                    !(c.params.size() && c.params[0].at_bound && c.params[0].value == 0.0);
+    const int k_total = c.effect == "payload_mass" ? 1 : (c.effect == "inertia_error" ? rank : rank + c.n_params);
+    c.score = c.rss > 0.0 && E.rss_given() > 0.0
+                  ? ne_ref * std::log(c.rss / E.rss_given()) + k_total * std::log(std::max(2.0, ne_ref))
+                  : 0.0;
+  }
+  std::stable_sort(D.candidates.begin(), D.candidates.end(), [](const auto& a, const auto& b) {
+    if (a.significant != b.significant) return a.significant;
+    if (a.identifiable != b.identifiable) return a.identifiable;
+    return a.score < b.score;
+  });
+
+  // Confounding between candidates: how much of one's fitted signature the
+  // other's columns reproduce (after the base is taken out).
+  const AxisExcitation ex = excitation(P);
+  const int top = std::min<int>(static_cast<int>(D.candidates.size()), 8);
+  std::vector<Eigen::MatrixXd> Xp(D.candidates.size());
+  for (std::size_t j = 0; j < D.candidates.size(); ++j)
+    if (D.candidates[j].identifiable && D.candidates[j].columns.cols() && D.candidates[j].refits_base)
+      Xp[j] = E.project_off_base(D.candidates[j].columns);
+  for (int a = 0; a < top; ++a) {
+    CandidateResult& ca = D.candidates[a];
+    if (Xp[a].size() == 0 || !ca.identifiable) continue;
+    const Eigen::VectorXd u = E.project_off_base(ca.fitted);
+    if (u.squaredNorm() <= 0.0) continue;
+    for (std::size_t b = 0; b < D.candidates.size(); ++b) {
+      if (static_cast<int>(b) == a || Xp[b].size() == 0) continue;
+      const Eigen::VectorXd coef = Xp[b].colPivHouseholderQr().solve(u);
+      const double share = std::clamp((Xp[b] * coef).squaredNorm() / u.squaredNorm(), 0.0, 1.0);
+      if (share < 0.81) continue;
+      const CandidateResult& cb = D.candidates[b];
+      ca.confounded.push_back({cb.label(), cb.effect, cb.axis, std::sqrt(share), separate_advice(ca, cb, ex)});
+    }
+  }
+
+  // Verdict and forward selection.
+  if (!D.candidates.empty() && D.candidates[0].significant) {
+    D.verdict = 0;
+    const CandidateResult& v = D.candidates[0];
+    std::vector<std::string> alts;
+    for (const auto& cf : v.confounded) {
+      if (cf.effect.empty() || cf.correlation < 0.95) continue;
+      for (const auto& o : D.candidates)
+        if (o.label() == cf.with && o.significant && o.score - v.score < 10.0) {
+          D.ambiguous = true;
+          alts.push_back(cf.with + " (" + cf.separate_by + ")");
+        }
+    }
+    std::ostringstream os;
+    os << "missing: " << v.label() << " — ";
+    for (std::size_t j = 0; j < v.params.size(); ++j)
+      os << (j ? ", " : "") << v.params[j].name << " = " << fmt(v.params[j].value, 4) << " "
+         << v.params[j].unit;
+    os << "; it brings the residual from " << fmt(D.baseline_rms, 3) << " to " << fmt(v.rms_after, 3)
+       << " N RMS (noise floor about " << fmt(D.noise_floor, 3) << " N)";
+    if (D.ambiguous) {
+      os << ". These data cannot tell it apart from ";
+      for (std::size_t j = 0; j < alts.size(); ++j) os << (j ? "; " : "") << alts[j];
+    }
+    D.verdict_text = os.str();
+    // Forward selection of further effects on top of the verdict.
+    Eigen::MatrixXd acc = v.refits_base ? v.columns : Eigen::MatrixXd(E.rows(), 0);
+    JointFit cur = E.fit(acc);
+    std::vector<bool> used(D.candidates.size(), false);
+    used[0] = true;
+    for (int step = 0; step < opt.max_forward_steps; ++step) {
+      int best = -1;
+      double best_bic = 0.0;
+      JointFit best_fit;
+      for (std::size_t j = 0; j < D.candidates.size(); ++j) {
+        const CandidateResult& c = D.candidates[j];
+        if (used[j] || !c.significant || !c.refits_base || c.columns.cols() == 0) continue;
+        Eigen::MatrixXd X(E.rows(), acc.cols() + c.columns.cols());
+        X << acc, c.columns;
+        const JointFit f = E.fit(X);
+        if (!f.full_rank) continue;
+        const int q = static_cast<int>(c.columns.cols()) + (c.n_params - static_cast<int>(c.columns.cols()));
+        const double N = E.rows(), ne = std::max(f.n_eff, 10.0);
+        const int k_total = rank + static_cast<int>(X.cols());
+        const double F = ((cur.rss - f.rss) / q) / (f.rss / std::max(1.0, N - k_total)) * (ne / N);
+        const double p = std::min(1.0, f_tail(F, q, std::max(1.0, ne - k_total)) * c.trials * family);
+        const double dbic = ne * std::log(f.rss / cur.rss) + q * std::log(ne);
+        if (p < opt.alpha && dbic < best_bic) {
+          best = static_cast<int>(j);
+          best_bic = dbic;
+          best_fit = f;
+        }
+      }
+      if (best < 0) break;
+      used[best] = true;
+      D.also.push_back(best);
+      Eigen::MatrixXd X(E.rows(), acc.cols() + D.candidates[best].columns.cols());
+      X << acc, D.candidates[best].columns;
+      acc = X;
+      cur = best_fit;
+    }
+    D.residual_final = v.refits_base || !D.also.empty() ? cur.residual : v.residual_after;
+    if (!D.also.empty()) {
+      D.verdict_text += ". Also significant on top of it: ";
+      for (std::size_t j = 0; j < D.also.size(); ++j)
+        D.verdict_text += (j ? ", " : "") + D.candidates[D.also[j]].label();
+    }
+  } else {
+    D.verdict_text = "none: no effect of the library explains a significant part of the residual "
+                     "(RMS " + fmt(D.baseline_rms, 3) + " N, noise floor about " + fmt(D.noise_floor, 3) + " N)";
+    D.residual_final = E.base_fit().residual;
+  }
+  if (!E.unidentifiable_base().empty()) {
+    std::string names;
+    for (int j : E.unidentifiable_base()) names += (names.empty() ? "" : ", ") + P.base_params[j].name;
+    D.notes.push_back("these data cannot determine the base parameter(s) " + names +
+                      "; they are kept at the model's values");
+  }
+  if (opt.structure_search) D.structure = find_motion_structure(P, D.residual_final, D.axis_noise);
+  return D;
+}
+
+}  // namespace cpm::ident

@@ -1,0 +1,2 @@
+#include "cpm/identification/diagnose.hpp"
+namespace cpm::ident {}
