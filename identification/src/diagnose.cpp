@@ -289,7 +289,7 @@ CandidateResult evaluate_dynamic_candidate(const MotionProblem& P, const Engine&
         }
         X = hcat({P.force_gain_column(axis)});
       } else {
-        if (vabs < 1e-4) {
+        if (vabs < 5e-3) {
           set_not_identifiable("axis " + std::to_string(axis + 1) + " does not move in these data");
           break;
         }
@@ -297,6 +297,7 @@ CandidateResult evaluate_dynamic_candidate(const MotionProblem& P, const Engine&
       }
       JointFit f = E.fit(X);
       double b = f.beta(0);
+      const double b_free = b;
       const double lo = in.params[0].lower, hi = in.params[0].upper;
       bool held = false;
       if (b < lo || b > hi) {
@@ -313,13 +314,13 @@ CandidateResult evaluate_dynamic_candidate(const MotionProblem& P, const Engine&
       finish(X, f, X, {b}, true);
       if (held) {
         c.params[0].at_bound = true;
-        c.note = "the best fit (" + fmt(f.beta(0)) + ") is outside the physical range; held at " + fmt(b);
+        c.note = "the best fit (" + fmt(b_free) + ") is outside the physical range; held at " + fmt(b);
         c.identifiable = c.identifiable && b != 0.0;
       }
       break;
     }
     case DynamicEffectType::spring: {
-      if (ex.span[axis] < 1e-4) {
+      if (ex.span[axis] < 1e-3) {
         set_not_identifiable("axis " + std::to_string(axis + 1) + " does not move in these data");
         break;
       }
@@ -349,7 +350,7 @@ CandidateResult evaluate_dynamic_candidate(const MotionProblem& P, const Engine&
     }
     case DynamicEffectType::stribeck_friction: {
       const double lo = 2.0 * ctl::kSignEpsilon, hi = std::min(in.params[1].upper, vabs);
-      if (vabs < 1e-4 || hi <= lo * 1.5) {
+      if (vabs < 5e-3 || hi <= lo * 1.5) {
         set_not_identifiable("axis " + std::to_string(axis + 1) + " does not move fast enough in these data");
         break;
       }
@@ -397,7 +398,7 @@ CandidateResult evaluate_dynamic_candidate(const MotionProblem& P, const Engine&
       const double span = ex.span[axis];
       const double lmin = std::max(opt.cogging_lambda_min, in.params[1].lower);
       const double lmax = std::min({opt.cogging_lambda_max, in.params[1].upper, span / 1.5});
-      if (vabs < 1e-4 || lmax <= lmin) {
+      if (vabs < 5e-3 || lmax <= lmin) {
         set_not_identifiable("axis " + std::to_string(axis + 1) + " moves over " + fmt(span * 1e3) +
                              " mm only: too little to see a force periodic in position (wavelength >= " +
                              fmt(lmin * 1e3) + " mm)");
@@ -601,15 +602,37 @@ Diagnosis diagnose_motion(const io::MotionData& data, const ctl::Machine& model,
     }
   }
 
+  // A candidate the base absorbs completely (e.g. a constant force when the
+  // axis moves one way only) still looks like others on its axis: report the
+  // pair from the raw columns, so the verdict does not hide it.
+  for (int a = 0; a < top; ++a) {
+    CandidateResult& ca = D.candidates[a];
+    if (ca.columns.cols() == 0 || ca.axis < 0) continue;
+    const Eigen::VectorXd ua = E.problem().w.cwiseProduct(ca.columns.col(0));
+    for (std::size_t b = 0; b < D.candidates.size(); ++b) {
+      const CandidateResult& cb = D.candidates[b];
+      if (static_cast<int>(b) == a || cb.identifiable || cb.columns.cols() == 0 || cb.axis != ca.axis) continue;
+      const Eigen::VectorXd ub = E.problem().w.cwiseProduct(cb.columns.col(0));
+      const double den = ua.norm() * ub.norm();
+      const double cosab = den > 0.0 ? std::fabs(ua.dot(ub)) / den : 0.0;
+      if (cosab < 0.85) continue;
+      bool dup = false;
+      for (const auto& o : ca.confounded) dup |= o.with == cb.label();
+      if (!dup)
+        ca.confounded.push_back({cb.label(), cb.effect, cb.axis, cosab,
+                                 separate_advice(ca, cb, ex) + " (" + cb.label() + " is absorbed by the base in these data)"});
+    }
+  }
+
   // Verdict and forward selection.
   if (!D.candidates.empty() && D.candidates[0].significant) {
     D.verdict = 0;
     const CandidateResult& v = D.candidates[0];
     std::vector<std::string> alts;
     for (const auto& cf : v.confounded) {
-      if (cf.effect.empty() || cf.correlation < 0.95) continue;
+      if (cf.effect.empty() || cf.correlation < 0.85) continue;
       for (const auto& o : D.candidates)
-        if (o.label() == cf.with && o.significant && o.score - v.score < 10.0) {
+        if (o.label() == cf.with && ((o.significant && o.score - v.score < 10.0) || !o.identifiable)) {
           D.ambiguous = true;
           alts.push_back(cf.with + " (" + cf.separate_by + ")");
         }

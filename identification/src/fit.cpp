@@ -1,2 +1,166 @@
-#include "cpm/identification/diagnose.hpp"
-namespace cpm::ident {}
+#include "cpm/identification/fit.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <sstream>
+
+#include "cpm/identification/stats.hpp"
+
+namespace cpm::ident {
+namespace {
+
+io::MotionData slice(const io::MotionData& d, std::size_t a, std::size_t b) {
+  io::MotionData s;
+  s.info = d.info;
+  s.rate = d.rate;
+  auto cut = [&](const auto& v) { return v.empty() ? std::decay_t<decltype(v)>{} : std::decay_t<decltype(v)>(v.begin() + a, v.begin() + b); };
+  s.t = cut(d.t);
+  s.d = cut(d.d);
+  s.v = cut(d.v);
+  s.f = cut(d.f);
+  s.a = cut(d.a);
+  s.run = cut(d.run);
+  if (!d.info.line_of_row.empty()) s.info.line_of_row = cut(d.info.line_of_row);
+  return s;
+}
+
+ctl::MachineModel without(const ctl::MachineModel& m, const FitRequest& r) {
+  ctl::MachineModel out = m;
+  out.effects.clear();
+  const auto t = ctl::dynamic_effect_from_name(r.effect);
+  for (const auto& e : m.effects)
+    if (!(t && e.type == *t && e.axis == r.axis && ctl::info(*t).per_axis)) out.effects.add(e);
+  return out;
+}
+
+}  // namespace
+
+FitRequest parse_fit_request(const std::string& spec) {
+  FitRequest r;
+  const auto c = spec.find(':');
+  r.effect = spec.substr(0, c);
+  const auto t = ctl::dynamic_effect_from_name(r.effect);
+  check_effect_for_kind(r.effect, "motion");
+  const bool per_axis = ctl::info(*t).per_axis;
+  if (c == std::string::npos) {
+    if (per_axis) throw Error("--add " + spec + ": " + r.effect + " acts on one axis; write " + r.effect + ":AXIS (1, 2 or 3)");
+    return r;
+  }
+  const std::string ax = spec.substr(c + 1);
+  if (!per_axis) throw Error("--add " + spec + ": " + r.effect + " acts on all axes together; give no axis");
+  if (ax != "1" && ax != "2" && ax != "3") throw Error("--add " + spec + ": the axis must be 1, 2 or 3");
+  r.axis = ax[0] - '1';
+  return r;
+}
+
+double motion_rms(const io::MotionData& data, const ctl::MachineModel& model, const MotionOptions& o) {
+  const ctl::Machine m(model);
+  const MotionProblem P = prepare_motion(data, m, o);
+  return Engine::rms(P.residual);
+}
+
+FitResult fit_motion(const io::MotionData& data, const ctl::MachineModel& model,
+                     const std::vector<FitRequest>& requests, const DiagnoseOptions& opt,
+                     const io::MotionData* holdout, bool cross_validate) {
+  if (requests.empty()) throw Error("fit: no effect to add (--add EFFECT[:AXIS])");
+  FitResult R;
+  // An effect already in the model on that axis is refitted: take it out first.
+  ctl::MachineModel work = model;
+  for (const auto& r : requests) {
+    check_effect_for_kind(r.effect, "motion");
+    const bool before = work.effects.size();
+    work = without(work, r);
+    if (before && work.effects.size() < model.effects.size())
+      R.notes.push_back(r.effect + (r.axis >= 0 ? "[axis " + std::to_string(r.axis + 1) + "]" : "") +
+                        " was in the model: refitted from scratch");
+  }
+  const ctl::Machine mw(work);
+  const MotionProblem P = prepare_motion(data, mw, opt.motion);
+  LinearProblem L = motion_linear_problem(P);
+  // Back-fitting: each effect on what the others leave, twice round.
+  std::vector<CandidateResult> got(requests.size());
+  std::vector<Eigen::VectorXd> contrib(requests.size(), Eigen::VectorXd::Zero(L.y.size()));
+  const Eigen::VectorXd y0 = L.y;
+  for (int pass = 0; pass < (requests.size() > 1 ? 2 : 1); ++pass)
+    for (std::size_t k = 0; k < requests.size(); ++k) {
+      L.y = y0;
+      for (std::size_t j = 0; j < requests.size(); ++j)
+        if (j != k) L.y -= contrib[j];
+      const Engine E(L);
+      CandidateResult c = evaluate_dynamic_candidate(P, E, work, requests[k].effect, requests[k].axis, opt);
+      if (!c.identifiable && c.effect != "inertia_error")
+        throw Error("cannot fit " + c.label() + " on " + (data.info.path.empty() ? "these data" : data.info.path) +
+                    ": " + (c.note.empty() ? "the data do not determine it" : c.note));
+      contrib[k] = c.fitted;
+      got[k] = std::move(c);
+    }
+  // The base: write A..E changes only when the data call for them.
+  L.y = y0;
+  for (const auto& c : contrib) L.y -= c;
+  const Engine Ef(L);
+  CandidateResult base = evaluate_dynamic_candidate(P, Ef, work, "inertia_error", -1, opt);
+  {
+    const int rank = Ef.base_rank();
+    const double ne = std::max(base.n_eff, 10.0);
+    const double F = ((Ef.rss_given() - Ef.rss_base()) / std::max(1, rank)) /
+                     (Ef.rss_base() / std::max(1.0, static_cast<double>(Ef.rows() - rank))) * (ne / Ef.rows());
+    const double p = f_tail(F, std::max(1, rank), std::max(1.0, ne - rank));
+    R.base_refitted = p < opt.alpha;
+    R.base_change = base.params;
+  }
+  // The new model.
+  ctl::MachineModel out = work;
+  auto axis_name = [](int a) { return a >= 0 ? ".axis" + std::to_string(a + 1) : std::string(); };
+  for (const auto& c : got) {
+    const auto t = *ctl::dynamic_effect_from_name(c.effect);
+    const ctl::DynamicEffectInfo& in = ctl::info(t);
+    std::vector<double> v;
+    for (const auto& p : c.params) v.push_back(p.value);
+    if (t == ctl::DynamicEffectType::force_gain) {
+      for (const auto& e : model.effects)
+        if (e.type == t && e.axis == c.axis) v[0] = (1.0 + e.param[0]) * (1.0 + v[0]) - 1.0;
+    }
+    if (t == ctl::DynamicEffectType::cogging) {
+      v[2] = std::remainder(v[2], 2.0 * 3.141592653589793);
+    }
+    for (int j = 0; j < in.n_params; ++j) v[j] = std::clamp(v[j], in.params[j].lower, in.params[j].upper);
+    ctl::add_effect(out, c.effect, c.axis, v);
+    for (int j = 0; j < in.n_params; ++j)
+      R.fitted.push_back({"effects." + c.effect + axis_name(c.axis) + "." + in.params[j].name, in.params[j].unit, 0.0,
+                          v[j], c.params[j].std_error});
+  }
+  if (R.base_refitted) {
+    std::vector<double> d;
+    for (const auto& p : base.params) d.push_back(p.value);
+    ctl::add_effect(out, "inertia_error", -1, d);
+    for (const auto& p : base.params)
+      R.fitted.push_back({"effects.inertia_error." + p.name, p.unit, 0.0, p.value, p.std_error});
+  } else {
+    R.notes.push_back("the rigid-body constants A, B, C, E are not significantly different from the model's: kept");
+  }
+  out.validate();
+  const ctl::Machine check(out);  // throws when the fitted constants are not a machine
+  R.model = out;
+  R.effects = got;
+  R.on_fit.before = motion_rms(data, model, opt.motion);
+  R.on_fit.after = motion_rms(data, out, opt.motion);
+  if (holdout) {
+    R.holdout = ErrorFigures{motion_rms(*holdout, model, opt.motion), motion_rms(*holdout, out, opt.motion)};
+  } else if (cross_validate && data.t.size() >= 400) {
+    // 2-fold by halves in time: fit on one half, measure on the other.
+    const std::size_t h = data.t.size() / 2;
+    const io::MotionData a = slice(data, 0, h), b = slice(data, h, data.t.size());
+    try {
+      const FitResult fa = fit_motion(a, model, requests, opt, nullptr, false);
+      const FitResult fb = fit_motion(b, model, requests, opt, nullptr, false);
+      const double bb = motion_rms(b, model, opt.motion), ab = motion_rms(b, fa.model, opt.motion);
+      const double ba = motion_rms(a, model, opt.motion), aa = motion_rms(a, fb.model, opt.motion);
+      R.cross_validation = ErrorFigures{std::sqrt(0.5 * (bb * bb + ba * ba)), std::sqrt(0.5 * (ab * ab + aa * aa))};
+    } catch (const Error& e) {
+      R.notes.push_back(std::string("no cross-validation: ") + e.what());
+    }
+  }
+  return R;
+}
+
+}  // namespace cpm::ident

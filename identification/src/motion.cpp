@@ -282,7 +282,12 @@ MotionProblem prepare_motion(const io::MotionData& data, const ctl::Machine& mod
   const int n_model_base = static_cast<int>(P.base_params.size());
   std::vector<ctl::Machine> pert;
   std::vector<double> pert_step;
-  for (int i = 0; i < 3; ++i) {
+  for (int i = 0; i < 3 && opt.nuisance == MotionOptions::Nuisance::coupling; ++i)
+    for (int j = 0; j < 3; ++j)
+      if (i != j)
+        P.base_params.push_back({"coupling[" + std::to_string(i + 1) + "<-" + std::to_string(j + 1) + "]", "1", 0.0,
+                                 -1, 3 * i + j, true});
+  for (int i = 0; i < 3 && opt.nuisance == MotionOptions::Nuisance::tilt; ++i) {
     const Vec3 u = mm.kinematics.planes[i].normal;
     for (int t = 0; t < 2; ++t) {
       const Vec3 e = Vec3::Unit((i + 1 + t) % 3);
@@ -352,6 +357,9 @@ MotionProblem prepare_motion(const io::MotionData& data, const ctl::Machine& mod
       out.segment<3>(3 * r) = ts.J.transpose() * F0;
       if (!primary) continue;
       P.platform_force[r] = F0;
+      if (opt.nuisance == MotionOptions::Nuisance::coupling)
+        for (int b = n_model_base; b < static_cast<int>(P.base_params.size()); ++b)
+          P.base(3 * r + P.base_params[b].param / 3, b) = F0[P.base_params[b].param % 3];
       for (int c = 0; c < 4; ++c) {
         Vec3 Fc;
         unit[c].inverse_dynamics(ts.p, ts.p_dot, p_dd, Fc);

@@ -1,2 +1,453 @@
-#include "cpm/identification/diagnose.hpp"
-namespace cpm::ident {}
+#include "cpm/identification/report.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <sstream>
+
+#include "cpm/identification/structure.hpp"
+
+namespace cpm::ident {
+namespace {
+
+std::string num(double v, int prec = 4) {
+  char b[64];
+  std::snprintf(b, sizeof b, "%.*g", prec, v);
+  return b;
+}
+
+std::string esc(const std::string& s) {
+  std::string o;
+  for (char c : s) {
+    if (c == '<') o += "&lt;";
+    else if (c == '>') o += "&gt;";
+    else if (c == '&') o += "&amp;";
+    else o += c;
+  }
+  return o;
+}
+
+struct Series {
+  std::vector<double> x, y;
+  std::string colour, label;
+  bool line = false;
+};
+
+// A plot as inline SVG: axes with ticks, labelled, one or more series.
+std::string svg_plot(const std::string& title, const std::string& xlabel, const std::string& ylabel,
+                     const std::vector<Series>& series, bool logx = false) {
+  const double W = 460, H = 230, l = 58, r = 12, t = 24, b = 40;
+  double x0 = 1e300, x1 = -1e300, y0 = 1e300, y1 = -1e300;
+  for (const auto& s : series)
+    for (std::size_t k = 0; k < s.x.size(); ++k) {
+      const double xv = logx ? std::log10(std::max(1e-300, s.x[k])) : s.x[k];
+      x0 = std::min(x0, xv); x1 = std::max(x1, xv);
+      y0 = std::min(y0, s.y[k]); y1 = std::max(y1, s.y[k]);
+    }
+  if (!(x1 > x0)) { x0 -= 1; x1 += 1; }
+  if (!(y1 > y0)) { y0 -= 1; y1 += 1; }
+  const double pad = 0.05 * (y1 - y0);
+  y0 -= pad; y1 += pad;
+  auto X = [&](double v) { return l + (W - l - r) * ((logx ? std::log10(std::max(1e-300, v)) : v) - x0) / (x1 - x0); };
+  auto Y = [&](double v) { return H - b - (H - t - b) * (v - y0) / (y1 - y0); };
+  std::ostringstream o;
+  o << "<svg xmlns='http://www.w3.org/2000/svg' width='" << W << "' height='" << H
+    << "' style='background:#fff;border:1px solid #ddd;margin:4px'>";
+  o << "<text x='" << W / 2 << "' y='15' text-anchor='middle' font-size='13' font-weight='bold'>" << esc(title) << "</text>";
+  o << "<rect x='" << l << "' y='" << t << "' width='" << W - l - r << "' height='" << H - t - b
+    << "' fill='none' stroke='#888'/>";
+  for (int k = 0; k <= 4; ++k) {
+    const double yv = y0 + (y1 - y0) * k / 4.0, xv = x0 + (x1 - x0) * k / 4.0;
+    o << "<line x1='" << l << "' x2='" << W - r << "' y1='" << Y(yv) << "' y2='" << Y(yv) << "' stroke='#eee'/>";
+    o << "<text x='" << l - 4 << "' y='" << Y(yv) + 4 << "' text-anchor='end' font-size='10'>" << num(yv, 3) << "</text>";
+    const double xl = logx ? std::pow(10.0, xv) : xv;
+    o << "<text x='" << l + (W - l - r) * k / 4.0 << "' y='" << H - b + 14 << "' text-anchor='middle' font-size='10'>"
+      << num(xl, 3) << "</text>";
+  }
+  if (y0 < 0 && y1 > 0)
+    o << "<line x1='" << l << "' x2='" << W - r << "' y1='" << Y(0) << "' y2='" << Y(0) << "' stroke='#aaa'/>";
+  o << "<text x='" << (l + W - r) / 2 << "' y='" << H - 6 << "' text-anchor='middle' font-size='11'>" << esc(xlabel) << "</text>";
+  o << "<text x='12' y='" << (t + H - b) / 2 << "' text-anchor='middle' font-size='11' transform='rotate(-90 12 "
+    << (t + H - b) / 2 << ")'>" << esc(ylabel) << "</text>";
+  int li = 0;
+  for (const auto& s : series) {
+    if (s.line) {
+      o << "<polyline fill='none' stroke='" << s.colour << "' stroke-width='1.2' points='";
+      for (std::size_t k = 0; k < s.x.size(); ++k) o << num(X(s.x[k]), 5) << "," << num(Y(s.y[k]), 5) << " ";
+      o << "'/>";
+    } else {
+      o << "<g fill='" << s.colour << "' fill-opacity='0.55'>";
+      for (std::size_t k = 0; k < s.x.size(); ++k)
+        o << "<circle cx='" << num(X(s.x[k]), 5) << "' cy='" << num(Y(s.y[k]), 5) << "' r='1.4'/>";
+      o << "</g>";
+    }
+    if (!s.label.empty()) {
+      o << "<text x='" << W - r - 4 << "' y='" << t + 14 + 13 * li << "' text-anchor='end' font-size='11' fill='"
+        << s.colour << "'>" << esc(s.label) << "</text>";
+      ++li;
+    }
+  }
+  o << "</svg>";
+  return o.str();
+}
+
+// At most `n` evenly spaced rows.
+std::vector<int> thin(int rows, int n) {
+  std::vector<int> idx;
+  const int step = std::max(1, rows / n);
+  for (int r = 0; r < rows; r += step) idx.push_back(r);
+  return idx;
+}
+
+const char* kStyle =
+    "<style>body{font-family:sans-serif;margin:18px;color:#222;max-width:1450px}"
+    "table{border-collapse:collapse;font-size:13px;margin:8px 0}td,th{border:1px solid #ccc;padding:3px 7px;text-align:right}"
+    "th{background:#f2f2f2}td.l{text-align:left}.v{font-size:17px;padding:10px;background:#f6f9ff;border-left:4px solid #36c}"
+    ".sig{background:#eaf7ea}.warn{color:#a40}</style>";
+
+std::string plots_of(const MotionProblem& P, const Eigen::VectorXd& before, const Eigen::VectorXd* after,
+                     const std::string& after_label) {
+  std::ostringstream o;
+  const auto idx = thin(P.rows(), 1500);
+  o << "<h2>Residual over time</h2><div>";
+  for (int i = 0; i < 3; ++i) {
+    Series sb{{}, {}, after ? "#bbb" : "#36c", after ? "model as given" : "", false};
+    Series sa{{}, {}, "#36c", after_label, false};
+    for (int r : idx) {
+      sb.x.push_back(P.t[r]); sb.y.push_back(before(3 * r + i));
+      if (after) { sa.x.push_back(P.t[r]); sa.y.push_back((*after)(3 * r + i)); }
+    }
+    std::vector<Series> ss{sb};
+    if (after) ss.push_back(sa);
+    o << svg_plot("axis " + std::to_string(i + 1), "t (s)", "force residual (N)", ss);
+  }
+  o << "</div><h2>Residual along each axis' position, by direction of motion</h2><div>";
+  const Eigen::VectorXd& show = after ? *after : before;
+  for (int i = 0; i < 3; ++i) {
+    Series sp{{}, {}, "#1a7", "moving +", false}, sn{{}, {}, "#d33", "moving -", false};
+    for (int r : idx) {
+      Series& s = P.v[r][i] >= 0 ? sp : sn;
+      s.x.push_back(P.d[r][i] * 1e3);
+      s.y.push_back(show(3 * r + i));
+    }
+    o << svg_plot("axis " + std::to_string(i + 1) + (after ? " (" + after_label + ")" : ""),
+                  "d" + std::to_string(i + 1) + " (mm)", "force residual (N)", {sp, sn});
+  }
+  o << "</div><h2>Periodogram against position (what repeats every λ mm of travel)</h2><div>";
+  for (int i = 0; i < 3; ++i) {
+    std::vector<double> x(P.rows()), y(P.rows()), wl, pw;
+    double mn = 1e300, mx = -1e300;
+    for (int r = 0; r < P.rows(); ++r) {
+      x[r] = P.d[r][i]; y[r] = show(3 * r + i);
+      mn = std::min(mn, x[r]); mx = std::max(mx, x[r]);
+    }
+    if (mx - mn < 0.01) {
+      o << "<p>axis " << i + 1 << " moves over " << num((mx - mn) * 1e3, 3) << " mm only: no periodogram.</p>";
+      continue;
+    }
+    periodogram(x, y, 2e-3, (mx - mn) / 1.5, wl, pw);
+    Series s{{}, {}, "#639", "", true};
+    for (std::size_t k = 0; k < wl.size(); ++k) {
+      s.x.push_back(wl[k] * 1e3);
+      s.y.push_back(std::sqrt(2.0 * pw[k] / P.rows()));
+    }
+    o << svg_plot("axis " + std::to_string(i + 1), "wavelength λ (mm, log)", "amplitude (N)", {s}, true);
+  }
+  o << "</div>";
+  return o.str();
+}
+
+}  // namespace
+
+std::string json_string(const std::string& s) {
+  std::string o = "\"";
+  for (char c : s) {
+    if (c == '"' || c == '\\') { o += '\\'; o += c; }
+    else if (c == '\n') o += "\\n";
+    else if (static_cast<unsigned char>(c) < 0x20) { char b[8]; std::snprintf(b, sizeof b, "\\u%04x", c); o += b; }
+    else o += c;
+  }
+  return o + "\"";
+}
+
+std::string json_num(double v) {
+  if (!std::isfinite(v)) return "null";
+  char b[64];
+  std::snprintf(b, sizeof b, "%.10g", v);
+  return b;
+}
+
+ResidualSummary summarize(const MotionProblem& P, const Eigen::VectorXd& res, int bins) {
+  ResidualSummary s;
+  const int R = P.rows();
+  s.rms = R ? std::sqrt(res.squaredNorm() / res.size()) : 0.0;
+  s.max = R ? res.cwiseAbs().maxCoeff() : 0.0;
+  for (int i = 0; i < 3; ++i) {
+    double ss = 0, sf = 0, sb = 0, mf = 0, mb = 0, mx = 0;
+    int nf = 0, nb = 0;
+    double dmin = 1e300, dmax = -1e300;
+    for (int r = 0; r < R; ++r) {
+      const double e = res(3 * r + i);
+      ss += e * e;
+      mx = std::max(mx, std::fabs(e));
+      if (P.v[r][i] > 1e-3) { sf += e * e; mf += e; ++nf; }
+      if (P.v[r][i] < -1e-3) { sb += e * e; mb += e; ++nb; }
+      dmin = std::min(dmin, P.d[r][i]); dmax = std::max(dmax, P.d[r][i]);
+    }
+    s.axis_rms[i] = std::sqrt(ss / std::max(1, R));
+    s.axis_max[i] = mx;
+    s.rms_forward[i] = nf ? std::sqrt(sf / nf) : 0.0;
+    s.rms_backward[i] = nb ? std::sqrt(sb / nb) : 0.0;
+    s.mean_forward[i] = nf ? mf / nf : 0.0;
+    s.mean_backward[i] = nb ? mb / nb : 0.0;
+    auto fill = [&](ResidualSummary::Bins& B, auto coord, double lo, double hi) {
+      B.centre.assign(bins, 0.0); B.mean.assign(bins, 0.0); B.rms.assign(bins, 0.0); B.count.assign(bins, 0);
+      const double w = (hi - lo) / bins;
+      for (int b = 0; b < bins; ++b) B.centre[b] = lo + (b + 0.5) * w;
+      if (!(w > 0.0)) return;
+      for (int r = 0; r < R; ++r) {
+        const int b = std::clamp(static_cast<int>((coord(r) - lo) / w), 0, bins - 1);
+        const double e = res(3 * r + i);
+        B.mean[b] += e; B.rms[b] += e * e; B.count[b]++;
+      }
+      for (int b = 0; b < bins; ++b)
+        if (B.count[b]) { B.mean[b] /= B.count[b]; B.rms[b] = std::sqrt(B.rms[b] / B.count[b]); }
+    };
+    fill(s.along_position[i], [&](int r) { return P.d[r][i]; }, dmin, dmax + 1e-12);
+    fill(s.over_time[i], [&](int r) { return P.t[r]; }, P.t.front(), P.t.back() + 1e-12);
+  }
+  return s;
+}
+
+std::string summary_text(const ResidualSummary& s, const MotionProblem& P) {
+  std::ostringstream o;
+  o << "force residual (commanded - model), N, after the " << 2 * P.half_width + 1
+    << "-sample zero-phase filter; acceleration: " << P.accel_source << "\n";
+  o << "  all axes: RMS " << num(s.rms) << " N, max " << num(s.max) << " N over " << P.rows() << " samples\n";
+  o << "  axis   RMS      max      RMS(+dir) RMS(-dir) mean(+)   mean(-)\n";
+  for (int i = 0; i < 3; ++i) {
+    char b[200];
+    std::snprintf(b, sizeof b, "  %d   %8.4g %8.4g %9.4g %9.4g %+9.4g %+9.4g\n", i + 1, s.axis_rms[i], s.axis_max[i],
+                  s.rms_forward[i], s.rms_backward[i], s.mean_forward[i], s.mean_backward[i]);
+    o << b;
+  }
+  for (int i = 0; i < 3; ++i) {
+    o << "  axis " << i + 1 << " mean residual along d" << i + 1 << " (mm: N):";
+    const auto& B = s.along_position[i];
+    for (std::size_t b = 0; b < B.centre.size(); ++b)
+      if (B.count[b]) o << " " << num(B.centre[b] * 1e3, 4) << ":" << num(B.mean[b], 3);
+    o << "\n";
+  }
+  for (int i = 0; i < 3; ++i) {
+    o << "  axis " << i + 1 << " RMS over time (s: N):";
+    const auto& B = s.over_time[i];
+    for (std::size_t b = 0; b < B.centre.size(); ++b)
+      if (B.count[b]) o << " " << num(B.centre[b], 3) << ":" << num(B.rms[b], 3);
+    o << "\n";
+  }
+  o << "  acceleration estimate adds about " << num(P.force_noise.maxCoeff(), 3) << " N (1 sigma) to the residual\n";
+  return o.str();
+}
+
+std::string summary_json(const ResidualSummary& s, const MotionProblem& P, const std::string& data_file,
+                         const std::string& model_file, int samples) {
+  std::ostringstream o;
+  auto vec = [&](const Vec3& v) { return "[" + json_num(v[0]) + ", " + json_num(v[1]) + ", " + json_num(v[2]) + "]"; };
+  auto arr = [&](const std::vector<double>& v, double scale = 1.0) {
+    std::string t = "[";
+    for (std::size_t k = 0; k < v.size(); ++k) t += (k ? ", " : "") + json_num(v[k] * scale);
+    return t + "]";
+  };
+  o << "{\"kind\": \"motion\", \"data_file\": " << json_string(data_file) << ", \"model_file\": " << json_string(model_file)
+    << ", \"samples\": " << samples << ", \"rows\": " << 3 * P.rows() << ", \"units\": \"N\",\n"
+    << " \"acceleration\": {\"source\": " << json_string(P.accel_source) << ", \"filter_half_width_samples\": " << P.half_width
+    << ", \"force_noise\": " << vec(P.force_noise) << "},\n"
+    << " \"rms\": " << json_num(s.rms) << ", \"max\": " << json_num(s.max) << ", \"axis_rms\": " << vec(s.axis_rms)
+    << ", \"axis_max\": " << vec(s.axis_max) << ",\n \"rms_forward\": " << vec(s.rms_forward)
+    << ", \"rms_backward\": " << vec(s.rms_backward) << ", \"mean_forward\": " << vec(s.mean_forward)
+    << ", \"mean_backward\": " << vec(s.mean_backward) << ",\n \"along_position\": [";
+  for (int i = 0; i < 3; ++i)
+    o << (i ? ", " : "") << "{\"centre\": " << arr(s.along_position[i].centre) << ", \"mean\": " << arr(s.along_position[i].mean)
+      << ", \"rms\": " << arr(s.along_position[i].rms) << "}";
+  o << "],\n \"over_time\": [";
+  for (int i = 0; i < 3; ++i)
+    o << (i ? ", " : "") << "{\"centre\": " << arr(s.over_time[i].centre) << ", \"mean\": " << arr(s.over_time[i].mean)
+      << ", \"rms\": " << arr(s.over_time[i].rms) << "}";
+  o << "]}\n";
+  return o.str();
+}
+
+std::string diagnosis_text(const Diagnosis& D) {
+  std::ostringstream o;
+  const MotionProblem& P = D.motion;
+  o << "data: " << D.data_file << " (kind motion, " << D.samples << " samples, " << D.rows / 3 << " filtered rows, "
+    << P.segments << " segment(s))\n";
+  o << "acceleration: " << P.accel_source << "; it adds about " << num(P.force_noise.maxCoeff(), 3) << " N\n";
+  o << "residual of the model as given: RMS " << num(D.baseline_rms) << " N (axes " << num(D.baseline_axis_rms[0], 3)
+    << ", " << num(D.baseline_axis_rms[1], 3) << ", " << num(D.baseline_axis_rms[2], 3) << "), max "
+    << num(D.baseline_max) << " N; noise floor about " << num(D.noise_floor, 3) << " N\n";
+  o << "after refitting the base (A, B, C, E, plane tilts): RMS " << num(D.base_refit_rms) << " N\n\n";
+  o << "rank effect                      RMS after  explained  p(adj)     dBIC   signif  parameters\n";
+  int k = 0;
+  for (const auto& c : D.candidates) {
+    char b[200];
+    std::snprintf(b, sizeof b, "%3d  %-27s %9.4g  %8.1f%%  %-9.2g %7.1f  %-6s  ", ++k, c.label().c_str(), c.rms_after,
+                  100.0 * c.explained, c.p_adjusted, c.delta_bic,
+                  c.significant ? "YES" : (c.identifiable ? "no" : "n/a"));
+    o << b;
+    for (std::size_t j = 0; j < c.params.size(); ++j) {
+      const auto& p = c.params[j];
+      o << (j ? ", " : "") << p.name << " " << num(p.value, 4);
+      if (p.std_error >= 0) o << " ± " << num(p.std_error, 2);
+      o << " " << p.unit;
+    }
+    o << "\n";
+    if (!c.note.empty()) o << "       note: " << c.note << "\n";
+    for (const auto& cf : c.confounded)
+      o << "       confounded with " << cf.with << " (|corr| " << num(cf.correlation, 3) << "): to separate, "
+        << cf.separate_by << "\n";
+  }
+  o << "\nVERDICT: " << D.verdict_text << "\n";
+  if (!D.structure.empty()) {
+    o << "\nstructure no library effect explains (in the residual after the verdict):\n";
+    for (const auto& f : D.structure) o << "  - " << f.text << " (" << num(f.z, 3) << " sigma)\n";
+  } else {
+    o << "\nno further structure found in what remains (direction, periodic in position or time, trend, step, bump)\n";
+  }
+  for (const auto& n : D.notes) o << "note: " << n << "\n";
+  for (const auto& w : D.warnings) o << "warning: " << w << "\n";
+  return o.str();
+}
+
+std::string diagnosis_json(const Diagnosis& D) {
+  std::ostringstream o;
+  auto axis = [](int a) { return a >= 0 ? std::to_string(a + 1) : std::string("null"); };
+  const MotionProblem& P = D.motion;
+  o << "{\n \"kind\": \"motion\",\n \"samples\": " << D.samples << ",\n \"rows\": " << D.rows
+    << ",\n \"units\": \"N\",\n \"data_file\": " << json_string(D.data_file) << ",\n \"model_file\": "
+    << json_string(D.model_file) << ",\n \"acceleration\": {\"source\": " << json_string(P.accel_source)
+    << ", \"filter_half_width_samples\": " << P.half_width << ", \"force_noise\": " << json_num(P.force_noise.maxCoeff())
+    << "},\n \"baseline\": {\"rms\": " << json_num(D.baseline_rms) << ", \"max\": " << json_num(D.baseline_max)
+    << ", \"axis_rms\": [" << json_num(D.baseline_axis_rms[0]) << ", " << json_num(D.baseline_axis_rms[1]) << ", "
+    << json_num(D.baseline_axis_rms[2]) << "]},\n \"base_refit\": {\"rms\": " << json_num(D.base_refit_rms)
+    << "},\n \"noise_floor\": " << json_num(D.noise_floor) << ",\n \"candidates\": [";
+  for (std::size_t k = 0; k < D.candidates.size(); ++k) {
+    const auto& c = D.candidates[k];
+    o << (k ? ",\n" : "\n") << "  {\"effect\": " << json_string(c.effect) << ", \"axis\": " << axis(c.axis)
+      << ", \"params\": {";
+    for (std::size_t j = 0; j < c.params.size(); ++j)
+      o << (j ? ", " : "") << json_string(c.params[j].name) << ": " << json_num(c.params[j].value);
+    o << "}, \"std_errors\": {";
+    for (std::size_t j = 0; j < c.params.size(); ++j)
+      o << (j ? ", " : "") << json_string(c.params[j].name) << ": "
+        << (c.params[j].std_error >= 0 ? json_num(c.params[j].std_error) : "null");
+    o << "}, \"units\": {";
+    for (std::size_t j = 0; j < c.params.size(); ++j)
+      o << (j ? ", " : "") << json_string(c.params[j].name) << ": " << json_string(c.params[j].unit);
+    o << "}, \"rms_after\": " << json_num(c.rms_after) << ", \"explained\": " << json_num(c.explained)
+      << ", \"explained_beyond_base\": " << json_num(c.explained_beyond_base)
+      << ", \"significant\": " << (c.significant ? "true" : "false")
+      << ", \"identifiable\": " << (c.identifiable ? "true" : "false") << ", \"f_stat\": " << json_num(c.f_stat)
+      << ", \"p_value\": " << json_num(c.p_value) << ", \"p_adjusted\": " << json_num(c.p_adjusted)
+      << ", \"delta_bic\": " << json_num(c.delta_bic) << ", \"n_params\": " << c.n_params
+      << ", \"refits_base\": " << (c.refits_base ? "true" : "false") << ", \"note\": " << json_string(c.note)
+      << ", \"confounded_with\": [";
+    for (std::size_t j = 0; j < c.confounded.size(); ++j) {
+      const auto& cf = c.confounded[j];
+      o << (j ? ", " : "") << "{\"with\": " << json_string(cf.with) << ", \"effect\": "
+        << (cf.effect.empty() ? "null" : json_string(cf.effect)) << ", \"axis\": " << axis(cf.axis)
+        << ", \"correlation\": " << json_num(cf.correlation) << ", \"separate_by\": " << json_string(cf.separate_by) << "}";
+    }
+    o << "]}";
+  }
+  o << "\n ],\n \"verdict\": {\"missing\": ";
+  if (D.verdict >= 0) {
+    const auto& v = D.candidates[D.verdict];
+    o << json_string(v.effect) << ", \"axis\": " << axis(v.axis);
+  } else {
+    o << "null, \"axis\": null";
+  }
+  o << ", \"ambiguous\": " << (D.ambiguous ? "true" : "false") << ", \"also\": [";
+  for (std::size_t j = 0; j < D.also.size(); ++j)
+    o << (j ? ", " : "") << "{\"effect\": " << json_string(D.candidates[D.also[j]].effect) << ", \"axis\": "
+      << axis(D.candidates[D.also[j]].axis) << "}";
+  o << "], \"text\": " << json_string(D.verdict_text) << "},\n \"structure\": [";
+  for (std::size_t j = 0; j < D.structure.size(); ++j) {
+    const auto& f = D.structure[j];
+    o << (j ? ", " : "") << "\n  {\"kind\": " << json_string(f.kind) << ", \"axis\": " << axis(f.axis)
+      << ", \"coordinate\": " << json_string(f.coordinate) << ", \"location\": " << json_num(f.location)
+      << ", \"size\": " << json_num(f.size) << ", \"z\": " << json_num(f.z) << ", \"text\": " << json_string(f.text) << "}";
+  }
+  o << "],\n \"notes\": [";
+  for (std::size_t j = 0; j < D.notes.size(); ++j) o << (j ? ", " : "") << json_string(D.notes[j]);
+  o << "],\n \"warnings\": [";
+  for (std::size_t j = 0; j < D.warnings.size(); ++j) o << (j ? ", " : "") << json_string(D.warnings[j]);
+  o << "]\n}\n";
+  return o.str();
+}
+
+std::string compare_html(const MotionProblem& P, const ResidualSummary& s, const std::string& title) {
+  std::ostringstream o;
+  o << "<!DOCTYPE html><html><head><meta charset='utf-8'><title>" << esc(title) << "</title>" << kStyle
+    << "</head><body><h1>" << esc(title) << "</h1>";
+  o << "<p>Force residual = commanded force (times the model's drive gain) − model force, per actuator, in N, after a "
+    << 2 * P.half_width + 1 << "-sample zero-phase filter applied to both sides. Acceleration: " << esc(P.accel_source)
+    << " (adds about " << num(P.force_noise.maxCoeff(), 3) << " N).</p>";
+  o << "<table><tr><th>axis</th><th>RMS (N)</th><th>max (N)</th><th>RMS moving + (N)</th><th>RMS moving − (N)</th>"
+       "<th>mean moving + (N)</th><th>mean moving − (N)</th></tr>";
+  for (int i = 0; i < 3; ++i)
+    o << "<tr><td>" << i + 1 << "</td><td>" << num(s.axis_rms[i]) << "</td><td>" << num(s.axis_max[i]) << "</td><td>"
+      << num(s.rms_forward[i]) << "</td><td>" << num(s.rms_backward[i]) << "</td><td>" << num(s.mean_forward[i])
+      << "</td><td>" << num(s.mean_backward[i]) << "</td></tr>";
+  o << "<tr><th>all</th><th>" << num(s.rms) << "</th><th>" << num(s.max) << "</th><td colspan=4></td></tr></table>";
+  o << plots_of(P, P.residual, nullptr, "");
+  o << "</body></html>\n";
+  return o.str();
+}
+
+std::string diagnosis_html(const Diagnosis& D) {
+  std::ostringstream o;
+  const std::string title = "cpm diagnose: " + D.data_file;
+  o << "<!DOCTYPE html><html><head><meta charset='utf-8'><title>" << esc(title) << "</title>" << kStyle
+    << "</head><body><h1>" << esc(title) << "</h1>";
+  o << "<div class='v'><b>Verdict:</b> " << esc(D.verdict_text) << "</div>";
+  o << "<p>Residual of the model as given: RMS " << num(D.baseline_rms) << " N (max " << num(D.baseline_max)
+    << " N); base refitted: " << num(D.base_refit_rms) << " N; noise floor about " << num(D.noise_floor, 3)
+    << " N. Acceleration: " << esc(D.motion.accel_source) << ".</p>";
+  o << "<h2>Candidates, best first</h2><table><tr><th>rank</th><th>effect</th><th>RMS after (N)</th><th>explained</th>"
+       "<th>p (adjusted)</th><th>ΔBIC</th><th>significant</th><th>parameters (± 1σ)</th><th>confounded with</th><th>note</th></tr>";
+  int k = 0;
+  for (const auto& c : D.candidates) {
+    o << "<tr" << (c.significant ? " class='sig'" : "") << "><td>" << ++k << "</td><td class='l'>" << esc(c.label())
+      << "</td><td>" << num(c.rms_after) << "</td><td>" << num(100 * c.explained, 3) << " %</td><td>"
+      << num(c.p_adjusted, 2) << "</td><td>" << num(c.delta_bic, 3) << "</td><td>"
+      << (c.significant ? "yes" : (c.identifiable ? "no" : "n/a")) << "</td><td class='l'>";
+    for (std::size_t j = 0; j < c.params.size(); ++j) {
+      const auto& p = c.params[j];
+      o << (j ? "<br>" : "") << esc(p.name) << " = " << num(p.value, 4);
+      if (p.std_error >= 0) o << " ± " << num(p.std_error, 2);
+      o << " " << esc(p.unit);
+    }
+    o << "</td><td class='l'>";
+    for (const auto& cf : c.confounded)
+      o << esc(cf.with) << " (" << num(cf.correlation, 3) << "; " << esc(cf.separate_by) << ")<br>";
+    o << "</td><td class='l'>" << esc(c.note) << "</td></tr>";
+  }
+  o << "</table>";
+  o << "<h2>Structure no library effect explains</h2>";
+  if (D.structure.empty()) o << "<p>None found in what remains after the verdict.</p>";
+  else {
+    o << "<ul>";
+    for (const auto& f : D.structure) o << "<li>" << esc(f.text) << " (" << num(f.z, 3) << " σ)</li>";
+    o << "</ul>";
+  }
+  const Eigen::VectorXd* after = D.residual_final.size() == D.motion.residual.size() ? &D.residual_final : nullptr;
+  o << plots_of(D.motion, D.motion.residual, after,
+                D.verdict >= 0 ? "with " + D.candidates[D.verdict].label() : "base refitted");
+  for (const auto& n : D.notes) o << "<p>" << esc(n) << "</p>";
+  for (const auto& w : D.warnings) o << "<p class='warn'>" << esc(w) << "</p>";
+  o << "</body></html>\n";
+  return o.str();
+}
+
+}  // namespace cpm::ident

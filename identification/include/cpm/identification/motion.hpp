@@ -40,6 +40,11 @@ struct MotionOptions {
   int stride = 0;              // rows kept every `stride` samples; 0 = kernel half width
   enum class Accel { automatic, velocity, position } accel = Accel::automatic;
   int min_rows = 30;           // fewer rows after filtering: refuse the file
+  // Nuisance for kinematic errors of an uncalibrated model: `coupling` fits
+  // the share of each platform-force component each actuator feels (the
+  // J^T part of tilted planes), `tilt` perturbs the plane normals (J^T and
+  // the pose), `none` trusts the model's kinematics.
+  enum class Nuisance { none, coupling, tilt } nuisance = Nuisance::tilt;
   void validate() const;
 };
 

@@ -1,0 +1,47 @@
+// cpm compare: the residual of a model on a data file, broken down by axis,
+// direction, position and time, with an HTML report (identification/).
+#include <cstdio>
+
+#include "cli.hpp"
+#include "cpm/identification/report.hpp"
+#include "cpm/io/data_files.hpp"
+#include "cpm/io/model_file.hpp"
+
+namespace cpm::cli {
+namespace {
+
+int run(Args& a) {
+  const std::string model_path = a.option_or("model", "config/machine.yaml");
+  const auto data_path = a.option("data");
+  const auto json_path = a.option("json");
+  const auto report_path = a.option("report");
+  ident::MotionOptions mo;
+  mo.half_window = a.number("window", mo.half_window * 1e3) * 1e-3;
+  a.finish();
+  if (!data_path) throw UsageError("--data FILE is required");
+  const io::DataSet ds = io::read_data_file(*data_path);
+  if (!std::holds_alternative<io::MotionData>(ds))
+    throw Error(*data_path + ": comparing ball-bar and position data needs the calibration module's "
+                "kinematic residual; not available yet (see docs/identification.md)");
+  const io::MotionData& data = std::get<io::MotionData>(ds);
+  const io::ModelFile mf = io::load_model_file(model_path);
+  const ctl::Machine model(mf.model);
+  const ident::MotionProblem P = ident::prepare_motion(data, model, mo);
+  const ident::ResidualSummary s = ident::summarize(P, P.residual);
+  std::printf("model %s on %s (kind motion, %zu samples)\n", model_path.c_str(), data_path->c_str(), data.t.size());
+  std::fputs(ident::summary_text(s, P).c_str(), stdout);
+  for (const auto& w : P.warnings) std::printf("warning: %s\n", w.c_str());
+  if (json_path)
+    io::write_file_atomically(*json_path, ident::summary_json(s, P, *data_path, model_path, static_cast<int>(data.t.size())));
+  if (report_path) {
+    io::write_file_atomically(*report_path, ident::compare_html(P, s, "cpm compare: " + model_path + " on " + *data_path));
+    std::printf("report: %s\n", report_path->c_str());
+  }
+  return 0;
+}
+
+const Command reg{"compare", "residuals of a model on measurements, by axis, direction, position and time", run,
+                  "--data FILE.csv [--model MODEL.yaml] [--json OUT.json] [--report OUT.html] [--window MS]"};
+
+}  // namespace
+}  // namespace cpm::cli
