@@ -166,14 +166,16 @@ void add_plane_entries(io::ModelFile& out, const kin::KinematicModel& before,
   }
 }
 
-// gamma = acos(c) and its standard error by mapping c +- se (c > 1 has no angle).
+// Kim's incident angle from the scale: gamma = acos(c) for c <= 1, and
+// -acos(1/c) for c > 1 (an actuator that over-travels, which cos gamma cannot
+// express, shows as a negative angle). Monotone in c and continuous at
+// c = 1, so the standard error maps through the interval c -+ se.
+double gamma_of_scale(double c) { return c <= 1.0 ? std::acos(std::max(-1.0, c)) : -std::acos(1.0 / c); }
+
 std::pair<double, double> gamma_of(double c, double se) {
-  if (!(c <= 1.0)) return {NAN, NAN};
-  const double g = std::acos(c);
+  const double g = gamma_of_scale(c);
   if (!std::isfinite(se)) return {g, INFINITY};
-  const double lo = std::acos(std::min(1.0, c + se));
-  const double hi = std::acos(std::max(-1.0, c - se));
-  return {g, 0.5 * (hi - lo)};
+  return {g, 0.5 * (gamma_of_scale(c - se) - gamma_of_scale(c + se))};
 }
 
 // A parameter for people: rad in degrees, scales as ppm from 1, m in mm or µm.
@@ -385,7 +387,7 @@ std::string CalibrationResult::summary() const {
     << ":\nlimb  normal u                           scale c-1 (ppm)   offset n (µm)\n";
   for (int i = 0; i < 3; ++i) {
     const kin::LimbPlane& pl = km.planes[i];
-    o << fmt("%-4d", i + 1) << "  (" << fmt("%+.7f", pl.normal.x()) << ", " << fmt("%+.7f", pl.normal.y())
+    o << pad(std::to_string(i + 1), 4) << "  (" << fmt("%+.7f", pl.normal.x()) << ", " << fmt("%+.7f", pl.normal.y())
       << ", " << fmt("%+.7f", pl.normal.z()) << ")  " << fmt("%+12.2f", (pl.scale - 1.0) * 1e6)
       << "   " << fmt("%+12.3f", pl.offset * 1e6) << '\n';
   }

@@ -109,6 +109,7 @@ TEST_F(CalibrationFiles, BallbarCalibrationWritesAModelFileThatReadsBackTheSame)
                           "\"theta_x\"", "\"theta_y\"", "\"dq_x\"", "\"dq_z\"", "\"dl\"", "\"warnings\"",
                           "\"stderr\"", "\"singular_values\"", "\"correlation\""})
     EXPECT_NE(js.find(key), std::string::npos) << key;
+  EXPECT_EQ(js.find("\"value\": null"), std::string::npos) << "every parameter has a number";
   // Calibrating again from the calibrated model gives the same planes: the
   // fit starts from the data, not from the input's planes.
   const std::string out2 = path("again.yaml");
