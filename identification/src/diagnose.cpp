@@ -423,11 +423,17 @@ CandidateResult evaluate_dynamic_candidate(const MotionProblem& P, const Engine&
         wr[r] = w(3 * r + axis) * w(3 * r + axis);
         yr[r] = yb(3 * r + axis);
       }
+      // The filter's amplitude response, tabulated (cycles per sample, 0..0.5).
+      constexpr int kTab = 1024;
+      std::vector<double> resp(kTab + 1);
+      for (int q = 0; q <= kTab; ++q) resp[q] = P.smooth_force.response(0.5 * q / kTab);
+      std::vector<double> fper(R);
+      for (int r = 0; r < R; ++r) fper[r] = std::fabs(P.v[r][axis]) * P.dt * 2.0 * kTab;
       for (int q = 0; q < K; ++q) {
         const double kq = kmin + q * dk;
         double cc = 0, cs = 0, ss = 0, cy = 0, sy = 0;
         for (int r = 0; r < R; ++r) {
-          const double h = P.smooth_force.response(std::min(0.5, std::fabs(P.v[r][axis]) * kq * P.dt));
+          const double h = resp[std::min(kTab, static_cast<int>(fper[r] * kq + 0.5))];
           const double cv = h * ph_c[r], sv = h * ph_s[r], ww = wr[r];
           cc += ww * cv * cv; cs += ww * cv * sv; ss += ww * sv * sv;
           cy += ww * cv * yr[r]; sy += ww * sv * yr[r];
