@@ -90,6 +90,14 @@ Machine::Machine(MachineModel model) : model_(std::move(model)) {
       default: additive_effects_ = true; break;
     }
   }
+  const auto& k = model_.kinematics;
+  constant_jacobian_ = !k.effects[0].any() && !k.effects[1].any() && !k.effects[2].any();
+  if (constant_jacobian_) {
+    // J = U^-1 diag(c): any point will do, the planes are fixed.
+    if (!kin::jacobian(k, Vec3::Zero(), Vec3::Zero(), {}, J_))
+      throw Error("model: the limb planes do not meet in one point");
+    J_inv_ = J_.inverse();
+  }
   if (!(inertia_.A > 0.0) || inertia_.B < 0.0) {
     std::ostringstream os;
     os << "model: with its effects the machine has A = " << inertia_.A << " kg, B = " << inertia_.B
@@ -132,7 +140,11 @@ Status Machine::task_state(const Vec3& d, const Vec3& d_dot, const kin::Kinemati
                            TaskState& out) const noexcept {
   if (!all_finite(d_dot)) return Status::failure(Fault::not_finite);
   if (Status s = kin::forward(kinematics(), d, in, out.p); !s) return s;
-  if (Status s = kin::jacobian(kinematics(), d, out.p, in, out.J); !s) return s;
+  if (constant_jacobian_) {
+    out.J = J_;
+  } else if (Status s = kin::jacobian(kinematics(), d, out.p, in, out.J); !s) {
+    return s;
+  }
   out.p_dot.noalias() = out.J * d_dot;
   return {};
 }

@@ -68,8 +68,9 @@ Status solve_one(const LimbGeometry& g, int i, const Vec3& p, LimbSolution& s) {
   s.u_perp = Vec2(-s.u.y(), s.u.x());
   const double alpha = std::atan2(s.u.y(), s.u.x());
   s.w = r - g.L1 * s.u;
-  s.theta = f.sign * (alpha - f.offset);
-  s.theta = std::remainder(s.theta, 2.0 * std::numbers::pi);
+  s.theta = f.sign * (alpha - f.offset);  // within (-3 pi / 2, 3 pi / 2]: wrap once
+  if (s.theta > std::numbers::pi) s.theta -= 2.0 * std::numbers::pi;
+  if (s.theta <= -std::numbers::pi) s.theta += 2.0 * std::numbers::pi;
   s.elbow = f.sign * std::atan2(cross2(s.u, s.w), s.u.dot(s.w));
   s.den = g.L1 * f.sign * s.w.dot(s.u_perp);
   const double straightness = std::min(std::abs(s.elbow), std::numbers::pi - std::abs(s.elbow));

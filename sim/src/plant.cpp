@@ -38,18 +38,26 @@ Status Plant::reset(const Vec3& p, const Vec3& p_dot) noexcept {
 Status Plant::acceleration(const Vec3& p, const Vec3& p_dot, const Vec3& force_command,
                            Vec3& p_dd) const noexcept {
   const Machine& m = *truth_;
-  kin::KinematicInputs in = kin_in_;
-  Vec3 d;
-  Mat3 J;
-  if (Status s = kin::inverse(m.kinematics(), p, in, d); !s) return s;
-  if (Status s = kin::jacobian(m.kinematics(), d, p, in, J); !s) return s;
+  const kin::KinematicInputs& in = kin_in_;
+  Mat3 J, J_inv;
+  Vec3 d = Vec3::Zero();
+  if (m.has_constant_jacobian()) {
+    J = m.constant_jacobian();
+    J_inv = m.constant_jacobian_inverse();
+    // The actuator positions matter only to position-dependent effects.
+    if (m.has_additive_effects())
+      if (Status s = kin::inverse(m.kinematics(), p, in, d); !s) return s;
+  } else {
+    if (Status s = kin::inverse(m.kinematics(), p, in, d); !s) return s;
+    if (Status s = kin::jacobian(m.kinematics(), d, p, in, J); !s) return s;
+    J_inv = J.inverse();
+  }
   ctl::RigidBodyTerms t;
   if (Status s = m.rigid_body(p, p_dot, t); !s) return s;
-  const auto Jlu = J.partialPivLu();
-  const Vec3 d_dot = Jlu.solve(p_dot);
+  const Vec3 d_dot = J_inv * p_dot;
   const Vec3 f_act = m.drive_gain().cwiseProduct(force_command) - m.effect_forces(d, d_dot);
   // Platform force from actuator forces: F_d = J^T F_p.
-  const Vec3 f_platform = J.transpose().partialPivLu().solve(f_act);
+  const Vec3 f_platform = J_inv.transpose() * f_act;
   p_dd = t.M.llt().solve(f_platform - t.Gv - t.K);
   if (!all_finite(p_dd)) return Status::failure(Fault::not_finite);
   return {};
@@ -87,8 +95,12 @@ Status Plant::step(const Vec3& force_command, double dt) noexcept {
 }
 
 Status Plant::actuator_state(Vec3& d, Vec3& d_dot) const noexcept {
-  Mat3 J;
   if (Status s = kin::inverse(truth_->kinematics(), p_, kin_in_, d); !s) return s;
+  if (truth_->has_constant_jacobian()) {
+    d_dot = truth_->constant_jacobian_inverse() * p_dot_;
+    return {};
+  }
+  Mat3 J;
   if (Status s = kin::jacobian(truth_->kinematics(), d, p_, kin_in_, J); !s) return s;
   d_dot = J.partialPivLu().solve(p_dot_);
   return {};

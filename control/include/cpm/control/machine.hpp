@@ -93,6 +93,11 @@ class Machine {
   [[nodiscard]] const Vec3& drive_gain() const noexcept { return drive_gain_; }
   [[nodiscard]] double force_limit() const noexcept { return model_.force_limit; }
   [[nodiscard]] bool has_additive_effects() const noexcept { return additive_effects_; }
+  // Without kinematic effects the planes make J = dp/dd constant: prepared
+  // once, with its inverse, so the plant and the controller skip the solve.
+  [[nodiscard]] bool has_constant_jacobian() const noexcept { return constant_jacobian_; }
+  [[nodiscard]] const Mat3& constant_jacobian() const noexcept { return J_; }
+  [[nodiscard]] const Mat3& constant_jacobian_inverse() const noexcept { return J_inv_; }
 
   // M, G q_d and K at (p, p_dot). Fails outside the limbs' reach or at a singularity.
   Status rigid_body(const Vec3& p, const Vec3& p_dot, RigidBodyTerms& out) const noexcept;
@@ -114,6 +119,8 @@ class Machine {
   InertiaConstants inertia_;
   Vec3 drive_gain_ = Vec3::Ones();
   bool additive_effects_ = false;
+  bool constant_jacobian_ = false;
+  Mat3 J_ = Mat3::Identity(), J_inv_ = Mat3::Identity();
 };
 
 }  // namespace cpm::ctl
