@@ -234,7 +234,9 @@ CircularTestResult run_circular_test(const ctl::MachineModel& truth_model,
 }
 
 std::string circular_test_svg(const CircularTestResult& r, const std::string& title) {
-  const double W = 760, Hh = 620, cx = 300, cy = 320, R0 = 190;
+  // Plot on the left (rings up to R0 + 4 pitches, axes a little beyond), the
+  // legend in its own column on the right, the title above everything.
+  const double R0 = 180, cx = 330, cy = 370, W = 900, Hh = 710;
   // Scale: a "nice" number of µm per ring so that the largest deviation
   // spans about three rings; ring pitch 30 px.
   double maxdev = 1e-9;
@@ -276,10 +278,12 @@ std::string circular_test_svg(const CircularTestResult& r, const std::string& ti
   o << "<line x1=\"" << cx - R0 - 140 << "\" y1=\"" << cy << "\" x2=\"" << cx + R0 + 140 << "\" y2=\"" << cy
     << "\" stroke=\"#ddd\"/>\n<line x1=\"" << cx << "\" y1=\"" << cy - R0 - 140 << "\" x2=\"" << cx
     << "\" y2=\"" << cy + R0 + 140 << "\" stroke=\"#ddd\"/>\n";
-  o << "<text x=\"" << cx + R0 + 125 << "\" y=\"" << cy - 6 << "\">+" << axn[ia] << "</text>\n";
-  o << "<text x=\"" << cx + 6 << "\" y=\"" << cy - R0 - 125 << "\">+" << axn[ib] << "</text>\n";
+  o << "<text x=\"" << cx + R0 + 122 << "\" y=\"" << cy - 6 << "\">+" << axn[ia] << "</text>\n";
+  o << "<text x=\"" << cx + 6 << "\" y=\"" << cy - R0 - 128 << "\">+" << axn[ib] << "</text>\n";
+  // CW dashed over CCW solid, so both show where they coincide.
   auto path = [&](const CircularTrace& t, const char* colour) {
-    o << "<polyline fill=\"none\" stroke=\"" << colour << "\" stroke-width=\"1.4\" points=\"";
+    o << "<polyline fill=\"none\" stroke=\"" << colour << "\" stroke-width=\"1.4\""
+      << (&t == &r.cw ? " stroke-dasharray=\"6,4\"" : "") << " points=\"";
     for (std::size_t k = 0; k <= t.angle.size() && !t.angle.empty(); ++k) {
       const std::size_t j = k % t.angle.size();
       const double rr = R0 + t.deviation[j] * 1e6 * px_per_um;
@@ -289,8 +293,8 @@ std::string circular_test_svg(const CircularTestResult& r, const std::string& ti
   };
   path(r.ccw, "#1f5fbf");
   path(r.cw, "#c0392b");
-  const double tx = 560;
-  double ty = 70;
+  const double tx = cx + R0 + 170;
+  double ty = 80;
   auto line = [&](const std::string& s, const char* colour = "#000") {
     o << "<text x=\"" << tx << "\" y=\"" << ty << "\" fill=\"" << colour << "\">" << s << "</text>\n";
     ty += 18;
@@ -309,7 +313,7 @@ std::string circular_test_svg(const CircularTestResult& r, const std::string& ti
   line(buf);
   ty += 8;
   line("— CCW (counter-clockwise)", "#1f5fbf");
-  line("— CW (clockwise)", "#c0392b");
+  line("- - CW (clockwise)", "#c0392b");
   ty += 8;
   std::snprintf(buf, sizeof buf, "G CCW  %.2f µm", r.ccw_metrics.G * 1e6);
   line(buf);
