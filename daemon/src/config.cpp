@@ -111,6 +111,113 @@ std::string resolve(const std::string& base, const std::string& p) {
   return (std::filesystem::path(base) / fp).lexically_normal().string();
 }
 
+void parse_line(const Reader& r, const YAML::Node& n, const std::string& path, hal::LineConfig& l) {
+  r.map(n, path, {}, {"chip", "name", "offset", "active_low"});
+  l.present = true;
+  if (n["chip"]) l.chip = r.text(n["chip"], path + ".chip");
+  if (n["name"]) l.name = r.text(n["name"], path + ".name");
+  if (n["offset"]) l.offset = static_cast<int>(r.integer(n["offset"], path + ".offset", 0, 4095));
+  if (n["active_low"]) l.active_low = r.boolean(n["active_low"], path + ".active_low");
+  if (l.name.empty() && l.offset < 0) r.fail(n, path, "give the line's name, or chip and offset");
+  if (l.offset >= 0 && l.chip.empty()) r.fail(n, path + ".chip", "missing (required with offset)");
+}
+
+int milliseconds(const Reader& r, const YAML::Node& n, const std::string& path, long lo, long hi) {
+  return static_cast<int>(r.integer(n, path, lo, hi));
+}
+
+void parse_canopen(const Reader& r, const YAML::Node& n, double rate_hz, CanopenConfig& c) {
+  r.map(n, "canopen", {"interface", "bitrate", "drives", "gpio"},
+        {"master_node_id", "velocity_from_drive", "max_bus_load", "heartbeat", "abort_connection_option",
+         "pdo_timeout_cycles", "sdo_timeout_ms", "boot_timeout_ms", "reset_on_start", "feedback_wait_ms"});
+  auto& m = c.master;
+  m.rate_hz = rate_hz;
+  c.interface = r.text(n["interface"], "canopen.interface");
+  m.bitrate = r.number(n["bitrate"], "canopen.bitrate", 10e3, 1e6, "bit/s");
+  bool known = false;
+  for (double b : {10e3, 20e3, 50e3, 125e3, 250e3, 500e3, 800e3, 1e6}) known = known || m.bitrate == b;
+  if (!known) r.fail(n["bitrate"], "canopen.bitrate", "must be a CiA 301 bitrate: 10000, 20000, 50000, 125000, 250000, 500000, 800000 or 1000000, got " + n["bitrate"].Scalar());
+  if (n["master_node_id"]) m.master_node_id = static_cast<int>(r.integer(n["master_node_id"], "canopen.master_node_id", 1, 127));
+  if (n["velocity_from_drive"]) m.velocity_from_drive = r.boolean(n["velocity_from_drive"], "canopen.velocity_from_drive");
+  if (n["max_bus_load"]) m.max_bus_load = r.positive(n["max_bus_load"], "canopen.max_bus_load", 1.0, "(fraction)");
+  if (n["abort_connection_option"])
+    m.abort_connection_option = static_cast<int>(r.integer(n["abort_connection_option"], "canopen.abort_connection_option", 0, 3));
+  if (n["pdo_timeout_cycles"]) m.pdo_timeout_cycles = static_cast<int>(r.integer(n["pdo_timeout_cycles"], "canopen.pdo_timeout_cycles", 1, 1000));
+  if (n["sdo_timeout_ms"]) m.sdo_timeout_ms = milliseconds(r, n["sdo_timeout_ms"], "canopen.sdo_timeout_ms", 1, 60000);
+  if (n["boot_timeout_ms"]) m.boot_timeout_ms = milliseconds(r, n["boot_timeout_ms"], "canopen.boot_timeout_ms", 1, 600000);
+  if (n["reset_on_start"]) m.reset_on_start = r.boolean(n["reset_on_start"], "canopen.reset_on_start");
+  if (n["feedback_wait_ms"]) c.feedback_wait = r.number(n["feedback_wait_ms"], "canopen.feedback_wait_ms", 0, 1000, "ms") * 1e-3;
+  if (c.feedback_wait >= 1.0 / rate_hz)
+    r.fail(n["feedback_wait_ms"], "canopen.feedback_wait_ms", "must be shorter than the control period (1 / loop.rate_hz)");
+  if (n["heartbeat"]) {
+    const auto h = r.map(n["heartbeat"], "canopen.heartbeat", {}, {"master_ms", "drive_ms", "timeout_ms", "drive_consumer_timeout_ms"});
+    if (h["master_ms"]) m.master_heartbeat_ms = milliseconds(r, h["master_ms"], "canopen.heartbeat.master_ms", 1, 65535);
+    if (h["drive_ms"]) m.drive_heartbeat_ms = milliseconds(r, h["drive_ms"], "canopen.heartbeat.drive_ms", 1, 65535);
+    if (h["timeout_ms"]) m.heartbeat_timeout_ms = milliseconds(r, h["timeout_ms"], "canopen.heartbeat.timeout_ms", 1, 65535);
+    if (h["drive_consumer_timeout_ms"])
+      m.drive_consumer_timeout_ms = milliseconds(r, h["drive_consumer_timeout_ms"], "canopen.heartbeat.drive_consumer_timeout_ms", 1, 65535);
+    if (m.heartbeat_timeout_ms <= m.drive_heartbeat_ms)
+      r.fail(h, "canopen.heartbeat.timeout_ms", "must exceed canopen.heartbeat.drive_ms (a drive's heartbeat period)");
+    if (m.drive_consumer_timeout_ms <= m.master_heartbeat_ms)
+      r.fail(h, "canopen.heartbeat.drive_consumer_timeout_ms", "must exceed canopen.heartbeat.master_ms (the master's heartbeat period)");
+  }
+  const YAML::Node ds = n["drives"];
+  if (!ds.IsSequence() || ds.size() != 3)
+    r.fail(ds, "canopen.drives", "expected a list of three drives (actuators 1, 2, 3)");
+  m.drives.clear();
+  for (std::size_t i = 0; i < 3; ++i) {
+    const std::string p = "canopen.drives[" + std::to_string(i) + "]";
+    const auto d = r.map(ds[i], p, {"node_id", "counts_per_m", "rated_force"},
+                         {"name", "velocity_units_per_mps", "max_torque_permille", "direction", "position_offset"});
+    hal::DriveConfig dc;
+    dc.name = d["name"] ? r.text(d["name"], p + ".name") : std::string(1, static_cast<char>('1' + i));
+    dc.node_id = static_cast<int>(r.integer(d["node_id"], p + ".node_id", 1, 127));
+    if (dc.node_id == m.master_node_id) r.fail(d["node_id"], p + ".node_id", "is the master's own node id (canopen.master_node_id)");
+    for (const auto& o : m.drives)
+      if (o.node_id == dc.node_id) r.fail(d["node_id"], p + ".node_id", "node id " + std::to_string(dc.node_id) + " is used twice");
+    dc.counts_per_m = r.positive(d["counts_per_m"], p + ".counts_per_m", 1e12, "counts/m");
+    if (d["velocity_units_per_mps"])
+      dc.velocity_units_per_mps = r.number(d["velocity_units_per_mps"], p + ".velocity_units_per_mps", 0, 1e12, "units per m/s (0: counts/s)");
+    dc.rated_force_n = r.positive(d["rated_force"], p + ".rated_force", 1e6, "N");
+    if (d["max_torque_permille"])
+      dc.max_torque_permille = static_cast<int>(r.integer(d["max_torque_permille"], p + ".max_torque_permille", 1, 32767));
+    if (d["direction"]) {
+      dc.direction = static_cast<int>(r.integer(d["direction"], p + ".direction", -1, 1));
+      if (dc.direction == 0) r.fail(d["direction"], p + ".direction", "must be 1 or -1");
+    }
+    if (d["position_offset"]) dc.position_offset_m = r.number(d["position_offset"], p + ".position_offset", -10, 10, "m");
+    m.drives.push_back(dc);
+  }
+  // GPIO: the machine's safety and auxiliary lines.
+  const auto g = r.map(n["gpio"], "canopen.gpio", {"estop", "drive_enable"},
+                       {"consumer", "limit_low_x", "limit_low_y", "limit_low_z", "limit_high_x", "limit_high_y",
+                        "limit_high_z", "brake_release_z"});
+  if (g["consumer"]) c.gpio.consumer = r.text(g["consumer"], "canopen.gpio.consumer");
+  for (std::size_t k = 0; k < hal::kLineCount; ++k) {
+    const auto line = static_cast<hal::Line>(k);
+    const char* name = hal::line_name(line);
+    if (g[name]) parse_line(r, g[name], std::string("canopen.gpio.") + name, c.gpio[line]);
+  }
+  try {
+    hal::validate(c.gpio);
+  } catch (const std::exception& e) {
+    r.fail(g, "canopen.gpio", e.what());
+  }
+  try {
+    hal::validate(m);
+  } catch (const std::exception& e) {
+    r.fail(n, "canopen", e.what());
+  }
+  c.load = hal::bus_load(m);
+  if (!c.load.fits) {
+    std::ostringstream os;
+    os << "the cyclic traffic does not fit the bus at loop.rate_hz " << rate_hz << " Hz: " << c.load.describe()
+       << "; lower loop.rate_hz to at most " << std::floor(c.load.max_rate_hz) << " Hz"
+       << (m.velocity_from_drive ? ", set canopen.velocity_from_drive: false" : "") << ", or raise canopen.bitrate";
+    r.fail(n, "canopen", os.str());
+  }
+}
+
 }  // namespace
 
 DaemonConfig parse_config(const std::string& text, const std::string& name, const std::string& base_dir) {
@@ -124,15 +231,14 @@ DaemonConfig parse_config(const std::string& text, const std::string& name, cons
   const Reader r(name);
   DaemonConfig c;
   c.source = name;
-  r.map(root, "", {"model_file", "backend", "loop", "controller", "limits", "lcm"}, {"sim"});
+  r.map(root, "", {"model_file", "backend", "loop", "controller", "limits", "lcm"}, {"sim", "canopen"});
 
   c.model_file = resolve(base_dir, r.text(root["model_file"], "model_file"));
   c.backend = r.text(root["backend"], "backend");
   if (c.backend != "sim" && c.backend != "canopen")
     r.fail(root["backend"], "backend", "must be sim or canopen, got '" + c.backend + "'");
-  if (c.backend == "canopen")
-    r.fail(root["backend"], "backend", "the canopen backend is not built yet (issue 6); use sim");
   if (c.backend == "sim" && !root["sim"]) r.fail(root, "sim", "missing (required with backend: sim)");
+  if (c.backend == "canopen" && !root["canopen"]) r.fail(root, "canopen", "missing (required with backend: canopen)");
 
   if (root["sim"]) {
     const auto s = r.map(root["sim"], "sim", {"truth_model_file", "initial_position"},
@@ -216,6 +322,7 @@ DaemonConfig parse_config(const std::string& text, const std::string& name, cons
     if (ch["control"]) c.lcm.control_channel = r.text(ch["control"], "lcm.channels.control");
     if (ch["ack"]) c.lcm.ack_channel = r.text(ch["ack"], "lcm.channels.ack");
   }
+  if (root["canopen"]) parse_canopen(r, root["canopen"], c.loop.rate_hz, c.canopen);
   return c;
 }
 

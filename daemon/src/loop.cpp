@@ -38,6 +38,7 @@ const char* fault_bit_name(std::uint32_t bit) noexcept {
     case kFaultEstop: return "estop";
     case kFaultOverrun: return "overrun";
     case kFaultEnableTimeout: return "enable_timeout";
+    case kFaultLimitSwitch: return "limit_switch";
     default: return "unknown";
   }
 }
@@ -130,6 +131,10 @@ void ControlLoop::latch(std::uint32_t bit, int axis, double value, double limit,
     fault_value_ = value;
     fault_limit_ = limit;
     fault_cycle_ = k;
+    // The backend's own words for the faults it reports (e.g. which drive lost its heartbeat).
+    const char* why = (bit & (kFaultDrive | kFaultBackendIo | kFaultEstop | kFaultLimitSwitch)) ? backend_->fault_text() : "";
+    std::strncpy(fault_text_, why, sizeof fault_text_ - 1);
+    fault_text_[sizeof fault_text_ - 1] = '\0';
   }
   faults_ |= bit;
   if (mode_ != Mode::fault) {
@@ -266,6 +271,7 @@ void ControlLoop::handle(const Command& c, std::int64_t k) noexcept {
       fault_axis_ = -1;
       fault_value_ = fault_limit_ = 0;
       fault_cycle_ = -1;
+      fault_text_[0] = '\0';
       consecutive_overruns_ = 0;
       overrun_fault_pending_ = false;
       hold_ = est_.p;
@@ -443,6 +449,8 @@ void ControlLoop::cycle(std::int64_t k, std::int64_t latency_ns) noexcept {
   for (int i = 0; i < 3; ++i)
     if (in_.drive_fault[i]) latch(kFaultDrive, i, in_.statusword[i], 0, k);
   if (in_.estop) latch(kFaultEstop, -1, 1, 0, k);
+  for (int i = 0; i < 3; ++i)
+    if (in_.limit_switch[i]) latch(kFaultLimitSwitch, i, 1, 0, k);
   if (overrun_fault_pending_) {
     latch(kFaultOverrun, -1, consecutive_overruns_, cfg_.loop.max_consecutive_overruns, k);
     overrun_fault_pending_ = false;
@@ -538,6 +546,8 @@ void ControlLoop::fill_state(std::int64_t k) noexcept {
   s.fault_value = fault_value_;
   s.fault_limit = fault_limit_;
   s.fault_cycle = fault_cycle_;
+  static_assert(sizeof s.fault_text == sizeof fault_text_);
+  std::memcpy(s.fault_text, fault_text_, sizeof fault_text_);
   if (playing_) {
     const Segment& seg = (*queue_)[q_head_];
     s.segment_id = seg.id;

@@ -11,6 +11,7 @@
 #include <string>
 #include <thread>
 
+#include "cpm/daemon/canopen_backend.hpp"
 #include "cpm/daemon/rt.hpp"
 #include "cpm/daemon/server.hpp"
 #include "cpm/daemon/sim_backend.hpp"
@@ -83,6 +84,9 @@ int run(int argc, char** argv) {
     so.initial_position = cfg.sim.initial_position;
     so.enable_delay = cfg.sim.enable_delay;
     backend = std::make_unique<SimBackend>(std::make_unique<ctl::Machine>(load_model(cfg.sim.truth_model_file)), so);
+  } else {
+    backend = std::make_unique<CanopenBackend>(cfg.canopen);
+    std::fprintf(stderr, "cpmd: CAN %s: %s\n", cfg.canopen.interface.c_str(), cfg.canopen.load.describe().c_str());
   }
   if (check) {
     std::printf("%s: configuration and model files are valid\n", config_path.c_str());

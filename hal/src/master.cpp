@@ -178,6 +178,12 @@ void Master::service() noexcept {
   while (bus_.receive(f).ok()) dispatch(f, now);
 }
 
+bool Master::feedback_complete() const noexcept {
+  for (const auto& d : drives_)
+    if (!d.got_tpdo1 || (cfg_.velocity_from_drive && !d.got_tpdo2)) return false;
+  return true;
+}
+
 void Master::dispatch(const CanFrame& f, std::int64_t now) noexcept {
   if (f.is_error()) {
     ++error_frames_;

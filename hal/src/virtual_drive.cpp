@@ -399,6 +399,10 @@ void VirtualDrive::handle_sync(std::int64_t) {
     last_transition_ = 12;
   }
   if (on_sync) on_sync(*this);
+  if (!hold_tpdos) transmit_sync_pdos();
+}
+
+void VirtualDrive::transmit_sync_pdos() {
   find(cia402::kStatusword, 0)->value = statusword();
   for (std::uint16_t n = 0; n < 4; ++n) {
     const std::uint32_t cob = find(static_cast<std::uint16_t>(0x1800 + n), 1)->value;

@@ -1,6 +1,7 @@
 // Client subcommands for the state machine: status, enable, disable, stop,
 // reset, controller, load-model, stats. They talk to a running cpmd over LCM.
 #include <cmath>
+#include <cstring>
 #include <sstream>
 #include <thread>
 
@@ -75,7 +76,11 @@ std::string json_state(const state_t& s) {
     os << (first ? "" : ", ") << '"' << part << '"';
     first = false;
   }
-  os << "], \"first_fault\": \"" << (s.first_fault ? daemon::fault_bit_name(static_cast<std::uint32_t>(s.first_fault)) : "")
+  std::string why(reinterpret_cast<const char*>(s.fault_text), strnlen(reinterpret_cast<const char*>(s.fault_text), sizeof s.fault_text));
+  for (char& ch : why)
+    if (ch == '"' || ch == '\\' || static_cast<unsigned char>(ch) < 0x20) ch = ' ';
+  os << "], \"fault_text\": \"" << why << "\"";
+  os << ", \"first_fault\": \"" << (s.first_fault ? daemon::fault_bit_name(static_cast<std::uint32_t>(s.first_fault)) : "")
      << "\", \"controller\": \"" << ctl::law_name(static_cast<ctl::ControlLaw>(s.controller))
      << "\", \"segment_id\": " << s.segment_id << ", \"queue_depth\": " << s.queue_depth
      << ", \"last_segment\": {\"id\": " << s.last_segment_id << ", \"rmse\": " << json_number(s.last_segment_rmse)
@@ -104,6 +109,8 @@ int status(Args& a) {
     std::printf("first fault: %s (axis %d, value %g, limit %g)\n",
                 daemon::fault_bit_name(static_cast<std::uint32_t>(s->first_fault)), s->fault_axis + 1, s->fault_value,
                 s->fault_limit);
+  if (s->faults && s->fault_text[0])
+    std::printf("fault: %.*s\n", static_cast<int>(sizeof s->fault_text), reinterpret_cast<const char*>(s->fault_text));
   if (s->last_segment_id >= 0)
     std::printf("last segment %lld: tracking error RMS %.1f um, max %.1f um\n",
                 static_cast<long long>(s->last_segment_id), s->last_segment_rmse * 1e6, s->last_segment_max * 1e6);

@@ -24,6 +24,7 @@ struct BackendInput {
   std::array<bool, 3> drive_enabled{};    // drive in "operation enabled", brake released
   std::array<bool, 3> drive_fault{};      // drive reports a fault
   bool estop = false;                     // emergency-stop chain open (GPIO input)
+  std::array<bool, 3> limit_switch{};     // a limit switch of actuator i (either end) tripped this cycle
   std::uint32_t digital_inputs = 0;       // raw GPIO inputs, bit i = line i
 };
 
@@ -49,6 +50,11 @@ class Backend {
   virtual BackendResult read(std::int64_t cycle, BackendInput& in) noexcept = 0;
   // Real-time: commands computed in cycle `cycle`, held until the next write.
   virtual BackendResult write(std::int64_t cycle, const BackendOutput& out) noexcept = 0;
+  // Real-time: what the backend found wrong in the last read()/write(), as
+  // one readable line ("drive 2 (y, node 2): heartbeat lost"); "" when
+  // nothing. The loop copies it into the state when it latches a drive,
+  // I/O, e-stop or limit-switch fault. Allocation-free.
+  [[nodiscard]] virtual const char* fault_text() const noexcept { return ""; }
 };
 
 }  // namespace cpm::daemon

@@ -10,6 +10,8 @@
 #include <string>
 
 #include "cpm/control/controller.hpp"
+#include "cpm/hal/digital_io.hpp"
+#include "cpm/hal/master.hpp"
 #include "cpm/sim/plant.hpp"
 
 namespace cpm::daemon {
@@ -56,11 +58,22 @@ struct SimConfig {
   double enable_delay = 0.005;    // s
 };
 
+// The CANopen backend (docs/canopen-backend.md): three CiA 402 drives in
+// cyclic synchronous torque on a SocketCAN interface, and the machine's GPIO.
+struct CanopenConfig {
+  std::string interface = "can0";   // SocketCAN interface
+  hal::MasterConfig master;         // rate_hz = loop.rate_hz; drives[i] = actuator i + 1
+  hal::DigitalIoConfig gpio;        // e-stop, drive enable, limit switches, z brake
+  double feedback_wait = 0.0;       // s read() waits for this cycle's TPDOs (0: take what is there)
+  hal::BusLoad load;                // computed at load time
+};
+
 struct DaemonConfig {
   std::string source;             // the file it came from
   std::string model_file;         // the model the controller believes; "builtin:elkady" = machine.md
-  std::string backend = "sim";    // "sim" (now), "canopen" (next)
+  std::string backend = "sim";    // "sim" or "canopen"
   SimConfig sim;
+  CanopenConfig canopen;
   LoopConfig loop;
   ControllerConfig controller;
   LimitsConfig limits;

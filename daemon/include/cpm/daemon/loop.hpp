@@ -59,6 +59,7 @@ enum FaultBit : std::uint32_t {
   kFaultEstop = 128,
   kFaultOverrun = 256,
   kFaultEnableTimeout = 512,
+  kFaultLimitSwitch = 1024,
 };
 // "following_error,estop" for a mask (static storage per bit; the joined text
 // is built in `buf`, not for the real-time path).
@@ -178,6 +179,7 @@ class ControlLoop {
   int fault_axis_ = -1;
   double fault_value_ = 0, fault_limit_ = 0;
   std::int64_t fault_cycle_ = -1;
+  char fault_text_[96] = {};       // the backend's words for the first fault
   std::int64_t enabling_since_ = 0;
   bool disable_after_stop_ = false;
   std::atomic<bool> shutdown_{false};

@@ -160,6 +160,10 @@ class Master {
   std::uint32_t sdo_read_u32(std::uint8_t node, std::uint16_t index, std::uint8_t sub);
   // Process received frames outside the cycle (start-up loops).
   void service() noexcept;
+  // Whether every drive's TPDOs answering the last SYNC have been received
+  // (processed by service() or read()). Lets a caller wait a bounded time
+  // for the feedback before read() (slow hosts, SIL). Allocation-free.
+  [[nodiscard]] bool feedback_complete() const noexcept;
 
   // ---- per cycle (allocation-free, noexcept)
   Status read(Feedback& out) noexcept;

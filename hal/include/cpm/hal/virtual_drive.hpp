@@ -43,6 +43,12 @@ class VirtualDrive {
   // and target torque took effect and before the TPDOs go out: step the
   // plant by one period here, then set_actual().
   std::function<void(VirtualDrive&)> on_sync;
+  // When true, a SYNC applies the RPDOs and calls on_sync but holds the
+  // TPDOs until transmit_sync_pdos(): a plant that couples several drives
+  // (one rigid platform on three axes) steps once every drive has applied
+  // this SYNC's torque, then sets each drive's actual values and sends.
+  bool hold_tpdos = false;
+  void transmit_sync_pdos();
   void set_actual(std::int32_t position, std::int32_t velocity, std::int16_t torque = 0);
   // The torque (per mille) the drive applies now: the target in operation
   // enabled, 0 otherwise.

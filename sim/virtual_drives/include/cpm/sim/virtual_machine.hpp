@@ -1,0 +1,101 @@
+// The machine as three CiA 402 drives see it: three hal::VirtualDrive on one
+// CAN bus, coupled by one sim::Plant (the true machine, a rigid platform on
+// three actuators).
+//
+// The plant steps by exactly one control period per SYNC frame, never by
+// the wall clock, so the closed loop through the bus is deterministic
+// whatever the host's speed (a software-emulated VM included). At a SYNC,
+// every drive first applies the RPDOs it got before it (controlword, target
+// torque 0x6071); then the plant steps under the three forces held for one
+// period (zero-order hold, as sim::run_closed_loop); then each drive answers
+// with its actual position 0x6064 and velocity 0x606C read from the plant's
+// encoders. That is the same sample / hold timing as the in-process loop: a
+// master that reads those TPDOs before its next cycle sees what
+// run_closed_loop's controller sees.
+//
+// Brakes: while any drive is not in "operation enabled" (and during the
+// first SYNC after all are, when the brake is still opening) the platform is
+// held still where it is, as the daemon's simulator backend does.
+//
+// Frames are fed one at a time (pump() or on_frame()), so three drives that
+// share one socket see the same frame order as on a real bus.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "cpm/control/machine.hpp"
+#include "cpm/hal/can.hpp"
+#include "cpm/hal/pdo.hpp"
+#include "cpm/hal/virtual_drive.hpp"
+#include "cpm/sim/plant.hpp"
+
+namespace cpm::sim {
+
+struct VirtualAxis {
+  int node_id = 1;
+  hal::pdo::Scaling scaling;   // the same numbers as the master's drive config
+};
+
+struct VirtualMachineConfig {
+  std::array<VirtualAxis, 3> axes{};
+  double period = 1e-3;                                  // s the plant advances per SYNC
+  Vec3 initial_position = Vec3(0.600, 0.425, 0.300);     // platform centre at power-on (m)
+  PlantOptions plant;
+  int quick_stop_option = 2;                             // each drive's 0x605A default
+  // The default: node ids 1, 2, 3; 1e7 counts/m (0.1 um), velocity in
+  // counts/s, rated force 40 N, clamp 3000 per mille (120 N, machine.md).
+  static VirtualMachineConfig defaults();
+};
+
+class VirtualMachine {
+ public:
+  // Keeps references to `bus` and `truth`. Throws Error on a bad config or an
+  // initial position outside the true machine's workspace.
+  VirtualMachine(hal::CanBus& bus, const ctl::Machine& truth, const VirtualMachineConfig& cfg);
+  ~VirtualMachine();
+  VirtualMachine(const VirtualMachine&) = delete;
+  VirtualMachine& operator=(const VirtualMachine&) = delete;
+
+  // Power the drives on (boot-up messages).
+  void power_on(std::int64_t now_ns);
+  // Every frame the bus has, one at a time, then poll (heartbeats, late answers).
+  void pump(std::int64_t now_ns);
+  // One received frame to every drive; a SYNC steps the plant.
+  void on_frame(const hal::CanFrame& f, std::int64_t now_ns);
+  // Let time pass without frames.
+  void poll(std::int64_t now_ns);
+
+  // Fault injection: the whole set of drives vanishes (power cut, cable
+  // pulled) or comes back (boots again, pre-operational).
+  void disappear(bool gone, std::int64_t now_ns);
+  [[nodiscard]] bool gone() const noexcept { return gone_; }
+
+  [[nodiscard]] hal::VirtualDrive& drive(int i) { return *drives_.at(static_cast<std::size_t>(i)); }
+  [[nodiscard]] const Plant& plant() const noexcept { return *plant_; }
+  [[nodiscard]] std::uint64_t steps() const noexcept { return steps_; }     // SYNCs that moved the plant
+  [[nodiscard]] std::uint64_t syncs() const noexcept { return syncs_; }     // SYNCs seen
+  [[nodiscard]] const Vec3& last_force() const noexcept { return force_; }  // N, per actuator
+  [[nodiscard]] bool plant_failed() const noexcept { return plant_failed_; }
+  [[nodiscard]] const VirtualMachineConfig& config() const noexcept { return cfg_; }
+
+ private:
+  class Port;
+  void on_sync(std::int64_t now_ns);
+  hal::CanBus& bus_;
+  VirtualMachineConfig cfg_;
+  std::unique_ptr<Plant> plant_;
+  std::vector<std::unique_ptr<Port>> ports_;
+  std::vector<std::unique_ptr<hal::VirtualDrive>> drives_;
+  std::array<std::uint64_t, 3> sync_seen_{};  // each drive's SYNC count before the frame
+  Vec3 force_ = Vec3::Zero();
+  std::uint64_t steps_ = 0, syncs_ = 0;
+  bool plant_failed_ = false;
+  bool enabled_before_ = false;  // every drive was in operation enabled at the previous SYNC
+  bool gone_ = false;
+};
+
+}  // namespace cpm::sim
