@@ -1,6 +1,7 @@
 #include "cli.hpp"
 
 #include <cmath>
+#include <filesystem>
 #include <cstdio>
 #include <fstream>
 #include <sstream>
@@ -101,6 +102,21 @@ std::string json_number(double v) {
 
 void write_file_atomically(const std::string& path, const std::string& text) {
   io::write_file_atomically(path, text);
+}
+
+std::string default_model_path() {
+  namespace fs = std::filesystem;
+  const fs::path published = "config/machine.yaml";
+  std::error_code ec;
+  if (fs::exists(published, ec)) return published.string();
+  const fs::path exe_dir = fs::read_symlink("/proc/self/exe", ec).parent_path();
+  if (!ec) {
+    for (const fs::path& candidate :
+         {exe_dir / ".." / ".." / published, exe_dir / ".." / "etc" / "cpmd" / "machine.yaml"})
+      if (fs::exists(candidate, ec)) return fs::weakly_canonical(candidate, ec).string();
+  }
+  if (fs::exists("/etc/cpmd/machine.yaml", ec)) return "/etc/cpmd/machine.yaml";
+  return published.string();
 }
 
 Vec3 parse_point(const std::string& what, const std::string& text, bool allow_non_finite) {

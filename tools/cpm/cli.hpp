@@ -62,6 +62,12 @@ std::map<std::string, CommandEntry>& registry();
 std::string json_number(double v);                  // finite -> shortest exact text, else null
 // io::write_file_atomically (temporary file, fsync, rename).
 void write_file_atomically(const std::string& path, const std::string& text);
+// The default machine model (the published path config/machine.yaml): from
+// the current folder when it has one, else beside the build tree this cpm
+// came from (build/bin/cpm -> config/machine.yaml), else the installed copy
+// (/etc/cpmd/machine.yaml). The relative path when none exists, so the
+// error names it.
+std::string default_model_path();
 // "x,y,z" in metres. Non-finite values are refused unless `allow_non_finite`
 // (the daemon client passes them on so that the daemon's refusal can be seen).
 Vec3 parse_point(const std::string& what, const std::string& text, bool allow_non_finite = false);

@@ -9,7 +9,7 @@ namespace cpm::cli {
 namespace {
 
 int run(Args& a) {
-  const std::string model = a.option_or("model", "config/machine.yaml");
+  const std::string model = a.option_or("model", default_model_path());
   const auto data = a.option("data");
   const auto out = a.option("out");
   const auto json = a.option("json");

@@ -23,8 +23,8 @@ std::string trace_csv(const cal::CircularTestResult& r) {
 }
 
 int run(Args& a) {
-  const std::string truth_path = a.option_or("truth", "config/machine.yaml");
-  const std::string model_path = a.option_or("model", "config/machine.yaml");
+  const std::string truth_path = a.option_or("truth", default_model_path());
+  const std::string model_path = a.option_or("model", default_model_path());
   cal::CircularTestSpec s;
   if (auto v = a.option("centre")) s.centre = calib_point("--centre", *v);
   s.radius = a.number("radius", s.radius);

@@ -16,7 +16,7 @@ std::string vec_text(const Vec3& v) {
 }
 
 int run(Args& a) {
-  const std::string model_path = a.option_or("model", "config/machine.yaml");
+  const std::string model_path = a.option_or("model", default_model_path());
   const std::string kind = a.option_or("kind", "ballbar");
   const std::string layout = a.option_or("layout", kind == "ballbar" ? "kim" : "optimal");
   Vec3 pivot(0.430, 0.430, 0.530);

@@ -12,8 +12,8 @@ namespace cpm::cli {
 namespace {
 
 int run(Args& a) {
-  const std::string truth_path = a.option_or("truth", "config/machine.yaml");
-  const std::string model_path = a.option_or("model", "config/machine.yaml");
+  const std::string truth_path = a.option_or("truth", default_model_path());
+  const std::string model_path = a.option_or("model", default_model_path());
   const auto poses_path = a.option("poses");
   const std::string kind = a.option_or("kind", "ballbar");
   cal::BallbarSimulation bs;
