@@ -126,7 +126,7 @@ int milliseconds(const Reader& r, const YAML::Node& n, const std::string& path, 
   return static_cast<int>(r.integer(n, path, lo, hi));
 }
 
-void parse_canopen(const Reader& r, const YAML::Node& n, double rate_hz, CanopenConfig& c) {
+void parse_canopen(const Reader& r, const YAML::Node& n, double rate_hz, bool skip_late_slots, CanopenConfig& c) {
   r.map(n, "canopen", {"interface", "bitrate", "drives", "gpio"},
         {"master_node_id", "velocity_from_drive", "max_bus_load", "heartbeat", "abort_connection_option",
          "pdo_timeout_cycles", "sdo_timeout_ms", "boot_timeout_ms", "reset_on_start", "feedback_wait_ms"});
@@ -147,8 +147,9 @@ void parse_canopen(const Reader& r, const YAML::Node& n, double rate_hz, Canopen
   if (n["boot_timeout_ms"]) m.boot_timeout_ms = milliseconds(r, n["boot_timeout_ms"], "canopen.boot_timeout_ms", 1, 600000);
   if (n["reset_on_start"]) m.reset_on_start = r.boolean(n["reset_on_start"], "canopen.reset_on_start");
   if (n["feedback_wait_ms"]) c.feedback_wait = r.number(n["feedback_wait_ms"], "canopen.feedback_wait_ms", 0, 1000, "ms") * 1e-3;
-  if (c.feedback_wait >= 1.0 / rate_hz)
-    r.fail(n["feedback_wait_ms"], "canopen.feedback_wait_ms", "must be shorter than the control period (1 / loop.rate_hz)");
+  if (c.feedback_wait >= 1.0 / rate_hz && skip_late_slots)
+    r.fail(n["feedback_wait_ms"], "canopen.feedback_wait_ms",
+           "must be shorter than the control period (1 / loop.rate_hz), unless loop.skip_late_slots is false");
   if (n["heartbeat"]) {
     const auto h = r.map(n["heartbeat"], "canopen.heartbeat", {}, {"master_ms", "drive_ms", "timeout_ms", "drive_consumer_timeout_ms"});
     if (h["master_ms"]) m.master_heartbeat_ms = milliseconds(r, h["master_ms"], "canopen.heartbeat.master_ms", 1, 65535);
@@ -261,11 +262,12 @@ DaemonConfig parse_config(const std::string& text, const std::string& name, cons
   }
 
   const auto l = r.map(root["loop"], "loop", {"rate_hz"},
-                       {"priority", "cpu", "lock_memory", "max_consecutive_overruns"});
+                       {"priority", "cpu", "lock_memory", "max_consecutive_overruns", "skip_late_slots"});
   c.loop.rate_hz = r.number(l["rate_hz"], "loop.rate_hz", 10.0, 10000.0, "Hz");
   if (l["priority"]) c.loop.priority = static_cast<int>(r.integer(l["priority"], "loop.priority", 0, 99));
   if (l["cpu"]) c.loop.cpu = static_cast<int>(r.integer(l["cpu"], "loop.cpu", -1, 1023));
   if (l["lock_memory"]) c.loop.lock_memory = r.boolean(l["lock_memory"], "loop.lock_memory");
+  if (l["skip_late_slots"]) c.loop.skip_late_slots = r.boolean(l["skip_late_slots"], "loop.skip_late_slots");
   if (l["max_consecutive_overruns"])
     c.loop.max_consecutive_overruns =
         static_cast<int>(r.integer(l["max_consecutive_overruns"], "loop.max_consecutive_overruns", 1, 100000));
@@ -322,7 +324,7 @@ DaemonConfig parse_config(const std::string& text, const std::string& name, cons
     if (ch["control"]) c.lcm.control_channel = r.text(ch["control"], "lcm.channels.control");
     if (ch["ack"]) c.lcm.ack_channel = r.text(ch["ack"], "lcm.channels.ack");
   }
-  if (root["canopen"]) parse_canopen(r, root["canopen"], c.loop.rate_hz, c.canopen);
+  if (root["canopen"]) parse_canopen(r, root["canopen"], c.loop.rate_hz, c.loop.skip_late_slots, c.canopen);
   return c;
 }
 

@@ -101,7 +101,7 @@ void RtThread::run(std::int64_t max_cycles) {
     while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr) == EINTR) {
     }
     std::int64_t woke = mono_ns();
-    if (woke - deadline >= period) {
+    if (woke - deadline >= period && cfg_.skip_late_slots) {
       // Woke after the whole slot: skip to the slot that is running now.
       const std::int64_t now_slot = (woke - t0) / period;
       loop_.record_schedule(true, now_slot - k);
@@ -115,7 +115,7 @@ void RtThread::run(std::int64_t max_cycles) {
     const std::int64_t end = mono_ns();
     // The next slot is k + 1; when we are already past it, skip to the
     // first slot that has not begun (never run a slot twice or late).
-    const std::int64_t next = (end - t0) / period + 1;
+    const std::int64_t next = cfg_.skip_late_slots ? (end - t0) / period + 1 : k + 1;
     const bool overrun = end > deadline_k + period;
     const std::int64_t skipped = std::max<std::int64_t>(0, next - (k + 1));
     loop_.record_schedule(overrun, skipped);

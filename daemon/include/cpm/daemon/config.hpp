@@ -22,6 +22,10 @@ struct LoopConfig {
   int cpu = -1;                     // CPU to pin the loop to; -1 = no pinning
   bool lock_memory = true;          // mlockall + pre-fault
   int max_consecutive_overruns = 5; // this many in a row is a fault
+  // false: a late cycle runs at once instead of skipping the slots it
+  // missed, so cycle k is always the k-th cycle run (simulated time, for the
+  // SIL tests in an emulated VM whose plant steps one period per SYNC).
+  bool skip_late_slots = true;
 };
 
 struct LimitsConfig {
