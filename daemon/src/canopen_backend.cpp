@@ -74,7 +74,9 @@ void CanopenBackend::start(double period) {
     emcy_seen_[i] = 0;
     faults_seen_[i] = 0;
     limit_before_[i] = false;
+    was_enabled_[i] = false;
   }
+  enabled_asked_ = false;
   error_frames_seen_ = 0;
   started_ = true;
 }
@@ -163,12 +165,17 @@ BackendResult CanopenBackend::read(std::int64_t, BackendInput& in) noexcept {
       fault = true;
       note("drive %zu (%s, node %d): CiA 402 %s (statusword 0x%04X)", i + 1, dc.name.c_str(), dc.node_id,
            hal::cia402::state_name(d.state), d.statusword);
+    } else if (was_enabled_[i] && enabled_asked_ && d.state != State::operation_enabled) {
+      fault = true;  // e.g. its own quick stop: the loop still expects it to hold the axis
+      note("drive %zu (%s, node %d): left operation enabled on its own, now %s", i + 1, dc.name.c_str(), dc.node_id,
+           hal::cia402::state_name(d.state));
     } else if (d.state == State::unknown) {
       fault = true;
       note("drive %zu (%s, node %d): statusword 0x%04X decodes to no CiA 402 state", i + 1, dc.name.c_str(), dc.node_id,
            d.statusword);
     }
     in.drive_fault[i] = fault;
+    was_enabled_[i] = enabled_asked_ && d.state == State::operation_enabled;
     in.drive_enabled[i] = !fault && d.state == State::operation_enabled && dout_.drive_enable &&
                           (i != 2 || dout_.brake_release_z);
     // Limit switches: the cycle one trips (an operator may reset, enable and move off it).
@@ -228,6 +235,7 @@ BackendResult CanopenBackend::write(std::int64_t, const BackendOutput& out) noex
     result = BackendResult::io_error;
     note("CAN %s: send failed: %s (%d)", cfg_.interface.c_str(), hal::code_name(ws.code), ws.detail);
   }
+  enabled_asked_ = enable;
   dout_.drive_enable = enable;
   // The z brake opens only once drive 3 holds the axis (operation enabled).
   dout_.brake_release_z = enable && fb_.drive[2].state == State::operation_enabled;

@@ -86,6 +86,8 @@ class CanopenBackend final : public Backend {
   std::array<std::uint32_t, 3> emcy_seen_{};
   std::array<std::uint32_t, 3> faults_seen_{};
   std::array<bool, 3> limit_before_{};
+  std::array<bool, 3> was_enabled_{};   // operation enabled while we asked for it, last read
+  bool enabled_asked_ = false;          // the last write asked for operation enabled
   std::uint64_t error_frames_seen_ = 0;
   std::int64_t feedback_wait_ns_ = 0;
   char text_[160] = {};
