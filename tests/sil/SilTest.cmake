@@ -10,7 +10,8 @@
 #   include(${PROJECT_SOURCE_DIR}/tests/sil/SilTest.cmake)
 include_guard(GLOBAL)
 
-set(CPM_SIL_RUNNER ${CMAKE_CURRENT_LIST_DIR}/run-in-vm.sh)
+# Global, not directory-scoped: the function is called from several folders.
+set_property(GLOBAL PROPERTY CPM_SIL_RUNNER ${CMAKE_CURRENT_LIST_DIR}/run-in-vm.sh)
 option(CPM_SIL_TESTS "Register the SIL tests (vcan/gpio-sim; boot a VM when the host has neither)" ON)
 
 function(cpm_add_sil_test)
@@ -27,9 +28,13 @@ function(cpm_add_sil_test)
   if(NOT ARG_TIMEOUT)
     set(ARG_TIMEOUT 300)
   endif()
-  if(NOT TEST sil.prepare)
+  get_property(CPM_SIL_RUNNER GLOBAL PROPERTY CPM_SIL_RUNNER)
+  # One sil.prepare for the whole project (`if(TEST ...)` sees only this folder).
+  get_property(prepared GLOBAL PROPERTY CPM_SIL_PREPARE_ADDED)
+  if(NOT prepared)
     add_test(NAME sil.prepare COMMAND bash ${CPM_SIL_RUNNER} --prepare --needs can,gpio)
     set_tests_properties(sil.prepare PROPERTIES LABELS sil TIMEOUT 1200 FIXTURES_SETUP cpm_sil_image)
+    set_property(GLOBAL PROPERTY CPM_SIL_PREPARE_ADDED TRUE)
   endif()
   # The guest has its own /tmp and /run: a tree under them is shared in.
   set(share "")
