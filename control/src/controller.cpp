@@ -55,7 +55,7 @@ Status Controller::step(const ControlInput& in, ControlOutput& out) const noexce
   // The reference through the calibrated inverse kinematics.
   Mat3 J_ref;
   if (Status s = kin::inverse(km, in.ref.p, in.kin, out.d_ref); !s) return s;
-  if (Status s = kin::jacobian(km, out.d_ref, in.ref.p, in.kin, J_ref); !s) return s;
+  if (Status s = m.jacobian(out.d_ref, in.ref.p, in.kin, J_ref); !s) return s;
   out.d_dot_ref = J_ref.partialPivLu().solve(in.ref.v);
 
   Vec3 F = Vec3::Zero();

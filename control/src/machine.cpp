@@ -136,15 +136,19 @@ Vec3 Machine::effect_forces(const Vec3& d, const Vec3& d_dot) const noexcept {
   return f;
 }
 
+Status Machine::jacobian(const Vec3& d, const Vec3& p, const kin::KinematicInputs& in,
+                         Mat3& J) const noexcept {
+  if (!constant_jacobian_) return kin::jacobian(kinematics(), d, p, in, J);
+  if (!all_finite(d) || !all_finite(p)) return Status::failure(Fault::not_finite);
+  J = J_;
+  return {};
+}
+
 Status Machine::task_state(const Vec3& d, const Vec3& d_dot, const kin::KinematicInputs& in,
                            TaskState& out) const noexcept {
   if (!all_finite(d_dot)) return Status::failure(Fault::not_finite);
   if (Status s = kin::forward(kinematics(), d, in, out.p); !s) return s;
-  if (constant_jacobian_) {
-    out.J = J_;
-  } else if (Status s = kin::jacobian(kinematics(), d, out.p, in, out.J); !s) {
-    return s;
-  }
+  if (Status s = jacobian(d, out.p, in, out.J); !s) return s;
   out.p_dot.noalias() = out.J * d_dot;
   return {};
 }

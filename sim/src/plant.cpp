@@ -41,17 +41,12 @@ Status Plant::acceleration(const Vec3& p, const Vec3& p_dot, const Vec3& force_c
   const kin::KinematicInputs& in = kin_in_;
   Mat3 J, J_inv;
   Vec3 d = Vec3::Zero();
-  if (m.has_constant_jacobian()) {
-    J = m.constant_jacobian();
-    J_inv = m.constant_jacobian_inverse();
-    // The actuator positions matter only to position-dependent effects.
-    if (m.has_additive_effects())
-      if (Status s = kin::inverse(m.kinematics(), p, in, d); !s) return s;
-  } else {
+  // Without kinematic effects J is constant and d matters only to
+  // position-dependent dynamic effects: skip what is not needed.
+  if (!m.has_constant_jacobian() || m.has_additive_effects())
     if (Status s = kin::inverse(m.kinematics(), p, in, d); !s) return s;
-    if (Status s = kin::jacobian(m.kinematics(), d, p, in, J); !s) return s;
-    J_inv = J.inverse();
-  }
+  if (Status s = m.jacobian(d, p, in, J); !s) return s;
+  J_inv = m.has_constant_jacobian() ? m.constant_jacobian_inverse() : Mat3(J.inverse());
   ctl::RigidBodyTerms t;
   if (Status s = m.rigid_body(p, p_dot, t); !s) return s;
   const Vec3 d_dot = J_inv * p_dot;
@@ -95,14 +90,11 @@ Status Plant::step(const Vec3& force_command, double dt) noexcept {
 }
 
 Status Plant::actuator_state(Vec3& d, Vec3& d_dot) const noexcept {
-  if (Status s = kin::inverse(truth_->kinematics(), p_, kin_in_, d); !s) return s;
-  if (truth_->has_constant_jacobian()) {
-    d_dot = truth_->constant_jacobian_inverse() * p_dot_;
-    return {};
-  }
   Mat3 J;
-  if (Status s = kin::jacobian(truth_->kinematics(), d, p_, kin_in_, J); !s) return s;
-  d_dot = J.partialPivLu().solve(p_dot_);
+  if (Status s = kin::inverse(truth_->kinematics(), p_, kin_in_, d); !s) return s;
+  if (Status s = truth_->jacobian(d, p_, kin_in_, J); !s) return s;
+  d_dot = truth_->has_constant_jacobian() ? Vec3(truth_->constant_jacobian_inverse() * p_dot_)
+                                          : Vec3(J.partialPivLu().solve(p_dot_));
   return {};
 }
 

@@ -106,6 +106,10 @@ class Machine {
                           Vec3& force) const noexcept;
   // Sum of the additive effect forces on each actuator (N).
   [[nodiscard]] Vec3 effect_forces(const Vec3& d, const Vec3& d_dot) const noexcept;
+  // J = dp/dd at (d, p): the prepared constant one when the planes carry no
+  // kinematic effects, else kin::jacobian.
+  Status jacobian(const Vec3& d, const Vec3& p, const kin::KinematicInputs& in,
+                  Mat3& J) const noexcept;
   // Platform state from encoder position and velocity through the calibrated kinematics.
   Status task_state(const Vec3& d, const Vec3& d_dot, const kin::KinematicInputs& in,
                     TaskState& out) const noexcept;
