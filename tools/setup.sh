@@ -11,6 +11,7 @@ packages=(
   libssl-dev               # SHA-256 of data files (libcrypto), model file provenance
   liblcm-dev liblcm-bin    # LCM transport and lcm-gen
   libgpiod-dev             # GPIO (v1 API, libgpiod 1.6)
+  clang libclang-rt-14-dev # fuzz/: libFuzzer with ASan/UBSan (clang 14 of bookworm)
   qemu-system-x86 xz-utils # SIL tests: boots Debian's kernel (vcan, gpio-sim) when the host has none
 )
 missing=()

@@ -8,8 +8,10 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <cstdint>
 #include <cstring>
 #include <map>
+#include <memory>
 #include <lcm/lcm-cpp.hpp>
 #include <sstream>
 
@@ -128,6 +130,15 @@ Validation validate_segment(const trajectory_command_t& c, const Vec3& start, co
     return reject(ack_t::REASON_INVALID, e.what());
   }
   const ctl::Trajectory& tr = *out.segment.get();
+  // Bounded before anything samples it: the checks below walk the segment
+  // at the loop's period, in the thread that also publishes the state.
+  const double T = tr.duration();
+  if (!std::isfinite(T) || T < 0.0)
+    return reject(ack_t::REASON_INVALID, "the segment's duration is not a finite time >= 0 s");
+  if (T > kMaxSegmentDuration)
+    return reject(ack_t::REASON_LIMIT, "the segment lasts " + std::to_string(T) + " s, more than the " +
+                                           std::to_string(kMaxSegmentDuration) +
+                                           " s one segment may last; send a long motion as consecutive segments");
   const Vec3 p0 = tr.sample(0.0).p;
   if ((p0 - start).norm() > 1e-6)
     return reject(ack_t::REASON_NOT_CONTINUOUS,
@@ -151,8 +162,59 @@ Server::Server(const DaemonConfig& cfg, ControlLoop& loop, ModelStore& models)
       scratch_(std::make_unique<Command>()) {
   lcm_ = std::make_unique<lcm::LCM>(cfg_.lcm.url);
   if (!lcm_->good()) throw Error("lcm: cannot open '" + cfg_.lcm.url + "' (is there a multicast route? see docs/daemon.md)");
-  lcm_->subscribe(cfg_.lcm.control_channel, &Server::on_control, this);
-  lcm_->subscribe(cfg_.lcm.trajectory_channel, &Server::on_trajectory, this);
+  // Untyped subscriptions: receive() decodes. lcm-gen's typed decoding
+  // trusts a string's length prefix (a length of 0 or below throws
+  // std::length_error out of the LCM callback and ends the daemon).
+  lcm_->subscribe(cfg_.lcm.control_channel, &Server::on_raw, this);
+  lcm_->subscribe(cfg_.lcm.trajectory_channel, &Server::on_raw, this);
+}
+
+void Server::on_raw(const lcm::ReceiveBuffer* rbuf, const std::string& channel) {
+  receive(channel, rbuf->data, rbuf->data_size);
+}
+
+namespace {
+
+// control_command_t's only string, model_path, is its last field: its int32
+// length prefix (which counts the NUL) sits 4 bytes before the end of a
+// well-formed message. A length below 1 makes the generated decoder call
+// std::string::assign with a negative size.
+bool control_string_length_ok(const void* data, std::size_t size) {
+  constexpr std::size_t kFixed = 8 + 8 + 8 + 1 + 1 + 1 + 3 * 8 + 3 * 8;  // hash .. kd
+  if (size < kFixed + 4) return false;
+  const auto* p = static_cast<const std::uint8_t*>(data) + kFixed;
+  const std::int32_t len = static_cast<std::int32_t>((std::uint32_t{p[0]} << 24) | (std::uint32_t{p[1]} << 16) |
+                                                     (std::uint32_t{p[2]} << 8) | std::uint32_t{p[3]});
+  return len >= 1 && static_cast<std::size_t>(len) <= size - kFixed - 4;
+}
+
+}  // namespace
+
+bool Server::receive(const std::string& channel, const void* data, std::size_t size) {
+  if (size > static_cast<std::size_t>(INT32_MAX)) return ++undecodable_, false;
+  const int n = static_cast<int>(size);
+  try {
+    if (channel == cfg_.lcm.control_channel) {
+      control_command_t m;
+      if (!control_string_length_ok(data, size) || m.decode(data, 0, n) < 0) return ++undecodable_, false;
+      on_control(nullptr, channel, &m);
+      return true;
+    }
+    if (channel == cfg_.lcm.trajectory_channel) {
+      // Decoded on the heap: the message is about 5.6 kB.
+      auto m = std::make_unique<trajectory_command_t>();
+      if (m->decode(data, 0, n) < 0) return ++undecodable_, false;
+      on_trajectory(nullptr, channel, m.get());
+      return true;
+    }
+  } catch (const std::exception& e) {
+    // Nothing a sender writes may end the daemon; a message that cannot be
+    // handled is dropped, loudly.
+    std::fprintf(stderr, "cpmd: dropped a message on %s: %s\n", channel.c_str(), e.what());
+    ++undecodable_;
+    return false;
+  }
+  return false;
 }
 
 Server::~Server() = default;

@@ -159,6 +159,10 @@ void split_lines(Table& tb, std::string_view text) {
       if (!is_metadata_key(key)) continue;  // an ordinary comment that happens to hold '='
       const std::string k(key);
       const std::string v(trim(body.substr(eq + 1)));
+      // A lone CR (not a CRLF line end) would make a value no writer can
+      // write back (found by fuzz/targets/csv_data.cpp).
+      if (v.find('\r') != std::string::npos)
+        tb.fail(number, "metadata '" + k + "': the value holds a carriage return; a value is one line");
       if (const auto it = tb.info.metadata.find(k); it != tb.info.metadata.end()) {
         if (it->second != v)
           tb.fail(number, "metadata '" + k + "' given twice with different values (first on line " +

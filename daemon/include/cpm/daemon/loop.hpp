@@ -112,6 +112,10 @@ std::int64_t histogram_bin_floor(int k) noexcept;
 class ControlLoop {
  public:
   static constexpr int kQueueCapacity = 32;  // trajectory segments
+  // Commands taken from the command queue per cycle, at most: a flood of
+  // commands cannot lengthen a cycle (the rest wait in the queue, and the
+  // server answers REASON_BUSY when it is full).
+  static constexpr int kCommandsPerCycle = 4;
 
   // Keeps references to `backend` and `machine`; the controller refers to `machine`.
   ControlLoop(const DaemonConfig& config, Backend& backend, const ctl::Machine& machine,

@@ -46,6 +46,10 @@ struct Validation {
   Segment segment;
 };
 
+// The longest segment accepted (s): validation samples a segment at the
+// loop's period in the LCM thread, so its length bounds that thread's pause.
+inline constexpr double kMaxSegmentDuration = 600.0;
+
 // Build and validate a segment starting at `start` (m) against the model,
 // the soft limits and the velocity/acceleration limits. Pure, for tests.
 Validation validate_segment(const cpm_msgs::trajectory_command_t& cmd, const Vec3& start,
@@ -59,8 +63,19 @@ class Server {
   void run(const std::atomic<bool>& stop);
   // Publish what the loop queued (acks, snapshots, statistics); returns how many.
   int drain();
+  // One LCM message as received on `channel`: decoded and handled exactly as
+  // run() does (its subscriptions call this). Bytes that do not decode, or
+  // whose strings carry an impossible length, are dropped and counted;
+  // nothing a sender puts in a message escapes as an exception (fuzz/,
+  // tests/daemon/test_hostile_*). Returns whether the message was handled.
+  bool receive(const std::string& channel, const void* data, std::size_t size);
+  [[nodiscard]] std::int64_t undecodable() const noexcept { return undecodable_; }
+  // The daemon's LCM handle (tests on memq:// subscribe to the acks and
+  // publish raw bytes on it; handle() then runs the daemon's subscriptions).
+  [[nodiscard]] lcm::LCM& bus() noexcept { return *lcm_; }
 
  private:
+  void on_raw(const lcm::ReceiveBuffer* rbuf, const std::string& channel);
   void on_control(const lcm::ReceiveBuffer* rbuf, const std::string& channel,
                   const cpm_msgs::control_command_t* msg);
   void on_trajectory(const lcm::ReceiveBuffer* rbuf, const std::string& channel,
@@ -82,6 +97,7 @@ class Server {
   ctl::ControlLaw law_;
   ctl::Gains gains_;
   std::unique_ptr<Command> scratch_;
+  std::int64_t undecodable_ = 0;
   std::map<std::int64_t, const ctl::Machine*> pending_models_;
   std::map<std::int64_t, std::pair<ctl::ControlLaw, ctl::Gains>> pending_laws_;  // a Command is large: build it off the stack
 };
