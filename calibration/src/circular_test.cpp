@@ -208,6 +208,11 @@ CircularTestResult run_circular_test(const ctl::MachineModel& truth_model,
   r.ccw = run_one(truth, model, s, r.pivot, +1.0, servo_sq, servo_n);
   r.cw = run_one(truth, model, s, r.pivot, -1.0, servo_sq, servo_n);
   r.servo_rms = servo_n > 0 ? std::sqrt(servo_sq / static_cast<double>(servo_n)) : 0.0;
+  evaluate_circular_traces(r);
+  return r;
+}
+
+void evaluate_circular_traces(CircularTestResult& r) {
   r.ccw_metrics = metrics(r.ccw);
   r.cw_metrics = metrics(r.cw);
   r.F_max = std::max(r.ccw_metrics.F_max, r.cw_metrics.F_max);
@@ -230,7 +235,6 @@ CircularTestResult run_circular_test(const ctl::MachineModel& truth_model,
     r.H = std::max(r.H, std::abs(e - at_angle(cw_sorted, r.ccw.angle[k])));
   }
   r.G_bidirectional = hi - lo;
-  return r;
 }
 
 std::string circular_test_svg(const CircularTestResult& r, const std::string& title) {

@@ -40,13 +40,17 @@ double Noise::sigma() const {
 
 std::vector<SimulatedPose> simulate_poses(const ctl::MachineModel& truth,
                                           const ctl::MachineModel& controller,
-                                          const std::vector<Vec3>& commanded) {
+                                          const std::vector<Vec3>& commanded,
+                                          const std::vector<kin::KinematicInputs>& inputs) {
   truth.validate();
   controller.validate();
+  if (!inputs.empty() && inputs.size() != commanded.size())
+    throw Error("simulated measurement: " + std::to_string(inputs.size()) + " kinematic inputs for " +
+                std::to_string(commanded.size()) + " poses");
   std::vector<SimulatedPose> out;
   out.reserve(commanded.size());
-  const kin::KinematicInputs in;
   for (std::size_t j = 0; j < commanded.size(); ++j) {
+    const kin::KinematicInputs in = inputs.empty() ? kin::KinematicInputs{} : inputs[j];
     SimulatedPose s;
     s.commanded = commanded[j];
     if (Status st = kin::check_pose(controller.kinematics, controller.strokes, s.commanded, in); !st)
@@ -64,9 +68,38 @@ std::vector<SimulatedPose> simulate_poses(const ctl::MachineModel& truth,
   return out;
 }
 
+std::vector<kin::KinematicInputs> sequence_inputs(const ctl::MachineModel& controller,
+                                                  const std::vector<Vec3>& commanded, double dwell,
+                                                  double t0) {
+  std::vector<kin::KinematicInputs> out;
+  kin::KinematicInputs in;
+  Vec3 prev = Vec3::Zero();
+  for (std::size_t j = 0; j < commanded.size(); ++j) {
+    Vec3 d;
+    if (Status st = kin::inverse(controller.kinematics, commanded[j], in, d); !st)
+      throw Error("simulated measurement: " + where(j, commanded[j]) + ": " + describe(st));
+    if (j > 0)
+      for (int i = 0; i < 3; ++i)
+        if (d[i] != prev[i]) in.dir[i] = d[i] > prev[i] ? +1 : -1;
+    in.t = t0 + dwell * static_cast<double>(j);
+    out.push_back(in);
+    prev = d;
+  }
+  return out;
+}
+
+namespace {
+void add_inputs(io::CommonColumns& extra, const std::vector<kin::KinematicInputs>& inputs) {
+  for (const auto& in : inputs) {
+    extra.t.push_back(in.t);
+    extra.dir.push_back(in.dir);
+  }
+}
+}  // namespace
+
 io::BallbarData simulate_ballbar(const ctl::MachineModel& truth, const ctl::MachineModel& controller,
                                  const std::vector<Vec3>& commanded, const BallbarSimulation& sim) {
-  const auto poses = simulate_poses(truth, controller, commanded);
+  const auto poses = simulate_poses(truth, controller, commanded, sim.inputs);
   NoiseSource noise(sim.noise);
   io::BallbarData b;
   b.pivot = sim.pivot_nominal;
@@ -76,13 +109,15 @@ io::BallbarData simulate_ballbar(const ctl::MachineModel& truth, const ctl::Mach
     b.d.push_back(s.d);
     b.length.push_back((s.p_true - sim.pivot_true).norm() - sim.length_offset + noise());
   }
+  add_inputs(b.extra, sim.inputs);
   return b;
 }
 
 io::PositionData simulate_positions(const ctl::MachineModel& truth,
                                     const ctl::MachineModel& controller,
-                                    const std::vector<Vec3>& commanded, const Noise& noise) {
-  const auto poses = simulate_poses(truth, controller, commanded);
+                                    const std::vector<Vec3>& commanded, const Noise& noise,
+                                    const std::vector<kin::KinematicInputs>& inputs) {
+  const auto poses = simulate_poses(truth, controller, commanded, inputs);
   NoiseSource n(noise);
   io::PositionData out;
   out.sigma = noise.sigma();
@@ -92,6 +127,7 @@ io::PositionData simulate_positions(const ctl::MachineModel& truth,
     const double a = n(), b = n(), c = n();
     out.p.push_back(s.p_true + Vec3(a, b, c));
   }
+  add_inputs(out.extra, inputs);
   return out;
 }
 

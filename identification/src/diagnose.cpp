@@ -5,6 +5,7 @@
 #include <numbers>
 #include <sstream>
 
+#include "internal.hpp"
 #include "cpm/identification/stats.hpp"
 #include "cpm/identification/structure.hpp"
 #include "cpm/kinematics/kinematic_effects.hpp"
@@ -38,23 +39,6 @@ Eigen::MatrixXd hcat(std::initializer_list<Eigen::VectorXd> cols) {
   Eigen::Index j = 0;
   for (const auto& c : cols) X.col(j++) = c;
   return X;
-}
-
-// Golden-section minimum of f on [a, b] (f unimodal there, or close to it).
-template <class F>
-double golden(F&& f, double a, double b, int iters, double& fbest) {
-  const double g = (std::sqrt(5.0) - 1.0) / 2.0;
-  double x1 = b - g * (b - a), x2 = a + g * (b - a);
-  double f1 = f(x1), f2 = f(x2);
-  for (int i = 0; i < iters; ++i) {
-    if (f1 < f2) {
-      b = x2; x2 = x1; f2 = f1; x1 = b - g * (b - a); f1 = f(x1);
-    } else {
-      a = x1; x1 = x2; f1 = f2; x2 = a + g * (b - a); f2 = f(x2);
-    }
-  }
-  fbest = std::min(f1, f2);
-  return f1 < f2 ? x1 : x2;
 }
 
 // What each effect's force depends on, for advice on separating two of them.
@@ -104,10 +88,14 @@ std::string separate_advice(const CandidateResult& a, const CandidateResult& b,
   return "measure with other speeds, both directions and another payload";
 }
 
+}  // namespace
+
+namespace detail {
 // Fill the statistics of a fitted candidate.
-void score(CandidateResult& c, const Engine& E, double rss_parent, int q, int k_total,
+void score_candidate(CandidateResult& c, const Engine& E, double rss_parent, int q, int k_total,
            double baseline_ms) {
   const double N = E.rows();
+  c.k_total = k_total;
   c.rms_after = Engine::rms(c.residual_after);
   c.explained = baseline_ms > 0.0 ? std::clamp(1.0 - c.rms_after * c.rms_after / baseline_ms, 0.0, 1.0) : 0.0;
   const double base_ms = E.rows() ? Engine::rms(E.base_fit().residual) : 0.0;
@@ -126,7 +114,7 @@ void score(CandidateResult& c, const Engine& E, double rss_parent, int q, int k_
   c.delta_bic = ne * std::log(c.rss / rss_parent) + q * std::log(ne);
 }
 
-}  // namespace
+}  // namespace detail
 
 std::string CandidateResult::label() const { return effect + axis_label(axis); }
 
@@ -371,7 +359,7 @@ CandidateResult evaluate_dynamic_candidate(const MotionProblem& P, const Engine&
         if (v < best) { best = v; bx = x; }
       }
       double fb = 0.0;
-      const double xr = golden(cost, std::max(std::log(lo), bx - step), std::min(std::log(hi), bx + step), 12, fb);
+      const double xr = detail::golden(cost, std::max(std::log(lo), bx - step), std::min(std::log(hi), bx + step), 12, fb);
       if (fb < best) bx = xr;
       const double vs = std::exp(bx);
       const Eigen::MatrixXd X = cols(vs);
@@ -457,7 +445,7 @@ CandidateResult evaluate_dynamic_candidate(const MotionProblem& P, const Engine&
       for (int q : peaks) {
         const double k0 = kmin + q * dk;
         double fb = 0.0;
-        const double kk = golden([&](double kx) { return E.rss(cols(1.0 / kx)); },
+        const double kk = detail::golden([&](double kx) { return E.rss(cols(1.0 / kx)); },
                                  std::max(kmin, k0 - dk), std::min(kmax, k0 + dk), 12, fb);
         if (fb < best) { best = fb; blam = 1.0 / kk; }
       }
@@ -561,147 +549,15 @@ Diagnosis diagnose_motion(const io::MotionData& data, const ctl::Machine& model,
   const int rank = E.base_rank();
   for (const auto& [name, axis] : todo) {
     CandidateResult c = evaluate_dynamic_candidate(P, E, model.model(), name, axis, opt);
-    if (name == "payload_mass") score(c, E, E.rss_given(), 1, 1, baseline_ms);
-    else if (name == "inertia_error") score(c, E, E.rss_given(), rank, rank, baseline_ms);
-    else score(c, E, E.rss_base(), c.n_params, rank + c.n_params, baseline_ms);
+    if (name == "payload_mass") detail::score_candidate(c, E, E.rss_given(), 1, 1, baseline_ms);
+    else if (name == "inertia_error") detail::score_candidate(c, E, E.rss_given(), rank, rank, baseline_ms);
+    else detail::score_candidate(c, E, E.rss_base(), c.n_params, rank + c.n_params, baseline_ms);
     D.candidates.push_back(std::move(c));
   }
-  // Look-elsewhere: the family of candidates and the search trials within each.
-  const double family = static_cast<double>(D.candidates.size());
-  double ne_ref = 0.0;
-  for (const auto& c : D.candidates) ne_ref = std::max(ne_ref, c.n_eff);
-  for (auto& c : D.candidates) {
-    c.p_adjusted = std::min(1.0, c.p_value * c.trials * family);
-    c.significant = c.identifiable && c.p_adjusted < opt.alpha && c.delta_bic < 0.0 &&
-                    !(c.params.size() && c.params[0].at_bound && c.params[0].value == 0.0);
-    const int k_total = c.effect == "payload_mass" ? 1 : (c.effect == "inertia_error" ? rank : rank + c.n_params);
-    c.score = c.rss > 0.0 && E.rss_given() > 0.0
-                  ? ne_ref * std::log(c.rss / E.rss_given()) + k_total * std::log(std::max(2.0, ne_ref))
-                  : 0.0;
-  }
-  std::stable_sort(D.candidates.begin(), D.candidates.end(), [](const auto& a, const auto& b) {
-    if (a.significant != b.significant) return a.significant;
-    if (a.identifiable != b.identifiable) return a.identifiable;
-    return a.score < b.score;
-  });
-
-  // Confounding between candidates: how much of one's fitted signature the
-  // other's columns reproduce (after the base is taken out).
   const AxisExcitation ex = excitation(P);
-  const int top = std::min<int>(static_cast<int>(D.candidates.size()), 8);
-  std::vector<Eigen::MatrixXd> Xp(D.candidates.size());
-  for (std::size_t j = 0; j < D.candidates.size(); ++j)
-    if (D.candidates[j].identifiable && D.candidates[j].columns.cols() && D.candidates[j].refits_base)
-      Xp[j] = E.project_off_base(D.candidates[j].columns);
-  for (int a = 0; a < top; ++a) {
-    CandidateResult& ca = D.candidates[a];
-    if (Xp[a].size() == 0 || !ca.identifiable) continue;
-    const Eigen::VectorXd u = E.project_off_base(ca.fitted);
-    if (u.squaredNorm() <= 0.0) continue;
-    for (std::size_t b = 0; b < D.candidates.size(); ++b) {
-      if (static_cast<int>(b) == a || Xp[b].size() == 0) continue;
-      const Eigen::VectorXd coef = Xp[b].colPivHouseholderQr().solve(u);
-      const double share = std::clamp((Xp[b] * coef).squaredNorm() / u.squaredNorm(), 0.0, 1.0);
-      if (share < 0.81) continue;
-      const CandidateResult& cb = D.candidates[b];
-      ca.confounded.push_back({cb.label(), cb.effect, cb.axis, std::sqrt(share), separate_advice(ca, cb, ex)});
-    }
-  }
-
-  // A candidate the base absorbs completely (e.g. a constant force when the
-  // axis moves one way only) still looks like others on its axis: report the
-  // pair from the raw columns, so the verdict does not hide it.
-  for (int a = 0; a < top; ++a) {
-    CandidateResult& ca = D.candidates[a];
-    if (ca.columns.cols() == 0 || ca.axis < 0) continue;
-    const Eigen::VectorXd ua = E.problem().w.cwiseProduct(ca.columns.col(0));
-    for (std::size_t b = 0; b < D.candidates.size(); ++b) {
-      const CandidateResult& cb = D.candidates[b];
-      if (static_cast<int>(b) == a || cb.identifiable || cb.columns.cols() == 0 || cb.axis != ca.axis) continue;
-      const Eigen::VectorXd ub = E.problem().w.cwiseProduct(cb.columns.col(0));
-      const double den = ua.norm() * ub.norm();
-      const double cosab = den > 0.0 ? std::fabs(ua.dot(ub)) / den : 0.0;
-      if (cosab < 0.85) continue;
-      bool dup = false;
-      for (const auto& o : ca.confounded) dup |= o.with == cb.label();
-      if (!dup)
-        ca.confounded.push_back({cb.label(), cb.effect, cb.axis, cosab,
-                                 separate_advice(ca, cb, ex) + " (" + cb.label() + " is absorbed by the base in these data)"});
-    }
-  }
-
-  // Verdict and forward selection.
-  if (!D.candidates.empty() && D.candidates[0].significant) {
-    D.verdict = 0;
-    const CandidateResult& v = D.candidates[0];
-    std::vector<std::string> alts;
-    for (const auto& cf : v.confounded) {
-      if (cf.effect.empty() || cf.correlation < 0.85) continue;
-      for (const auto& o : D.candidates)
-        if (o.label() == cf.with && ((o.significant && o.score - v.score < 10.0) || !o.identifiable)) {
-          D.ambiguous = true;
-          alts.push_back(cf.with + " (" + cf.separate_by + ")");
-        }
-    }
-    std::ostringstream os;
-    os << "missing: " << v.label() << " — ";
-    for (std::size_t j = 0; j < v.params.size(); ++j)
-      os << (j ? ", " : "") << v.params[j].name << " = " << fmt(v.params[j].value, 4) << " "
-         << v.params[j].unit;
-    os << "; it brings the residual from " << fmt(D.baseline_rms, 3) << " to " << fmt(v.rms_after, 3)
-       << " N RMS (noise floor about " << fmt(D.noise_floor, 3) << " N)";
-    if (D.ambiguous) {
-      os << ". These data cannot tell it apart from ";
-      for (std::size_t j = 0; j < alts.size(); ++j) os << (j ? "; " : "") << alts[j];
-    }
-    D.verdict_text = os.str();
-    // Forward selection of further effects on top of the verdict.
-    Eigen::MatrixXd acc = v.refits_base ? v.columns : Eigen::MatrixXd(E.rows(), 0);
-    JointFit cur = E.fit(acc);
-    std::vector<bool> used(D.candidates.size(), false);
-    used[0] = true;
-    for (int step = 0; step < opt.max_forward_steps; ++step) {
-      int best = -1;
-      double best_bic = 0.0;
-      JointFit best_fit;
-      for (std::size_t j = 0; j < D.candidates.size(); ++j) {
-        const CandidateResult& c = D.candidates[j];
-        if (used[j] || !c.significant || !c.refits_base || c.columns.cols() == 0) continue;
-        Eigen::MatrixXd X(E.rows(), acc.cols() + c.columns.cols());
-        X << acc, c.columns;
-        const JointFit f = E.fit(X);
-        if (!f.full_rank) continue;
-        const int q = static_cast<int>(c.columns.cols()) + (c.n_params - static_cast<int>(c.columns.cols()));
-        const double N = E.rows(), ne = std::max(f.n_eff, 10.0);
-        const int k_total = rank + static_cast<int>(X.cols());
-        const double F = ((cur.rss - f.rss) / q) / (f.rss / std::max(1.0, N - k_total)) * (ne / N);
-        const double p = std::min(1.0, f_tail(F, q, std::max(1.0, ne - k_total)) * c.trials * family);
-        const double dbic = ne * std::log(f.rss / cur.rss) + q * std::log(ne);
-        if (p < opt.alpha && dbic < best_bic) {
-          best = static_cast<int>(j);
-          best_bic = dbic;
-          best_fit = f;
-        }
-      }
-      if (best < 0) break;
-      used[best] = true;
-      D.also.push_back(best);
-      Eigen::MatrixXd X(E.rows(), acc.cols() + D.candidates[best].columns.cols());
-      X << acc, D.candidates[best].columns;
-      acc = X;
-      cur = best_fit;
-    }
-    D.residual_final = v.refits_base || !D.also.empty() ? cur.residual : v.residual_after;
-    if (!D.also.empty()) {
-      D.verdict_text += ". Also significant on top of it: ";
-      for (std::size_t j = 0; j < D.also.size(); ++j)
-        D.verdict_text += (j ? ", " : "") + D.candidates[D.also[j]].label();
-    }
-  } else {
-    D.verdict_text = "none: no effect of the library explains a significant part of the residual "
-                     "(RMS " + fmt(D.baseline_rms, 3) + " N, noise floor about " + fmt(D.noise_floor, 3) + " N)";
-    D.residual_final = E.base_fit().residual;
-  }
+  detail::rank_and_decide(D, E, opt, [&](const CandidateResult& a, const CandidateResult& b) {
+    return separate_advice(a, b, ex);
+  });
   if (!E.unidentifiable_base().empty()) {
     std::string names;
     for (int j : E.unidentifiable_base()) names += (names.empty() ? "" : ", ") + P.base_params[j].name;

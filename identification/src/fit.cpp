@@ -1,5 +1,7 @@
 #include "cpm/identification/fit.hpp"
 
+#include "cpm/kinematics/kinematic_effects.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <sstream>
@@ -40,8 +42,9 @@ FitRequest parse_fit_request(const std::string& spec) {
   const auto c = spec.find(':');
   r.effect = spec.substr(0, c);
   const auto t = ctl::dynamic_effect_from_name(r.effect);
-  check_effect_for_kind(r.effect, "motion");
-  const bool per_axis = ctl::info(*t).per_axis;
+  const bool kinematic = kin::kinematic_effect_from_name(r.effect).has_value();
+  if (!kinematic) check_effect_for_kind(r.effect, "motion");  // unknown names
+  const bool per_axis = kinematic || ctl::info(*t).per_axis;
   if (c == std::string::npos) {
     if (per_axis) throw Error("--add " + spec + ": " + r.effect + " acts on one axis; write " + r.effect + ":AXIS (1, 2 or 3)");
     return r;

@@ -279,19 +279,32 @@ std::string summary_json(const ResidualSummary& s, const MotionProblem& P, const
 
 std::string diagnosis_text(const Diagnosis& D) {
   std::ostringstream o;
-  const MotionProblem& P = D.motion;
-  o << "data: " << D.data_file << " (kind motion, " << D.samples << " samples, " << D.rows / 3 << " filtered rows, "
-    << P.segments << " segment(s))\n";
-  o << "acceleration: " << P.accel_source << "; it adds about " << num(P.force_noise.maxCoeff(), 3) << " N\n";
-  o << "residual of the model as given: RMS " << num(D.baseline_rms) << " N (axes " << num(D.baseline_axis_rms[0], 3)
-    << ", " << num(D.baseline_axis_rms[1], 3) << ", " << num(D.baseline_axis_rms[2], 3) << "), max "
-    << num(D.baseline_max) << " N; noise floor about " << num(D.noise_floor, 3) << " N\n";
-  o << "after refitting the base (A, B, C, E, plane tilts): RMS " << num(D.base_refit_rms) << " N\n\n";
+  const bool motion = D.kind == "motion";
+  // Kinematic data in µm on screen (SI inside and in the JSON).
+  const double k = motion ? 1.0 : 1e6;
+  const char* u = motion ? "N" : "µm";
+  if (motion) {
+    const MotionProblem& P = D.motion;
+    o << "data: " << D.data_file << " (kind motion, " << D.samples << " samples, " << D.rows / 3 << " filtered rows, "
+      << P.segments << " segment(s))\n";
+    o << "acceleration: " << P.accel_source << "; it adds about " << num(P.force_noise.maxCoeff(), 3) << " N\n";
+    o << "residual of the model as given: RMS " << num(D.baseline_rms) << " N (axes " << num(D.baseline_axis_rms[0], 3)
+      << ", " << num(D.baseline_axis_rms[1], 3) << ", " << num(D.baseline_axis_rms[2], 3) << "), max "
+      << num(D.baseline_max) << " N; noise floor about " << num(D.noise_floor, 3) << " N\n";
+    o << "after refitting the base (A, B, C, E, plane tilts): RMS " << num(D.base_refit_rms) << " N\n\n";
+  } else {
+    o << "data: " << D.data_file << " (kind " << D.kind << ", " << D.samples << " samples, " << D.rows << " readings)\n";
+    o << "residual (model - measurement) of the model as given: RMS " << num(D.baseline_rms * k) << " µm, max "
+      << num(D.baseline_max * k) << " µm\n";
+    o << "after calibrating the base (" << (D.kind == "ballbar" ? "beta', dq, dl when the bar is not calibrated" : "the 12 plane parameters")
+      << "): RMS " << num(D.base_refit_rms * k) << " µm; noise floor about " << num(D.noise_floor * k, 3) << " µm\n\n";
+  }
   o << "rank effect                      RMS after  explained  p(adj)     dBIC   signif  parameters\n";
-  int k = 0;
+  o << "                                 (" << u << ")\n";
+  int rank = 0;
   for (const auto& c : D.candidates) {
     char b[200];
-    std::snprintf(b, sizeof b, "%3d  %-27s %9.4g  %8.1f%%  %-9.2g %7.1f  %-6s  ", ++k, c.label().c_str(), c.rms_after,
+    std::snprintf(b, sizeof b, "%3d  %-27s %9.4g  %8.1f%%  %-9.2g %7.1f  %-6s  ", ++rank, c.label().c_str(), c.rms_after * k,
                   100.0 * c.explained, c.p_adjusted, c.delta_bic,
                   c.significant ? "YES" : (c.identifiable ? "no" : "n/a"));
     o << b;
@@ -310,7 +323,11 @@ std::string diagnosis_text(const Diagnosis& D) {
   o << "\nVERDICT: " << D.verdict_text << "\n";
   if (!D.structure.empty()) {
     o << "\nstructure no library effect explains (in the residual after the verdict):\n";
-    for (const auto& f : D.structure) o << "  - " << f.text << " (" << num(f.z, 3) << " sigma)\n";
+    for (const auto& f : D.structure) {
+      o << "  - " << f.text;
+      if (f.z > 0.0) o << " (" << num(f.z, 3) << " sigma)";
+      o << "\n";
+    }
   } else {
     o << "\nno further structure found in what remains (direction, periodic in position or time, trend, step, bump)\n";
   }
@@ -323,11 +340,14 @@ std::string diagnosis_json(const Diagnosis& D) {
   std::ostringstream o;
   auto axis = [](int a) { return a >= 0 ? std::to_string(a + 1) : std::string("null"); };
   const MotionProblem& P = D.motion;
-  o << "{\n \"kind\": \"motion\",\n \"samples\": " << D.samples << ",\n \"rows\": " << D.rows
-    << ",\n \"units\": \"N\",\n \"data_file\": " << json_string(D.data_file) << ",\n \"model_file\": "
-    << json_string(D.model_file) << ",\n \"acceleration\": {\"source\": " << json_string(P.accel_source)
-    << ", \"filter_half_width_samples\": " << P.half_width << ", \"force_noise\": " << json_num(P.force_noise.maxCoeff())
-    << "},\n \"baseline\": {\"rms\": " << json_num(D.baseline_rms) << ", \"max\": " << json_num(D.baseline_max)
+  o << "{\n \"kind\": " << json_string(D.kind) << ",\n \"samples\": " << D.samples << ",\n \"rows\": " << D.rows
+    << ",\n \"units\": " << json_string(D.units) << ",\n \"data_file\": " << json_string(D.data_file) << ",\n \"model_file\": "
+    << json_string(D.model_file) << ",\n";
+  if (D.kind == "motion")
+    o << " \"acceleration\": {\"source\": " << json_string(P.accel_source)
+      << ", \"filter_half_width_samples\": " << P.half_width << ", \"force_noise\": " << json_num(P.force_noise.maxCoeff())
+      << "},\n";
+  o << " \"baseline\": {\"rms\": " << json_num(D.baseline_rms) << ", \"max\": " << json_num(D.baseline_max)
     << ", \"axis_rms\": [" << json_num(D.baseline_axis_rms[0]) << ", " << json_num(D.baseline_axis_rms[1]) << ", "
     << json_num(D.baseline_axis_rms[2]) << "]},\n \"base_refit\": {\"rms\": " << json_num(D.base_refit_rms)
     << "},\n \"noise_floor\": " << json_num(D.noise_floor) << ",\n \"candidates\": [";

@@ -78,6 +78,11 @@ CircularTestResult run_circular_test(const ctl::MachineModel& truth,
                                      const ctl::MachineModel& controller,
                                      const CircularTestSpec& spec);
 
+// The figures (G per run and bidirectional, H, F) of the traces r.ccw and
+// r.cw already in `r` (both non-empty): for traces measured elsewhere, e.g.
+// a ball-bar file read from a real circular test.
+void evaluate_circular_traces(CircularTestResult& r);
+
 // A self-contained SVG polar plot as a ball-bar user knows it: the nominal
 // circle, the two runs' radial deviations magnified (scale rings in µm),
 // and the figures.

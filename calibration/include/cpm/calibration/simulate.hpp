@@ -32,9 +32,20 @@ struct SimulatedPose {
 
 // Throws Error naming the pose and the reason when a commanded point is
 // outside the controller's workspace or the truth cannot reach it.
+// `inputs` (empty, or one per pose): the direction each axis last moved and
+// the time of each pose, for a truth with backlash or thermal drift; the
+// controller sees the same inputs.
 std::vector<SimulatedPose> simulate_poses(const ctl::MachineModel& truth,
                                           const ctl::MachineModel& controller,
-                                          const std::vector<Vec3>& commanded);
+                                          const std::vector<Vec3>& commanded,
+                                          const std::vector<kin::KinematicInputs>& inputs = {});
+
+// The inputs of visiting the poses in order, `dwell` seconds apart from
+// `t0`: each axis' direction is that of its move into the pose (the first
+// pose and an axis that does not move keep the previous one, initially +1).
+std::vector<kin::KinematicInputs> sequence_inputs(const ctl::MachineModel& controller,
+                                                  const std::vector<Vec3>& commanded,
+                                                  double dwell, double t0 = 0.0);
 
 struct BallbarSimulation {
   Vec3 pivot_nominal = Vec3(0.430, 0.430, 0.530);  // declared in the file (m)
@@ -42,6 +53,9 @@ struct BallbarSimulation {
   double length_offset = 0.0;                      // dl_true (m): reading = true distance - dl
   bool length_offset_known = true;                 // written to the file's metadata
   Noise noise;
+  // One per pose, or empty: see simulate_poses. When given, the file gets
+  // the columns t and dir1..dir3.
+  std::vector<kin::KinematicInputs> inputs;
 };
 
 io::BallbarData simulate_ballbar(const ctl::MachineModel& truth, const ctl::MachineModel& controller,
@@ -49,6 +63,7 @@ io::BallbarData simulate_ballbar(const ctl::MachineModel& truth, const ctl::Mach
 
 io::PositionData simulate_positions(const ctl::MachineModel& truth,
                                     const ctl::MachineModel& controller,
-                                    const std::vector<Vec3>& commanded, const Noise& noise);
+                                    const std::vector<Vec3>& commanded, const Noise& noise,
+                                    const std::vector<kin::KinematicInputs>& inputs = {});
 
 }  // namespace cpm::cal

@@ -17,6 +17,7 @@
 //     structure no library effect explains (structure.hpp).
 #pragma once
 
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
@@ -25,6 +26,8 @@
 #include "cpm/identification/motion.hpp"
 
 namespace cpm::ident {
+
+struct KinematicProblem;  // kinematic.hpp
 
 struct ParamEstimate {
   std::string name, unit;
@@ -55,6 +58,7 @@ struct CandidateResult {
   double delta_bic = 0.0;   // against its nested parent (< 0 favours the candidate)
   double score = 0.0;       // BIC against the model as given, for ranking (lower first)
   int n_params = 0;         // including searched ones
+  int k_total = 0;          // parameters fitted in all (base included) for the test
   double trials = 1.0;      // effective number of independent search trials
   double n_eff = 0.0;
   bool identifiable = true;
@@ -88,7 +92,7 @@ struct DiagnoseOptions {
 };
 
 struct Diagnosis {
-  std::string kind = "motion";
+  std::string kind = "motion";      // "motion", "ballbar" or "position"
   std::string units = "N";
   std::string data_file, model_file;
   int samples = 0;                  // rows of the file
@@ -107,7 +111,8 @@ struct Diagnosis {
   std::vector<std::string> notes;
   std::vector<std::string> warnings;
   Eigen::VectorXd residual_final;   // after the verdict's effects (or the base refit)
-  MotionProblem motion;             // the processed data (plots, summaries)
+  MotionProblem motion;             // the processed data (plots, summaries), kind motion
+  std::shared_ptr<const KinematicProblem> kinematic;  // kinds ballbar and position
 };
 
 // Refuses (Error) an effect name that is unknown or that this data kind cannot show.

@@ -1,0 +1,162 @@
+#include <algorithm>
+#include <cmath>
+#include <sstream>
+
+#include "internal.hpp"
+
+namespace cpm::ident::detail {
+namespace {
+std::string fmt(double v, int prec = 3) {
+  std::ostringstream os;
+  os.precision(prec);
+  os << v;
+  return os.str();
+}
+}  // namespace
+
+std::string amount(double v, const std::string& units) {
+  if (units == "m") return fmt(v * 1e6, 3) + " µm";
+  return fmt(v, 3) + " " + units;
+}
+
+void rank_and_decide(Diagnosis& D, const Engine& E, const DiagnoseOptions& opt, const SeparateAdvice& advice) {
+  const int rank = E.base_rank();
+  // Look-elsewhere: the family of candidates and the search trials within each.
+  const double family = static_cast<double>(D.candidates.size());
+  double ne_ref = 0.0;
+  for (const auto& c : D.candidates) ne_ref = std::max(ne_ref, c.n_eff);
+  for (auto& c : D.candidates) {
+    c.p_adjusted = std::min(1.0, c.p_value * c.trials * family);
+    c.significant = c.identifiable && c.p_adjusted < opt.alpha && c.delta_bic < 0.0 &&
+                    !(c.params.size() && c.params[0].at_bound && c.params[0].value == 0.0);
+    const int k_total = c.k_total > 0 ? c.k_total : rank + c.n_params;
+    c.score = c.rss > 0.0 && E.rss_given() > 0.0
+                  ? ne_ref * std::log(c.rss / E.rss_given()) + k_total * std::log(std::max(2.0, ne_ref))
+                  : 0.0;
+  }
+  std::stable_sort(D.candidates.begin(), D.candidates.end(), [](const auto& a, const auto& b) {
+    if (a.significant != b.significant) return a.significant;
+    if (a.identifiable != b.identifiable) return a.identifiable;
+    return a.score < b.score;
+  });
+
+  // Confounding between candidates: how much of one's fitted signature the
+  // other's columns reproduce (after the base is taken out).
+  const int top = std::min<int>(static_cast<int>(D.candidates.size()), 8);
+  std::vector<Eigen::MatrixXd> Xp(D.candidates.size());
+  for (std::size_t j = 0; j < D.candidates.size(); ++j)
+    if (D.candidates[j].identifiable && D.candidates[j].columns.cols() && D.candidates[j].refits_base)
+      Xp[j] = E.project_off_base(D.candidates[j].columns);
+  for (int a = 0; a < top; ++a) {
+    CandidateResult& ca = D.candidates[a];
+    if (Xp[a].size() == 0 || !ca.identifiable) continue;
+    const Eigen::VectorXd u = E.project_off_base(ca.fitted);
+    if (u.squaredNorm() <= 0.0) continue;
+    for (std::size_t b = 0; b < D.candidates.size(); ++b) {
+      if (static_cast<int>(b) == a || Xp[b].size() == 0) continue;
+      const Eigen::VectorXd coef = Xp[b].colPivHouseholderQr().solve(u);
+      const double share = std::clamp((Xp[b] * coef).squaredNorm() / u.squaredNorm(), 0.0, 1.0);
+      if (share < 0.81) continue;
+      const CandidateResult& cb = D.candidates[b];
+      ca.confounded.push_back({cb.label(), cb.effect, cb.axis, std::sqrt(share), advice(ca, cb)});
+    }
+  }
+
+  // A candidate the base absorbs completely (e.g. a constant force when the
+  // axis moves one way only) still looks like others on its axis: report the
+  // pair from the raw columns, so the verdict does not hide it.
+  for (int a = 0; a < top; ++a) {
+    CandidateResult& ca = D.candidates[a];
+    if (ca.columns.cols() == 0 || ca.axis < 0) continue;
+    const Eigen::VectorXd ua = E.problem().w.cwiseProduct(ca.columns.col(0));
+    for (std::size_t b = 0; b < D.candidates.size(); ++b) {
+      const CandidateResult& cb = D.candidates[b];
+      if (static_cast<int>(b) == a || cb.identifiable || cb.columns.cols() == 0 || cb.axis != ca.axis) continue;
+      const Eigen::VectorXd ub = E.problem().w.cwiseProduct(cb.columns.col(0));
+      const double den = ua.norm() * ub.norm();
+      const double cosab = den > 0.0 ? std::fabs(ua.dot(ub)) / den : 0.0;
+      if (cosab < 0.85) continue;
+      bool dup = false;
+      for (const auto& o : ca.confounded) dup |= o.with == cb.label();
+      if (!dup)
+        ca.confounded.push_back({cb.label(), cb.effect, cb.axis, cosab,
+                                 advice(ca, cb) + " (" + cb.label() + " is absorbed by the base in these data)"});
+    }
+  }
+
+  // Verdict and forward selection.
+  if (!D.candidates.empty() && D.candidates[0].significant) {
+    D.verdict = 0;
+    const CandidateResult& v = D.candidates[0];
+    std::vector<std::string> alts;
+    for (const auto& cf : v.confounded) {
+      if (cf.effect.empty() || cf.correlation < 0.85) continue;
+      for (const auto& o : D.candidates)
+        if (o.label() == cf.with && ((o.significant && o.score - v.score < 10.0) || !o.identifiable)) {
+          D.ambiguous = true;
+          alts.push_back(cf.with + " (" + cf.separate_by + ")");
+        }
+    }
+    std::ostringstream os;
+    os << "missing: " << v.label() << " — ";
+    for (std::size_t j = 0; j < v.params.size(); ++j)
+      os << (j ? ", " : "") << v.params[j].name << " = " << fmt(v.params[j].value, 4) << " "
+         << v.params[j].unit;
+    os << "; it brings the residual from " << amount(D.baseline_rms, D.units) << " to "
+       << amount(v.rms_after, D.units) << " RMS (noise floor about " << amount(D.noise_floor, D.units) << ")";
+    if (D.ambiguous) {
+      os << ". These data cannot tell it apart from ";
+      for (std::size_t j = 0; j < alts.size(); ++j) os << (j ? "; " : "") << alts[j];
+    }
+    D.verdict_text = os.str();
+    // Forward selection of further effects on top of the verdict.
+    Eigen::MatrixXd acc = v.refits_base ? v.columns : Eigen::MatrixXd(E.rows(), 0);
+    JointFit cur = E.fit(acc);
+    std::vector<bool> used(D.candidates.size(), false);
+    used[0] = true;
+    for (int step = 0; step < opt.max_forward_steps; ++step) {
+      int best = -1;
+      double best_bic = 0.0;
+      JointFit best_fit;
+      for (std::size_t j = 0; j < D.candidates.size(); ++j) {
+        const CandidateResult& c = D.candidates[j];
+        if (used[j] || !c.significant || !c.refits_base || c.columns.cols() == 0) continue;
+        Eigen::MatrixXd X(E.rows(), acc.cols() + c.columns.cols());
+        X << acc, c.columns;
+        const JointFit f = E.fit(X);
+        if (!f.full_rank) continue;
+        const int q = static_cast<int>(c.columns.cols()) + (c.n_params - static_cast<int>(c.columns.cols()));
+        const double N = E.rows(), ne = std::max(f.n_eff, 10.0);
+        const int k_total = rank + static_cast<int>(X.cols());
+        const double F = ((cur.rss - f.rss) / q) / (f.rss / std::max(1.0, N - k_total)) * (ne / N);
+        const double p = std::min(1.0, f_tail(F, q, std::max(1.0, ne - k_total)) * c.trials * family);
+        const double dbic = ne * std::log(f.rss / cur.rss) + q * std::log(ne);
+        if (p < opt.alpha && dbic < best_bic) {
+          best = static_cast<int>(j);
+          best_bic = dbic;
+          best_fit = f;
+        }
+      }
+      if (best < 0) break;
+      used[best] = true;
+      D.also.push_back(best);
+      Eigen::MatrixXd X(E.rows(), acc.cols() + D.candidates[best].columns.cols());
+      X << acc, D.candidates[best].columns;
+      acc = X;
+      cur = best_fit;
+    }
+    D.residual_final = v.refits_base || !D.also.empty() ? cur.residual : v.residual_after;
+    if (!D.also.empty()) {
+      D.verdict_text += ". Also significant on top of it: ";
+      for (std::size_t j = 0; j < D.also.size(); ++j)
+        D.verdict_text += (j ? ", " : "") + D.candidates[D.also[j]].label();
+    }
+  } else {
+    D.verdict_text = "none: no effect of the library explains a significant part of the residual "
+                     "(RMS " + amount(D.baseline_rms, D.units) + ", noise floor about " +
+                     amount(D.noise_floor, D.units) + ")";
+    D.residual_final = E.base_fit().residual;
+  }
+}
+
+}  // namespace cpm::ident::detail

@@ -1,0 +1,50 @@
+// Pieces the motion and the kinematic diagnosis share (not a public header).
+#pragma once
+
+#include <algorithm>
+#include <cmath>
+#include <functional>
+#include <string>
+
+#include "cpm/identification/diagnose.hpp"
+#include "cpm/identification/stats.hpp"
+
+namespace cpm::ident::detail {
+
+// Golden-section minimum of f on [a, b] (f unimodal there, or close to it).
+template <class F>
+inline
+double golden(F&& f, double a, double b, int iters, double& fbest) {
+  const double g = (std::sqrt(5.0) - 1.0) / 2.0;
+  double x1 = b - g * (b - a), x2 = a + g * (b - a);
+  double f1 = f(x1), f2 = f(x2);
+  for (int i = 0; i < iters; ++i) {
+    if (f1 < f2) {
+      b = x2; x2 = x1; f2 = f1; x1 = b - g * (b - a); f1 = f(x1);
+    } else {
+      a = x1; x1 = x2; f1 = f2; x2 = a + g * (b - a); f2 = f(x2);
+    }
+  }
+  fbest = std::min(f1, f2);
+  return f1 < f2 ? x1 : x2;
+}
+
+
+// Fill the statistics of a fitted candidate: RMS after, shares explained,
+// nested F-test against `rss_parent` with q parameters (k_total fitted in
+// all), BIC.
+void score_candidate(CandidateResult& c, const Engine& E, double rss_parent, int q, int k_total,
+                     double baseline_ms);
+
+// "0.123 N" or "1.23 µm" for a value in the diagnosis' units.
+std::string amount(double v, const std::string& units);
+
+// The measurement that would separate two candidates.
+using SeparateAdvice = std::function<std::string(const CandidateResult&, const CandidateResult&)>;
+
+// Shared tail of a diagnosis: look-elsewhere correction and significance,
+// ranking, confounding between candidates, the verdict and forward selection,
+// residual_final. The candidates must be scored already.
+void rank_and_decide(Diagnosis& D, const Engine& E, const DiagnoseOptions& opt, const SeparateAdvice& advice);
+
+}  // namespace cpm::ident::detail
