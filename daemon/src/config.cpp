@@ -292,7 +292,7 @@ DaemonConfig parse_config(const std::string& text, const std::string& name, cons
 
   const auto m = r.map(root["limits"], "limits",
                        {"workspace_min", "workspace_max", "velocity", "acceleration", "force", "following_error"},
-                       {"overspeed", "stop_deceleration", "enable_timeout"});
+                       {"overspeed", "stop_deceleration", "enable_timeout", "saturation_time"});
   auto& L = c.limits;
   L.workspace_min = r.vec3(m["workspace_min"], "limits.workspace_min", 0.0, 2.0, "m");
   L.workspace_max = r.vec3(m["workspace_max"], "limits.workspace_max", 0.0, 2.0, "m");
@@ -309,6 +309,7 @@ DaemonConfig parse_config(const std::string& text, const std::string& name, cons
   if (m["stop_deceleration"])
     L.stop_deceleration = r.positive(m["stop_deceleration"], "limits.stop_deceleration", 100.0, "m/s^2");
   if (m["enable_timeout"]) L.enable_timeout = r.positive(m["enable_timeout"], "limits.enable_timeout", 60.0, "s");
+  if (m["saturation_time"]) L.saturation_time = r.positive(m["saturation_time"], "limits.saturation_time", 60.0, "s");
 
   const auto n = r.map(root["lcm"], "lcm", {"url"}, {"channels", "state_decimation"});
   c.lcm.url = r.text(n["url"], "lcm.url");

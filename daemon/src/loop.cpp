@@ -8,6 +8,8 @@
 
 #include <cpm_msgs/ack_t.hpp>
 
+#include "cpm/kinematics/workspace.hpp"
+
 namespace cpm::daemon {
 
 using cpm_msgs::ack_t;
@@ -39,6 +41,8 @@ const char* fault_bit_name(std::uint32_t bit) noexcept {
     case kFaultOverrun: return "overrun";
     case kFaultEnableTimeout: return "enable_timeout";
     case kFaultLimitSwitch: return "limit_switch";
+    case kFaultSaturation: return "force_saturation";
+    case kFaultStreamUnderrun: return "stream_underrun";
     default: return "unknown";
   }
 }
@@ -120,6 +124,7 @@ void ControlLoop::add_sample(int s, std::int64_t ns) noexcept {
 }
 
 void ControlLoop::enter(Mode m) noexcept {
+  if (m != Mode::stopping) underrun_pending_ = false;
   mode_ = m;
   mode_atomic_.store(m, std::memory_order_release);
 }
@@ -137,6 +142,8 @@ void ControlLoop::latch(std::uint32_t bit, int axis, double value, double limit,
     fault_text_[sizeof fault_text_ - 1] = '\0';
   }
   faults_ |= bit;
+  saturated_cycles_ = {};
+  underrun_pending_ = false;
   if (mode_ != Mode::fault) {
     if (playing_) finish_segment();
     flush_queue();
@@ -182,9 +189,30 @@ void ControlLoop::start_stop(std::int64_t k) noexcept {
   stop_dir_ = v > 1e-12 ? Vec3(ref_.v / v) : Vec3::Zero();
   stop_T_ = v / cfg_.limits.stop_deceleration;
   stop_start_cycle_ = k;
+  stop_t0_ = 0;
   if (playing_) finish_segment();
   flush_queue();
   enter(Mode::stopping);
+}
+
+void ControlLoop::start_underrun_stop(const Segment& s, std::int64_t k, double late) noexcept {
+  // The stream's last chunk ended at speed and nothing follows it: decelerate
+  // from where and how fast the chunk ended, `late` s ago (the profile is
+  // continuous with the chunk: nothing jumps), then latch the fault at rest.
+  const Vec3 v_end = std::get_if<StreamTrajectory>(&s.traj)->end_velocity();
+  const double v = v_end.norm();
+  stop_p0_ = s.end;
+  stop_v0_ = v;
+  stop_dir_ = Vec3(v_end / v);
+  stop_T_ = v / cfg_.limits.stop_deceleration;
+  stop_start_cycle_ = k;
+  stop_t0_ = late;
+  finish_segment();  // `s` is the playing segment: read above, cleared here
+  flush_queue();
+  enter(Mode::stopping);
+  underrun_pending_ = true;
+  underrun_cycle_ = k;
+  underrun_speed_ = v;
 }
 
 void ControlLoop::reply(const Command& c, bool ok, std::int16_t reason, const char* msg,
@@ -266,12 +294,17 @@ void ControlLoop::handle(const Command& c, std::int64_t k) noexcept {
         reply(c, false, ack_t::REASON_FAULT_ACTIVE, "a drive still reports a fault");
         return;
       }
+      if (!backend_ok_) {
+        reply(c, false, ack_t::REASON_FAULT_ACTIVE, "the backend still reports an I/O error (bus, GPIO)");
+        return;
+      }
       faults_ = 0;
       first_fault_ = 0;
       fault_axis_ = -1;
       fault_value_ = fault_limit_ = 0;
       fault_cycle_ = -1;
       fault_text_[0] = '\0';
+      saturated_cycles_ = {};
       consecutive_overruns_ = 0;
       overrun_fault_pending_ = false;
       hold_ = est_.p;
@@ -331,7 +364,7 @@ void ControlLoop::handle(const Command& c, std::int64_t k) noexcept {
 
 void ControlLoop::handle_commands(std::int64_t k) noexcept {
   // A bounded number per cycle keeps the cycle's time bounded.
-  for (int n = 0; n < kCommandsPerCycle; ++n) {
+  for (int n = 0; n < 4; ++n) {
     const Command* c = commands_.front();
     if (!c) return;
     handle(*c, k);
@@ -351,6 +384,13 @@ ctl::TrajectorySample ControlLoop::reference(std::int64_t k) noexcept {
         if (t < tr->duration() - 1e-9) return tr->sample(t);
         // Finished: the next segment starts now, at its own t = 0.
         hold_ = s.end;
+        const bool starved = q_count_ == 1 && std::holds_alternative<StreamTrajectory>(s.traj) &&
+                             std::get_if<StreamTrajectory>(&s.traj)->end_velocity().norm() > kStreamRestSpeed;
+        if (starved) {
+          // The commander's next chunk is late: the stream would stop dead.
+          start_underrun_stop(s, k, t - tr->duration());
+          return reference(k);
+        }
         finish_segment();
         if (!start_next_segment(k)) break;
       }
@@ -359,15 +399,22 @@ ctl::TrajectorySample ControlLoop::reference(std::int64_t k) noexcept {
       return r;
     }
     case Mode::stopping: {
-      const double t = std::min(static_cast<double>(k - stop_start_cycle_) * dt_, stop_T_);
+      const double elapsed = static_cast<double>(k - stop_start_cycle_) * dt_ + stop_t0_;
+      const double t = std::min(elapsed, stop_T_);
       const double a = cfg_.limits.stop_deceleration;
       r.p = stop_p0_ + stop_dir_ * (stop_v0_ * t - 0.5 * a * t * t);
       r.v = stop_dir_ * (stop_v0_ - a * t);
       r.a = t < stop_T_ ? Vec3(-a * stop_dir_) : Vec3::Zero();
-      if (static_cast<double>(k - stop_start_cycle_) * dt_ >= stop_T_) {
+      if (elapsed >= stop_T_) {
         hold_ = r.p;
         queue_end_ = hold_;
         r.v.setZero();
+        if (underrun_pending_) {
+          // At rest: now the drives may go off (brakes on) without a jolt.
+          underrun_pending_ = false;
+          latch(kFaultStreamUnderrun, -1, underrun_speed_, kStreamRestSpeed, underrun_cycle_);
+          return r;
+        }
         enter(disable_after_stop_ ? Mode::disabled : Mode::holding);
         disable_after_stop_ = false;
       }
@@ -402,6 +449,7 @@ void ControlLoop::cycle(std::int64_t k, std::int64_t latency_ns) noexcept {
 
   // 1. Read the backend.
   const BackendResult rr = backend_->read(k, in_);
+  backend_ok_ = rr == BackendResult::ok && backend_write_ok_;
   const std::int64_t t1 = now_ns();
 
   // 2. Estimate the platform state through the calibrated kinematics.
@@ -436,6 +484,7 @@ void ControlLoop::cycle(std::int64_t k, std::int64_t latency_ns) noexcept {
     cin_.ref = ref_;
     sc = controller_.step(cin_, cout_);
   } else {
+    saturated_cycles_ = {};
     cout_.force.setZero();
     cout_.force_unlimited.setZero();
     cout_.saturated = {false, false, false};
@@ -466,8 +515,25 @@ void ControlLoop::cycle(std::int64_t k, std::int64_t latency_ns) noexcept {
     if (en > cfg_.limits.following_error) latch(kFaultFollowingError, -1, en, cfg_.limits.following_error, k);
     if (!inside(est_.p, cfg_.limits.workspace_min, cfg_.limits.workspace_max, axis, v, lim))
       latch(kFaultSoftLimit, axis, v, lim, k);
+    // The machine's own workspace (strokes, limb reach, elbow singularity):
+    // the reference one cycle ahead is checked first, so that a path running
+    // towards a stroke end or a singularity stops before the platform (which
+    // follows the reference within micrometres) gets there.
+    if (mode_ != Mode::fault) {
+      const Vec3 ahead = ref_.p + ref_.v * dt_;
+      const Status wr = kin::check_pose(machine_->kinematics(), machine_->model().strokes, ahead, cin_.kin);
+      const Status wm = wr.ok() ? kin::check_pose(machine_->kinematics(), machine_->model().strokes, est_.p, cin_.kin) : wr;
+      if (!wm.ok()) latch(kFaultSoftLimit, wm.index, wm.value, wm.limit, k);
+    }
     if (est_.p_dot.norm() > cfg_.limits.overspeed)
       latch(kFaultOverspeed, -1, est_.p_dot.norm(), cfg_.limits.overspeed, k);
+    // Force saturation held too long: the axis cannot follow (blocked,
+    // overloaded, a gain too high); the following error may not show it yet.
+    for (int i = 0; i < 3 && mode_ != Mode::fault; ++i) {
+      saturated_cycles_[i] = cout_.saturated[i] ? saturated_cycles_[i] + 1 : 0;
+      const double held = static_cast<double>(saturated_cycles_[i]) * dt_;
+      if (held > cfg_.limits.saturation_time + 1e-12) latch(kFaultSaturation, i, held, cfg_.limits.saturation_time, k);
+    }
     if (mode_ == Mode::enabling) {
       if (in_.drive_enabled[0] && in_.drive_enabled[1] && in_.drive_enabled[2]) {
         enter(Mode::holding);
@@ -490,6 +556,7 @@ void ControlLoop::cycle(std::int64_t k, std::int64_t latency_ns) noexcept {
   for (int i = 0; i < 3; ++i) out_.force[i] = drive_on ? cout_.force[i] : 0.0;
   out_.enable = drive_on;
   const BackendResult rw = backend_->write(k, out_);
+  backend_write_ok_ = rw == BackendResult::ok;
   if (rw != BackendResult::ok) {
     latch(kFaultBackendIo, -1, static_cast<double>(rw), 0, k);
   }

@@ -38,6 +38,7 @@ struct LimitsConfig {
   double following_error = 0.005;   // |p_ref - p| that is a fault (m)
   double stop_deceleration = 2.0;   // deceleration of a stop (m/s^2)
   double enable_timeout = 0.5;      // drives must report enabled within this (s)
+  double saturation_time = 0.2;     // an actuator at the force limit longer than this is a fault (s)
 };
 
 struct ControllerConfig {

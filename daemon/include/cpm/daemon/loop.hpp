@@ -29,6 +29,7 @@
 // to the measured position, so nothing jumps.
 #pragma once
 
+#include <array>
 #include <atomic>
 #include <cstdint>
 #include <optional>
@@ -60,6 +61,11 @@ enum FaultBit : std::uint32_t {
   kFaultOverrun = 256,
   kFaultEnableTimeout = 512,
   kFaultLimitSwitch = 1024,
+  // An actuator held at the force limit longer than limits.saturation_time.
+  kFaultSaturation = 2048,
+  // A setpoint stream ran dry while moving (its next chunk was late): the
+  // loop stops along the path at limits.stop_deceleration, then latches this.
+  kFaultStreamUnderrun = 4096,
 };
 // "following_error,estop" for a mask (static storage per bit; the joined text
 // is built in `buf`, not for the real-time path).
@@ -112,10 +118,9 @@ std::int64_t histogram_bin_floor(int k) noexcept;
 class ControlLoop {
  public:
   static constexpr int kQueueCapacity = 32;  // trajectory segments
-  // Commands taken from the command queue per cycle, at most: a flood of
-  // commands cannot lengthen a cycle (the rest wait in the queue, and the
-  // server answers REASON_BUSY when it is full).
-  static constexpr int kCommandsPerCycle = 4;
+  // A stream chunk ending slower than this (m/s) ends the stream; faster,
+  // it owes a next chunk (stream_underrun when none has come).
+  static constexpr double kStreamRestSpeed = 1e-6;
 
   // Keeps references to `backend` and `machine`; the controller refers to `machine`.
   ControlLoop(const DaemonConfig& config, Backend& backend, const ctl::Machine& machine,
@@ -157,6 +162,7 @@ class ControlLoop {
   void enter(Mode m) noexcept;
   void flush_queue() noexcept;
   void start_stop(std::int64_t k) noexcept;
+  void start_underrun_stop(const Segment& s, std::int64_t k, double late) noexcept;
   bool start_next_segment(std::int64_t k) noexcept;
   void finish_segment() noexcept;
   ctl::TrajectorySample reference(std::int64_t k) noexcept;
@@ -189,6 +195,12 @@ class ControlLoop {
   std::atomic<bool> shutdown_{false};
   int consecutive_overruns_ = 0;
   bool overrun_fault_pending_ = false;
+  bool backend_ok_ = true, backend_write_ok_ = true;  // last read / write: reset waits for both
+  std::array<std::int64_t, 3> saturated_cycles_{};  // consecutive cycles at the force limit
+  // A stream ran dry: latched once the stop it started is at rest.
+  bool underrun_pending_ = false;
+  std::int64_t underrun_cycle_ = -1;
+  double underrun_speed_ = 0;
 
   // Trajectory queue (owned by the loop): a ring of segments.
   std::unique_ptr<std::array<Segment, kQueueCapacity>> queue_;
@@ -200,6 +212,7 @@ class ControlLoop {
   // Stop profile.
   Vec3 stop_p0_ = Vec3::Zero(), stop_dir_ = Vec3::Zero();
   double stop_v0_ = 0, stop_T_ = 0;
+  double stop_t0_ = 0;  // s of the stop profile already elapsed at stop_start_cycle_
   std::int64_t stop_start_cycle_ = 0;
   // Tracking of the playing segment.
   double seg_sum_e2_ = 0, seg_max_e_ = 0;

@@ -21,6 +21,9 @@ class StreamTrajectory final : public ctl::Trajectory {
   // Before 0 and after the end: the end points, at rest.
   [[nodiscard]] ctl::TrajectorySample sample(double t) const noexcept override;
   [[nodiscard]] int size() const noexcept { return n_; }
+  // The velocity given at the last point (m/s): non-zero means the stream
+  // goes on, and the commander owes the next chunk before this one ends.
+  [[nodiscard]] Vec3 end_velocity() const noexcept { return n_ > 0 ? v_[n_ - 1] : Vec3::Zero(); }
 
  private:
   int n_ = 0;
