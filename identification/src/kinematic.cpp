@@ -273,10 +273,15 @@ KinematicProblem read_problem(const io::DataSet& data, const kin::KinematicModel
 
 }  // namespace
 
-KinematicProblem prepare_kinematic(const io::DataSet& data, const kin::KinematicModel& model) {
+KinematicProblem read_kinematic(const io::DataSet& data, const kin::KinematicModel& model) {
   KinematicProblem P = read_problem(data, model);
-  const std::size_t n = P.d.size();
   P.residual_given = P.residual_of_model(P.given);
+  return P;
+}
+
+KinematicProblem prepare_kinematic(const io::DataSet& data, const kin::KinematicModel& model) {
+  KinematicProblem P = read_kinematic(data, model);
+  const std::size_t n = P.d.size();
   // Effective displacements of the model's own effects: what calibration fits.
   std::vector<Vec3> dt(n);
   for (std::size_t j = 0; j < n; ++j)
@@ -842,7 +847,7 @@ KinematicFit fit_kinematic(const io::DataSet& data, const kin::KinematicModel& m
   out.on_fit.after = Engine::rms(P.residual_of_model(J.model));
   for (const auto& c : out.effects)
     for (const auto& p : c.params)
-      out.fitted.push_back({"kinematics.effects." + c.effect + ".axis" + std::to_string(c.axis + 1) + "." + p.name, p.unit,
+      out.fitted.push_back({"kinematics.limb" + std::to_string(c.axis + 1) + ".effects." + c.effect + "." + p.name, p.unit,
                             0.0, p.value, p.std_error});
   out.notes.push_back("the planes were recalibrated with the effects (" + P.kind + " base: " +
                       std::to_string(P.base_value.size()) + " parameters); calibrated base alone: " +

@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <sstream>
 
+#include "cpm/identification/kinematic.hpp"
 #include "cpm/identification/structure.hpp"
 
 namespace cpm::ident {
@@ -152,6 +153,69 @@ std::string plots_of(const MotionProblem& P, const Eigen::VectorXd& before, cons
       s.y.push_back(std::sqrt(2.0 * pw[k] / P.rows()));
     }
     o << svg_plot("axis " + std::to_string(i + 1), "wavelength λ (mm, log)", "amplitude (N)", {s}, true);
+  }
+  o << "</div>";
+  return o.str();
+}
+
+// Kinematic data: measurement - model (µm) per sample, against each axis'
+// position (split by the direction of approach when known), against time,
+// and the periodogram against position.
+std::string kinematic_plots(const KinematicProblem& P, const Eigen::VectorXd& before, const Eigen::VectorXd* after,
+                            const std::string& after_label) {
+  std::ostringstream o;
+  const int per = P.per_sample;
+  const char* comp[3] = {"x", "y", "z"};
+  const std::string what = P.kind == "ballbar" ? "bar length" : "position";
+  const Eigen::VectorXd& show = after ? *after : before;
+  o << "<h2>Measurement − model along each axis' position" << (P.has_dir ? ", by direction of approach" : "") << "</h2><div>";
+  for (int i = 0; i < 3; ++i) {
+    Series sp{{}, {}, "#1a7", P.has_dir ? "approached +" : "", false}, sn{{}, {}, "#d33", "approached −", false};
+    for (int r = 0; r < P.rows(); ++r) {
+      const int j = r / per;
+      Series& s = (!P.has_dir || P.inputs[static_cast<std::size_t>(j)].dir[i] > 0) ? sp : sn;
+      s.x.push_back(P.d[static_cast<std::size_t>(j)][i] * 1e3);
+      s.y.push_back(show(r) * 1e6);
+    }
+    std::vector<Series> ss{sp};
+    if (P.has_dir) ss.push_back(sn);
+    o << svg_plot("d" + std::to_string(i + 1) + (after ? " (" + after_label + ")" : ""), "d" + std::to_string(i + 1) + " (mm)",
+                  what + " error (µm)", ss);
+  }
+  o << "</div><h2>Measurement − model per sample" << (P.has_time ? " over time" : "") << "</h2><div>";
+  for (int k = 0; k < per; ++k) {
+    Series sb{{}, {}, after ? "#bbb" : "#36c", after ? "model as given" : "", false};
+    Series sa{{}, {}, "#36c", after_label, false};
+    for (int j = 0; j < P.samples(); ++j) {
+      const double x = P.has_time ? P.inputs[static_cast<std::size_t>(j)].t : j + 1.0;
+      sb.x.push_back(x); sb.y.push_back(before(per * j + k) * 1e6);
+      if (after) { sa.x.push_back(x); sa.y.push_back((*after)(per * j + k) * 1e6); }
+    }
+    std::vector<Series> ss{sb};
+    if (after) ss.push_back(sa);
+    o << svg_plot(per == 1 ? what : std::string(comp[k]), P.has_time ? "t (s)" : "sample", what + " error (µm)", ss);
+  }
+  o << "</div><h2>Periodogram against each axis' position (what repeats every λ mm)</h2><div>";
+  for (int i = 0; i < 3; ++i) {
+    std::vector<double> x, y, wl, pw;
+    double mn = 1e300, mx = -1e300;
+    for (int r = 0; r < P.rows(); ++r) {
+      const double xv = P.d[static_cast<std::size_t>(r / per)][i];
+      // The effect of axis i on this reading: divide by its sensitivity where it is large.
+      const double s = P.sensitivity.rows() == P.rows() ? P.sensitivity(r, i) : 1.0;
+      if (std::fabs(s) < 0.3) continue;
+      x.push_back(xv); y.push_back(show(r) / s);
+      mn = std::min(mn, xv); mx = std::max(mx, xv);
+    }
+    if (x.size() < 8 || mx - mn < 0.01) continue;
+    periodogram(x, y, 1e-3, std::min(0.05, (mx - mn) / 1.5), wl, pw);
+    Series s{{}, {}, "#639", "", true};
+    for (std::size_t k = 0; k < wl.size(); ++k) {
+      s.x.push_back(wl[k] * 1e3);
+      s.y.push_back(std::sqrt(2.0 * pw[k] / static_cast<double>(x.size())) * 1e6);
+    }
+    o << svg_plot("axis " + std::to_string(i + 1) + " (readings it moves by ≥ 0.3 of its travel)",
+                  "wavelength λ (mm, log)", "amplitude in d" + std::to_string(i + 1) + " (µm)", {s}, true);
   }
   o << "</div>";
   return o.str();
@@ -431,15 +495,23 @@ std::string diagnosis_html(const Diagnosis& D) {
   o << "<!DOCTYPE html><html><head><meta charset='utf-8'><title>" << esc(title) << "</title>" << kStyle
     << "</head><body><h1>" << esc(title) << "</h1>";
   o << "<div class='v'><b>Verdict:</b> " << esc(D.verdict_text) << "</div>";
-  o << "<p>Residual of the model as given: RMS " << num(D.baseline_rms) << " N (max " << num(D.baseline_max)
-    << " N); base refitted: " << num(D.base_refit_rms) << " N; noise floor about " << num(D.noise_floor, 3)
-    << " N. Acceleration: " << esc(D.motion.accel_source) << ".</p>";
-  o << "<h2>Candidates, best first</h2><table><tr><th>rank</th><th>effect</th><th>RMS after (N)</th><th>explained</th>"
+  const bool motion = D.kind == "motion";
+  const double k = motion ? 1.0 : 1e6;
+  const std::string u = motion ? "N" : "µm";
+  if (motion)
+    o << "<p>Residual of the model as given: RMS " << num(D.baseline_rms) << " N (max " << num(D.baseline_max)
+      << " N); base refitted: " << num(D.base_refit_rms) << " N; noise floor about " << num(D.noise_floor, 3)
+      << " N. Acceleration: " << esc(D.motion.accel_source) << ".</p>";
+  else
+    o << "<p>Kind " << esc(D.kind) << ", " << D.samples << " samples. Residual of the model as given: RMS "
+      << num(D.baseline_rms * k) << " µm (max " << num(D.baseline_max * k) << " µm); calibrated base: "
+      << num(D.base_refit_rms * k) << " µm; noise floor about " << num(D.noise_floor * k, 3) << " µm.</p>";
+  o << "<h2>Candidates, best first</h2><table><tr><th>rank</th><th>effect</th><th>RMS after (" << u << ")</th><th>explained</th>"
        "<th>p (adjusted)</th><th>ΔBIC</th><th>significant</th><th>parameters (± 1σ)</th><th>confounded with</th><th>note</th></tr>";
-  int k = 0;
+  int rank = 0;
   for (const auto& c : D.candidates) {
-    o << "<tr" << (c.significant ? " class='sig'" : "") << "><td>" << ++k << "</td><td class='l'>" << esc(c.label())
-      << "</td><td>" << num(c.rms_after) << "</td><td>" << num(100 * c.explained, 3) << " %</td><td>"
+    o << "<tr" << (c.significant ? " class='sig'" : "") << "><td>" << ++rank << "</td><td class='l'>" << esc(c.label())
+      << "</td><td>" << num(c.rms_after * k) << "</td><td>" << num(100 * c.explained, 3) << " %</td><td>"
       << num(c.p_adjusted, 2) << "</td><td>" << num(c.delta_bic, 3) << "</td><td>"
       << (c.significant ? "yes" : (c.identifiable ? "no" : "n/a")) << "</td><td class='l'>";
     for (std::size_t j = 0; j < c.params.size(); ++j) {
@@ -461,11 +533,185 @@ std::string diagnosis_html(const Diagnosis& D) {
     for (const auto& f : D.structure) o << "<li>" << esc(f.text) << " (" << num(f.z, 3) << " σ)</li>";
     o << "</ul>";
   }
-  const Eigen::VectorXd* after = D.residual_final.size() == D.motion.residual.size() ? &D.residual_final : nullptr;
-  o << plots_of(D.motion, D.motion.residual, after,
-                D.verdict >= 0 ? "with " + D.candidates[D.verdict].label() : "base refitted");
+  const std::string after_label = D.verdict >= 0 ? "with " + D.candidates[D.verdict].label()
+                                                 : (motion ? "base refitted" : "calibrated base");
+  if (motion) {
+    const Eigen::VectorXd* after = D.residual_final.size() == D.motion.residual.size() ? &D.residual_final : nullptr;
+    o << plots_of(D.motion, D.motion.residual, after, after_label);
+  } else if (D.kinematic) {
+    const KinematicProblem& P = *D.kinematic;
+    const KinematicSummary s = summarize_kinematic(P, P.residual_given);
+    if (s.circle) {
+      o << "<h2>Circular test (ISO 230-4) of the model as given</h2>" << cal::circular_test_svg(*s.circle, "model as given");
+      if (D.residual_final.size() == P.rows()) {
+        const KinematicSummary s2 = summarize_kinematic(P, -D.residual_final);
+        if (s2.circle) o << cal::circular_test_svg(*s2.circle, after_label);
+      }
+      if (!s.circle_note.empty()) o << "<p>" << esc(s.circle_note) << "</p>";
+    }
+    const Eigen::VectorXd before = -P.residual_given;
+    const Eigen::VectorXd* after = D.residual_final.size() == P.rows() ? &D.residual_final : nullptr;
+    o << kinematic_plots(P, before, after, after_label);
+  }
   for (const auto& n : D.notes) o << "<p>" << esc(n) << "</p>";
   for (const auto& w : D.warnings) o << "<p class='warn'>" << esc(w) << "</p>";
+  o << "</body></html>\n";
+  return o.str();
+}
+
+// ---------------------------------------------------------------------------
+// Kinematic data (ball-bar, positions): cpm compare
+
+KinematicSummary summarize_kinematic(const KinematicProblem& P, const Eigen::VectorXd& res) {
+  KinematicSummary s;
+  const int per = P.per_sample;
+  s.rms = Engine::rms(res);
+  s.max = res.size() ? res.cwiseAbs().maxCoeff() : 0.0;
+  for (int k = 0; k < per; ++k) {
+    double q = 0.0;
+    for (int j = 0; j < P.samples(); ++j) q += res(per * j + k) * res(per * j + k);
+    s.component_rms[k] = std::sqrt(q / std::max(1, P.samples()));
+  }
+  if (P.has_dir)
+    for (int i = 0; i < 3; ++i) {
+      double sf = 0, sb = 0, mf = 0, mb = 0;
+      int nf = 0, nb = 0;
+      for (int r = 0; r < P.rows(); ++r) {
+        const double e = res(r);
+        if (P.inputs[static_cast<std::size_t>(r / per)].dir[i] > 0) { sf += e * e; mf += e; ++nf; }
+        else { sb += e * e; mb += e; ++nb; }
+      }
+      s.rms_forward[i] = nf ? std::sqrt(sf / nf) : 0.0;
+      s.rms_backward[i] = nb ? std::sqrt(sb / nb) : 0.0;
+      s.mean_forward[i] = nf ? mf / nf : 0.0;
+      s.mean_backward[i] = nb ? mb / nb : 0.0;
+    }
+  // A circle about the pivot in a machine plane: the polar trace with G, H, F.
+  if (P.kind != "ballbar" || P.samples() < 16) return s;
+  std::vector<Vec3> v(static_cast<std::size_t>(P.samples()));
+  double rsum = 0.0;
+  for (int j = 0; j < P.samples(); ++j) {
+    Vec3 p;
+    if (!kin::forward(P.given, P.d[static_cast<std::size_t>(j)], P.inputs[static_cast<std::size_t>(j)], p)) return s;
+    v[static_cast<std::size_t>(j)] = p - P.pivot;
+    rsum += v[static_cast<std::size_t>(j)].norm();
+  }
+  const double R = rsum / P.samples();
+  Vec3 mean = Vec3::Zero(), sq = Vec3::Zero();
+  double rs = 0.0;
+  for (const auto& x : v) { mean += x; rs += (x.norm() - R) * (x.norm() - R); }
+  mean /= P.samples();
+  for (const auto& x : v) sq += (x - mean).cwiseAbs2();
+  Eigen::Index normal = 0;
+  sq.minCoeff(&normal);
+  if (std::sqrt(sq[normal] / P.samples()) > 0.02 * R || std::sqrt(rs / P.samples()) > 0.01 * R) return s;
+  const ctl::CirclePlane plane = normal == 2 ? ctl::CirclePlane::xy : (normal == 0 ? ctl::CirclePlane::yz : ctl::CirclePlane::zx);
+  const auto [a, b] = cal::plane_axes(plane);
+  std::vector<double> ang(static_cast<std::size_t>(P.samples()));
+  for (int j = 0; j < P.samples(); ++j) {
+    double t = std::atan2(v[static_cast<std::size_t>(j)][b], v[static_cast<std::size_t>(j)][a]);
+    if (t < 0) t += 2.0 * 3.141592653589793;
+    ang[static_cast<std::size_t>(j)] = t;
+  }
+  // Direction of travel from the angle's progression within each run.
+  cal::CircularTestResult c;
+  c.spec.radius = R;
+  c.spec.plane = plane;
+  c.pivot = P.pivot;
+  for (int j = 0; j < P.samples(); ++j) {
+    const auto u = static_cast<std::size_t>(j);
+    const long run = P.run.empty() ? 0 : P.run[u];
+    int nb = j + 1 < P.samples() && (P.run.empty() || P.run[u + 1] == run) ? j + 1 : j - 1;
+    if (nb < 0 || (!P.run.empty() && P.run[static_cast<std::size_t>(nb)] != run)) nb = j;
+    double dth = std::remainder(ang[static_cast<std::size_t>(nb)] - ang[u], 2.0 * 3.141592653589793);
+    if (nb < j) dth = -dth;
+    auto& tr = dth >= 0.0 ? c.ccw : c.cw;
+    tr.angle.push_back(ang[u]);
+    tr.deviation.push_back(-res(j));  // bar reading minus the model's distance
+  }
+  double cover = 0.0;
+  {
+    std::vector<double> all = ang;
+    std::sort(all.begin(), all.end());
+    double gap = all.front() + 2.0 * 3.141592653589793 - all.back();
+    for (std::size_t k = 1; k < all.size(); ++k) gap = std::max(gap, all[k] - all[k - 1]);
+    cover = 2.0 * 3.141592653589793 - gap;
+  }
+  if (cover < 1.5 * 3.141592653589793) return s;
+  if (c.ccw.angle.empty() || c.cw.angle.empty()) {
+    (c.ccw.angle.empty() ? c.ccw : c.cw) = c.ccw.angle.empty() ? c.cw : c.ccw;
+    s.circle_note = "one direction of travel only: the hysteresis H is not measured (shown as 0)";
+  }
+  auto sort_trace = [](cal::CircularTrace& t) {
+    std::vector<std::size_t> idx(t.angle.size());
+    for (std::size_t k = 0; k < idx.size(); ++k) idx[k] = k;
+    std::sort(idx.begin(), idx.end(), [&](std::size_t x, std::size_t y) { return t.angle[x] < t.angle[y]; });
+    cal::CircularTrace o;
+    for (auto k : idx) { o.angle.push_back(t.angle[k]); o.deviation.push_back(t.deviation[k]); }
+    t = o;
+  };
+  sort_trace(c.ccw);
+  sort_trace(c.cw);
+  cal::evaluate_circular_traces(c);
+  s.circle = c;
+  return s;
+}
+
+std::string kinematic_summary_text(const KinematicProblem& P, const KinematicSummary& s) {
+  std::ostringstream o;
+  const std::string what = P.kind == "ballbar" ? "bar length" : "platform position";
+  o << what << " residual (model - measurement), µm, " << P.samples() << " samples\n";
+  o << "  RMS " << num(s.rms * 1e6) << " µm, max " << num(s.max * 1e6) << " µm";
+  if (P.kind == "position")
+    o << " (x " << num(s.component_rms[0] * 1e6, 3) << ", y " << num(s.component_rms[1] * 1e6, 3) << ", z "
+      << num(s.component_rms[2] * 1e6, 3) << ")";
+  o << "\n";
+  if (P.kind == "ballbar" && P.with_dl) o << "  (bar length not calibrated: its mean offset removed)\n";
+  if (P.has_dir)
+    for (int i = 0; i < 3; ++i)
+      o << "  axis " << i + 1 << " approached +: mean " << num(s.mean_forward[i] * 1e6, 3) << " µm (RMS "
+        << num(s.rms_forward[i] * 1e6, 3) << "); approached -: mean " << num(s.mean_backward[i] * 1e6, 3) << " µm (RMS "
+        << num(s.rms_backward[i] * 1e6, 3) << ")\n";
+  if (s.circle) {
+    const auto& c = *s.circle;
+    o << "  circle about the pivot in " << cal::plane_name(c.spec.plane) << ", radius " << num(c.spec.radius * 1e3, 5)
+      << " mm: G " << num(c.G_bidirectional * 1e6, 3) << " µm (CCW " << num(c.ccw_metrics.G * 1e6, 3) << ", CW "
+      << num(c.cw_metrics.G * 1e6, 3) << "), H " << num(c.H * 1e6, 3) << " µm, F " << num(c.F_min * 1e6, 3) << " .. "
+      << num(c.F_max * 1e6, 3) << " µm\n";
+    if (!s.circle_note.empty()) o << "  " << s.circle_note << "\n";
+  }
+  return o.str();
+}
+
+std::string kinematic_summary_json(const KinematicProblem& P, const KinematicSummary& s, const std::string& model_file) {
+  std::ostringstream o;
+  auto vec = [](const Vec3& v) { return "[" + json_num(v[0]) + ", " + json_num(v[1]) + ", " + json_num(v[2]) + "]"; };
+  o << "{\"kind\": " << json_string(P.kind) << ", \"data_file\": " << json_string(P.data_file)
+    << ", \"model_file\": " << json_string(model_file) << ", \"samples\": " << P.samples() << ", \"rows\": " << P.rows()
+    << ", \"units\": \"m\",\n \"rms\": " << json_num(s.rms) << ", \"max\": " << json_num(s.max)
+    << ", \"component_rms\": " << vec(s.component_rms);
+  if (P.has_dir)
+    o << ",\n \"by_direction\": {\"rms_forward\": " << vec(s.rms_forward) << ", \"rms_backward\": " << vec(s.rms_backward)
+      << ", \"mean_forward\": " << vec(s.mean_forward) << ", \"mean_backward\": " << vec(s.mean_backward) << "}";
+  if (s.circle) {
+    const auto& c = *s.circle;
+    o << ",\n \"circle\": {\"plane\": " << json_string(cal::plane_name(c.spec.plane)) << ", \"radius\": "
+      << json_num(c.spec.radius) << ", \"G\": " << json_num(c.G_bidirectional) << ", \"G_ccw\": " << json_num(c.ccw_metrics.G)
+      << ", \"G_cw\": " << json_num(c.cw_metrics.G) << ", \"H\": " << json_num(c.H) << ", \"F_max\": " << json_num(c.F_max)
+      << ", \"F_min\": " << json_num(c.F_min) << "}";
+  }
+  o << "\n}\n";
+  return o.str();
+}
+
+std::string kinematic_compare_html(const KinematicProblem& P, const KinematicSummary& s, const std::string& title) {
+  std::ostringstream o;
+  o << "<!DOCTYPE html><html><head><meta charset='utf-8'><title>" << esc(title) << "</title>" << kStyle
+    << "</head><body><h1>" << esc(title) << "</h1>";
+  o << "<pre>" << esc(kinematic_summary_text(P, s)) << "</pre>";
+  if (s.circle) o << cal::circular_test_svg(*s.circle, "model as given");
+  const Eigen::VectorXd before = -P.residual_given;
+  o << kinematic_plots(P, before, nullptr, "");
   o << "</body></html>\n";
   return o.str();
 }

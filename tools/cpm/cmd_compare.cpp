@@ -1,8 +1,12 @@
 // cpm compare: the residual of a model on a data file, broken down by axis,
 // direction, position and time, with an HTML report (identification/).
+// Motion logs: the force residual (N). Ball-bar and position data: the
+// length or position residual (m; µm on screen), with the polar trace and
+// G, H, F of ISO 230-4 when the ball-bar data are a circle about the pivot.
 #include <cstdio>
 
 #include "cli.hpp"
+#include "cpm/identification/kinematic.hpp"
 #include "cpm/identification/report.hpp"
 #include "cpm/io/data_files.hpp"
 #include "cpm/io/model_file.hpp"
@@ -20,11 +24,23 @@ int run(Args& a) {
   a.finish();
   if (!data_path) throw UsageError("--data FILE is required");
   const io::DataSet ds = io::read_data_file(*data_path);
-  if (!std::holds_alternative<io::MotionData>(ds))
-    throw Error(*data_path + ": comparing ball-bar and position data needs the calibration module's "
-                "kinematic residual; not available yet (see docs/identification.md)");
-  const io::MotionData& data = std::get<io::MotionData>(ds);
   const io::ModelFile mf = io::load_model_file(model_path);
+  const std::string title = "cpm compare: " + model_path + " on " + *data_path;
+  if (!std::holds_alternative<io::MotionData>(ds)) {
+    const ident::KinematicProblem P = ident::read_kinematic(ds, mf.model.kinematics);
+    const ident::KinematicSummary s = ident::summarize_kinematic(P, P.residual_given);
+    std::printf("model %s on %s (kind %s, %d samples)\n", model_path.c_str(), data_path->c_str(), P.kind.c_str(),
+                P.samples());
+    std::fputs(ident::kinematic_summary_text(P, s).c_str(), stdout);
+    for (const auto& w : P.warnings) std::printf("warning: %s\n", w.c_str());
+    if (json_path) io::write_file_atomically(*json_path, ident::kinematic_summary_json(P, s, model_path));
+    if (report_path) {
+      io::write_file_atomically(*report_path, ident::kinematic_compare_html(P, s, title));
+      std::printf("report: %s\n", report_path->c_str());
+    }
+    return 0;
+  }
+  const io::MotionData& data = std::get<io::MotionData>(ds);
   const ctl::Machine model(mf.model);
   const ident::MotionProblem P = ident::prepare_motion(data, model, mo);
   const ident::ResidualSummary s = ident::summarize(P, P.residual);
@@ -34,14 +50,16 @@ int run(Args& a) {
   if (json_path)
     io::write_file_atomically(*json_path, ident::summary_json(s, P, *data_path, model_path, static_cast<int>(data.t.size())));
   if (report_path) {
-    io::write_file_atomically(*report_path, ident::compare_html(P, s, "cpm compare: " + model_path + " on " + *data_path));
+    io::write_file_atomically(*report_path, ident::compare_html(P, s, title));
     std::printf("report: %s\n", report_path->c_str());
   }
   return 0;
 }
 
 const Command reg{"compare", "residuals of a model on measurements, by axis, direction, position and time", run,
-                  "--data FILE.csv [--model MODEL.yaml] [--json OUT.json] [--report OUT.html] [--window MS]"};
+                  "--data FILE.csv [--model MODEL.yaml] [--json OUT.json] [--report OUT.html] [--window MS]\n"
+                  "  Motion logs: force residual (N). Ball-bar and position data: length or position residual\n"
+                  "  (m in the JSON, µm on screen); a ball-bar circle about the pivot gets G, H, F and its polar plot."};
 
 }  // namespace
 }  // namespace cpm::cli

@@ -4,6 +4,7 @@
 
 #include "cli.hpp"
 #include "cpm/identification/diagnose.hpp"
+#include "cpm/identification/kinematic.hpp"
 #include "cpm/identification/report.hpp"
 #include "cpm/io/data_files.hpp"
 #include "cpm/io/model_file.hpp"
@@ -25,17 +26,17 @@ int run(Args& a) {
   if (!data_path) throw UsageError("--data FILE is required");
   if (!(o.alpha > 0.0 && o.alpha < 1.0)) throw UsageError("--alpha must be within (0, 1)");
   const io::DataSet ds = io::read_data_file(*data_path);
-  if (!std::holds_alternative<io::MotionData>(ds)) {
-    const std::string kind = std::holds_alternative<io::BallbarData>(ds) ? "ballbar" : "position";
-    for (const auto& e : o.effects) ident::check_effect_for_kind(e, kind);
-    throw Error(*data_path + ": kind = " + kind +
-                ": the kinematic diagnosis (ball-bar and position data) is not available yet; it needs the "
-                "calibration module's base fit (see docs/identification.md)");
-  }
-  const io::MotionData& data = std::get<io::MotionData>(ds);
   const io::ModelFile mf = io::load_model_file(model_path);
-  const ctl::Machine model(mf.model);
-  ident::Diagnosis D = ident::diagnose_motion(data, model, o);
+  ident::Diagnosis D;
+  if (!std::holds_alternative<io::MotionData>(ds)) {
+    const std::string kind = io::kind_name(io::kind_of(ds));
+    for (const auto& e : o.effects) ident::check_effect_for_kind(e, kind);
+    D = ident::diagnose_kinematic(
+        std::make_shared<const ident::KinematicProblem>(ident::prepare_kinematic(ds, mf.model.kinematics)), o);
+  } else {
+    const ctl::Machine model(mf.model);
+    D = ident::diagnose_motion(std::get<io::MotionData>(ds), model, o);
+  }
   D.model_file = model_path;
   if (!quiet) std::fputs(ident::diagnosis_text(D).c_str(), stdout);
   if (json_path) io::write_file_atomically(*json_path, ident::diagnosis_json(D));
@@ -52,7 +53,9 @@ const Command reg{
     "       [--effect NAME]... (only these effects) [--alpha 0.01] [--window MS (filter half width, 12)] [--quiet]\n"
     "  Motion logs: the force residual, every dynamic effect of effects.md on every axis fitted with the\n"
     "  base (A, B, C, E), scored (RMS after, share explained, F-test, BIC, confounding), ranked, a verdict,\n"
-    "  and the structure no effect explains. Default model: config/machine.yaml."};
+    "  and the structure no effect explains. Ball-bar and position data: the same with every kinematic\n"
+    "  effect, fitted jointly with calibration's base (beta', dq[, dl]; the 12 plane parameters).\n"
+    "  Default model: config/machine.yaml."};
 
 }  // namespace
 }  // namespace cpm::cli

@@ -81,6 +81,9 @@ struct KinematicProblem {
   [[nodiscard]] int sample_of_row(int r) const noexcept { return r / per_sample; }
 };
 
+// Read the data and the residual of the model as given, nothing fitted (compare).
+KinematicProblem read_kinematic(const io::DataSet& data, const kin::KinematicModel& model);
+
 // Read the data into a problem and calibrate the base. Throws Error naming
 // the file and line for a reading the model cannot follow, DegeneratePoses
 // for a pose set that cannot determine the base.
