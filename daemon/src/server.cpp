@@ -1,6 +1,7 @@
 #include "cpm/daemon/server.hpp"
 
 #include <sys/socket.h>
+#include <sys/stat.h>
 #include <sys/un.h>
 #include <unistd.h>
 
@@ -40,6 +41,8 @@ void ModelStore::release(const ctl::Machine* m) {
 }
 
 namespace {
+
+constexpr off_t kMaxModelFileBytes = 16 << 20;
 
 std::string mm(const Vec3& p) {
   char b[96];
@@ -276,6 +279,15 @@ void Server::on_control(const lcm::ReceiveBuffer*, const std::string&, const con
       break;
     }
     case control_command_t::CMD_LOAD_MODEL: {
+      // Only a regular file of sane size: /dev/zero would be read until
+      // memory runs out and a FIFO would block, and this thread is the one
+      // that must hear the next stop command.
+      if (m->model_path.rfind("builtin:", 0) != 0) {
+        struct stat st {};
+        if (::stat(m->model_path.c_str(), &st) == 0 && (!S_ISREG(st.st_mode) || st.st_size > kMaxModelFileBytes))
+          return refuse(ack_t::REASON_LOAD_FAILED, "load_model: " + m->model_path +
+                                                       ": not a regular file of at most 16 MiB");
+      }
       try {
         ctl::MachineModel model = load_model(m->model_path);
         model.force_limit = std::min(model.force_limit, cfg_.limits.force);

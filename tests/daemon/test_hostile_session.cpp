@@ -7,6 +7,8 @@
 // moving leaves the motion bit for bit as it was without the flood, with at
 // most ControlLoop::kCommandsPerCycle commands taken in any cycle.
 #include <gtest/gtest.h>
+#include <sys/stat.h>
+#include <unistd.h>
 
 #include <cmath>
 #include <limits>
@@ -150,6 +152,30 @@ TEST(HostileSession, MalformedBytesAreDroppedAndTheDaemonGoesOn) {
   s.cycles(1);
   ASSERT_EQ(s.acks.size(), 1u);
   EXPECT_TRUE(s.acks[0].accepted);
+}
+
+TEST(HostileSession, LoadModelRefusesDevicesAndFifos) {
+  // Read whole, /dev/zero would exhaust memory and a FIFO would block the
+  // thread that has to hear the next stop. (Were they read, this test would
+  // not end.)
+  Session s;
+  const std::string fifo = testing::TempDir() + "cpmd-hostile-fifo";
+  ::unlink(fifo.c_str());
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+  std::int64_t id = 40;
+  for (const std::string& path : {std::string("/dev/zero"), std::string("/dev/stdin"), fifo, std::string("/")}) {
+    control_command_t m{};
+    m.command = control_command_t::CMD_LOAD_MODEL;
+    m.id = id;
+    m.model_path = path;
+    s.publish(s.h.cfg.lcm.control_channel, Session::encode(m));
+    const ack_t* a = s.ack_of(id++);
+    ASSERT_NE(a, nullptr) << path;
+    EXPECT_FALSE(a->accepted) << path;
+    EXPECT_EQ(a->reason, ack_t::REASON_LOAD_FAILED) << path;
+    EXPECT_NE(a->message.find(path), std::string::npos) << a->message;
+  }
+  ::unlink(fifo.c_str());
 }
 
 TEST(HostileSession, ExtremeIdsAreEchoed) {
