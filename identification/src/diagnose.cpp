@@ -1,6 +1,7 @@
 #include "cpm/identification/diagnose.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <numbers>
 #include <sstream>
@@ -53,6 +54,9 @@ Depends depends(const std::string& e) {
 
 struct AxisExcitation {
   Vec3 vmax = Vec3::Zero(), vmin = Vec3::Zero(), span = Vec3::Zero(), fmax = Vec3::Zero();
+  // The axis moved one way only: fewer than 2 % of its moving rows (|v| > 1 mm/s)
+  // go the other way (start-up and settling wobble do not count as a reversal).
+  std::array<bool, 3> one_way{};
 };
 
 AxisExcitation excitation(const MotionProblem& P) {
@@ -69,6 +73,14 @@ AxisExcitation excitation(const MotionProblem& P) {
       x.fmax[i] = std::max(x.fmax[i], std::fabs(P.f[r][i]));
     }
   x.span = dmax - dmin;
+  for (int i = 0; i < 3; ++i) {
+    int plus = 0, minus = 0;
+    for (int r = 0; r < P.rows(); ++r) {
+      plus += P.v[r][i] > 1e-3;
+      minus += P.v[r][i] < -1e-3;
+    }
+    x.one_way[i] = plus + minus > 0 && std::min(plus, minus) < 0.02 * (plus + minus);
+  }
   return x;
 }
 
@@ -77,7 +89,7 @@ std::string separate_advice(const CandidateResult& a, const CandidateResult& b,
   const Depends da = depends(a.effect), db = depends(b.effect);
   const int ax = a.axis >= 0 ? a.axis : b.axis;
   const std::string axis_text = ax >= 0 ? "axis " + std::to_string(ax + 1) : "the axes";
-  const bool one_direction = ax >= 0 && (x.vmin[ax] > -1e-3 || x.vmax[ax] < 1e-3);
+  const bool one_direction = ax >= 0 && x.one_way[ax];
   if (da.direction != db.direction && one_direction)
     return "move " + axis_text + " in both directions";
   if ((da.direction && db.direction) || (da.speed != db.speed))
@@ -243,7 +255,7 @@ CandidateResult evaluate_dynamic_candidate(const MotionProblem& P, const Engine&
         cf.with = P.base_params[static_cast<std::size_t>(bi)].name;
         cf.correlation = std::sqrt(share(j));
         const Depends d = depends(effect);
-        cf.separate_by = d.direction && axis >= 0 && (ex.vmin[axis] > -1e-3 || ex.vmax[axis] < 1e-3)
+        cf.separate_by = d.direction && axis >= 0 && ex.one_way[axis]
                              ? "move axis " + std::to_string(axis + 1) + " in both directions"
                              : "vary the accelerations, speeds and poses more widely";
         bool dup = false;
@@ -558,6 +570,33 @@ Diagnosis diagnose_motion(const io::MotionData& data, const ctl::Machine& model,
   detail::rank_and_decide(D, E, opt, [&](const CandidateResult& a, const CandidateResult& b) {
     return separate_advice(a, b, ex);
   });
+  // Coulomb friction on an axis that moved one way only is a constant force:
+  // what a tilted plane puts into the weight, what a force-gain error makes
+  // of a nearly steady force, what a distant spring pulls. The fit may prefer
+  // one of them, but these data cannot name the cause: say so.
+  if (D.verdict >= 0) {
+    const CandidateResult& v = D.candidates[static_cast<std::size_t>(D.verdict)];
+    if (v.axis >= 0 && ex.one_way[static_cast<std::size_t>(v.axis)] &&
+        (v.effect == "coulomb_friction" || v.effect == "force_gain" || v.effect == "spring")) {
+      const std::string ax = std::to_string(v.axis + 1);
+      std::vector<std::string> alts;
+      for (const char* e : {"coulomb_friction", "force_gain", "spring"})
+        if (v.effect != e) alts.push_back(std::string(e) + "[axis " + ax + "]");
+      D.ambiguous = true;
+      D.verdict_text += ". Axis " + ax + " moved one way only: a steady force on it cannot be told apart between " +
+                        v.label() + ", " + alts[0] + ", " + alts[1] +
+                        " and a tilted plane's share of the weight; to separate, move axis " + ax + " in both directions";
+      for (auto& c : D.candidates)
+        if (c.axis == v.axis && (c.effect == "coulomb_friction" || c.effect == "force_gain" || c.effect == "spring") &&
+            c.label() != v.label()) {
+          bool dup = false;
+          for (const auto& o : D.candidates[static_cast<std::size_t>(D.verdict)].confounded) dup |= o.with == c.label();
+          if (!dup)
+            D.candidates[static_cast<std::size_t>(D.verdict)].confounded.push_back(
+                {c.label(), c.effect, c.axis, 0.0, "move axis " + ax + " in both directions"});
+        }
+    }
+  }
   if (!E.unidentifiable_base().empty()) {
     std::string names;
     for (int j : E.unidentifiable_base()) names += (names.empty() ? "" : ", ") + P.base_params[j].name;

@@ -290,5 +290,57 @@ TEST(KinematicFit, TheFittedModelExplainsHeldOutDataAndCompensatesTheCircle) {
   EXPECT_LT(g1, 0.5 * g0);
 }
 
+// Circle-like ball-bar data (a circular test read as a ball-bar file: CCW
+// run then CW run about the pivot): compare finds the circle and its G, H, F
+// agree with calibration's own circular test of the same machine.
+TEST(KinematicCompare, CircleDataGetTheCircularTestFigures) {
+  const auto truth = cal::kim_true_machine();
+  const auto nominal = ctl::MachineModel::elkady();
+  const Vec3 c(0.430, 0.430, 0.400);
+  const double R = 0.150;
+  std::vector<Vec3> poses;
+  for (int dir : {+1, -1})
+    for (int k = 0; k < 360; ++k) {
+      const double a = dir * 2.0 * std::numbers::pi * k / 360.0;
+      poses.push_back(c + R * Vec3(std::cos(a), std::sin(a), 0.0));
+    }
+  cal::CircularTestSpec spec;
+  spec.closed_loop = false;
+  const cal::CircularTestResult ref = cal::run_circular_test(truth, nominal, spec);
+  cal::BallbarSimulation sim;
+  sim.pivot_nominal = c;
+  sim.pivot_true = ref.pivot;  // the pivot where the machine goes for the centre, as the test sets it up
+  sim.noise = {cal::NoiseShape::uniform, 0.5e-6, 5};
+  sim.inputs = cal::sequence_inputs(nominal, poses, 0.1);
+  io::BallbarData b = cal::simulate_ballbar(truth, nominal, poses, sim);
+  for (int k = 0; k < 720; ++k) b.extra.run.push_back(k < 360 ? 1 : 2);
+  // The model's distance to the pivot as the user declares it (the centre).
+  const auto P = ident::read_kinematic(b, nominal.kinematics);
+  const ident::KinematicSummary s = ident::summarize_kinematic(P, P.residual_given);
+  ASSERT_TRUE(s.circle.has_value()) << s.circle_note;
+  std::printf("G from the file %.2f µm, from the circular test %.2f µm; H %.2f / %.2f µm\n",
+              s.circle->G_bidirectional * 1e6, ref.G_bidirectional * 1e6, s.circle->H * 1e6, ref.H * 1e6);
+  EXPECT_EQ(s.circle->spec.plane, ctl::CirclePlane::xy);
+  EXPECT_NEAR(s.circle->spec.radius, R, 1e-3);
+  EXPECT_NEAR(s.circle->G_bidirectional, ref.G_bidirectional, 2e-6 + 0.02 * ref.G_bidirectional);
+  const std::string html = ident::kinematic_compare_html(P, s, "circle");
+  EXPECT_NE(html.find("<svg"), std::string::npos);
+  EXPECT_NE(ident::kinematic_summary_json(P, s, "m.yaml").find("\"G\": "), std::string::npos);
+}
+
+// The JSON contract of issue 4 for kinematic data.
+TEST(KinematicReport, JsonContractAndHtml) {
+  const io::BallbarData b = test::kim_ballbar({{"cyclic_error", 2, {3e-6, 0.02, 1.0}}}, ballbar_poses());
+  const Diagnosis D = diagnose(b);
+  const std::string js = ident::diagnosis_json(D);
+  for (const char* key : {"\"kind\": \"ballbar\"", "\"samples\": ", "\"units\": \"m\"", "\"baseline\": {\"rms\": ",
+                          "\"candidates\": [", "\"rms_after\": ", "\"explained\": ", "\"significant\": ",
+                          "\"verdict\": {\"missing\": \"cyclic_error\", \"axis\": 3"})
+    EXPECT_NE(js.find(key), std::string::npos) << key;
+  const std::string html = ident::diagnosis_html(D);
+  EXPECT_NE(html.find("cyclic_error[axis 3]"), std::string::npos);
+  EXPECT_NE(html.find("<svg"), std::string::npos);
+}
+
 }  // namespace
 }  // namespace cpm
