@@ -1,8 +1,11 @@
 // cpmd: the motion controller daemon. See docs/daemon.md.
 //   cpmd --config FILE [--check] [--duration S] [--stats-json FILE]
+#include <fcntl.h>
 #include <signal.h>
+#include <unistd.h>
 #include <time.h>
 
+#include <cerrno>
 #include <chrono>
 #include <cstdio>
 #include <cstring>
@@ -51,6 +54,25 @@ std::string stats_json(const cpm_msgs::loop_stats_t& s) {
   }
   os << "}}\n";
   return os.str();
+}
+
+// Temporary file, fsync, rename: a crash leaves the old file or the new one
+// (cpmd does not link cpm_io's write_file_atomically).
+void write_atomically(const std::string& path, const std::string& text) {
+  const std::string tmp = path + ".tmp";
+  const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  bool ok = fd >= 0;
+  for (std::size_t off = 0; ok && off < text.size();) {
+    const ssize_t n = ::write(fd, text.data() + off, text.size() - off);
+    if (n < 0 && errno == EINTR) continue;
+    ok = n > 0;
+    if (ok) off += static_cast<std::size_t>(n);
+  }
+  ok = ok && ::fsync(fd) == 0;
+  if (fd >= 0) ::close(fd);
+  if (ok && std::rename(tmp.c_str(), path.c_str()) == 0) return;
+  ::unlink(tmp.c_str());
+  std::fprintf(stderr, "cpmd: cannot write %s: %s\n", path.c_str(), std::strerror(errno));
 }
 
 int run(int argc, char** argv) {
@@ -156,12 +178,7 @@ int run(int argc, char** argv) {
   lcm_thread.join();
   backend->stop();
   const cpm_msgs::loop_stats_t& st = loop->current_stats();
-  if (!stats_path.empty()) {
-    std::ofstream f(stats_path + ".tmp");
-    f << stats_json(st);
-    f.close();
-    std::rename((stats_path + ".tmp").c_str(), stats_path.c_str());
-  }
+  if (!stats_path.empty()) write_atomically(stats_path, stats_json(st));
   std::fprintf(stderr, "cpmd: stopped after %lld cycles, %lld overruns, worst wake-up latency %.1f us\n",
                static_cast<long long>(st.cycles), static_cast<long long>(st.overruns),
                st.max_ns[kSeriesLatency] * 1e-3);

@@ -96,11 +96,16 @@ int record(Args& a) {
   if (duration < 0 && !until_idle) throw UsageError("give --duration S or --until-idle");
   daemon::Client c(l);
   std::vector<MotionRow> rows;
-  std::int64_t first = -1, last = -1;
+  // Counted against the loop's cycle counter (state_t.cycles), not the slot
+  // index (state_t.cycle): a late cycle skips slots that never ran, which are
+  // no lost message.
+  std::int64_t first = -1, last = -1, first_run = -1, last_run = -1, skipped0 = 0, skipped = 0;
   bool moved = false, idle = false;
   c.on_state([&](const state_t& s) {
-    if (first < 0) first = s.cycle;
+    if (first < 0) first = s.cycle, first_run = s.cycles, skipped0 = s.skipped;
     last = s.cycle;
+    last_run = s.cycles;
+    skipped = s.skipped - skipped0;
     rows.push_back(row_of(s));
     if (s.mode == state_t::MODE_MOVING || s.mode == state_t::MODE_STOPPING) moved = true;
     if (moved && s.mode != state_t::MODE_MOVING && s.mode != state_t::MODE_STOPPING) idle = true;
@@ -114,13 +119,14 @@ int record(Args& a) {
   if (rows.empty()) throw Error("no state received from cpmd (channel " + l.state_channel + ")");
   // Nominal rate from the cycle numbers (missing states do not change it).
   const double rate = last > first ? static_cast<double>(last - first) / (rows.back().t - rows.front().t) : 0.0;
-  const long expected = static_cast<long>(last - first + 1);
-  char note[160];
-  std::snprintf(note, sizeof note, "recorded by cpm record from %s: %zu states of %ld cycles", l.state_channel.c_str(),
-                rows.size(), expected);
+  const long expected = static_cast<long>(last_run - first_run + 1);
+  char note[200];
+  std::snprintf(note, sizeof note, "recorded by cpm record from %s: %zu states of %ld cycles run (%lld slots skipped by late cycles)",
+                l.state_channel.c_str(), rows.size(), expected, static_cast<long long>(skipped));
   write_motion_csv(*out, rows, std::round(rate), note);
-  std::printf("record: %zu rows over %.3f s to %s (%ld cycles, %ld missing)\n", rows.size(),
-              rows.back().t - rows.front().t, out->c_str(), expected, expected - static_cast<long>(rows.size()));
+  std::printf("record: %zu rows over %.3f s to %s (%ld cycles run, %ld missing; %lld slots skipped by late cycles)\n",
+              rows.size(), rows.back().t - rows.front().t, out->c_str(), expected,
+              expected - static_cast<long>(rows.size()), static_cast<long long>(skipped));
   return 0;
 }
 
