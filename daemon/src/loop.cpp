@@ -364,7 +364,7 @@ void ControlLoop::handle(const Command& c, std::int64_t k) noexcept {
 
 void ControlLoop::handle_commands(std::int64_t k) noexcept {
   // A bounded number per cycle keeps the cycle's time bounded.
-  for (int n = 0; n < 4; ++n) {
+  for (int n = 0; n < kCommandsPerCycle; ++n) {
     const Command* c = commands_.front();
     if (!c) return;
     handle(*c, k);

@@ -121,6 +121,10 @@ class ControlLoop {
   // A stream chunk ending slower than this (m/s) ends the stream; faster,
   // it owes a next chunk (stream_underrun when none has come).
   static constexpr double kStreamRestSpeed = 1e-6;
+  // Commands taken from the command queue per cycle, at most: a flood of
+  // commands cannot lengthen a cycle (the rest wait in the queue, and the
+  // server answers REASON_BUSY when it is full).
+  static constexpr int kCommandsPerCycle = 4;
 
   // Keeps references to `backend` and `machine`; the controller refers to `machine`.
   ControlLoop(const DaemonConfig& config, Backend& backend, const ctl::Machine& machine,
