@@ -91,6 +91,7 @@ struct MotionProblem {
   Vec3 velocity_noise = Vec3::Zero();   // estimated white noise of v (m/s)
   Vec3 position_noise = Vec3::Zero();   // estimated white noise of d (m)
   Vec3 accel_noise = Vec3::Zero();      // noise the estimate adds at each row (m/s^2)
+  Vec3 v_hat_noise = Vec3::Zero();      // noise of the per-sample velocity v_hat (m/s)
   Vec3 force_noise = Vec3::Zero();      // the same through the inertia (N)
   int half_width = 0;             // kernel half width (samples)
   int stride = 0;
@@ -121,6 +122,10 @@ struct MotionProblem {
     return out;
   }
   // Column of parameter j of a per-axis dynamic effect (effect_force_gradient), filtered.
+  // Near rest, where sgn_eps and the Stribeck bell bend within the noise of
+  // v_hat, the value is the expectation over that noise (regression
+  // calibration): evaluating a sharp function at a noisy velocity would
+  // attenuate its fitted amplitude.
   [[nodiscard]] Eigen::VectorXd effect_column(const ctl::DynamicEffect& e, int j) const;
   // The effect's force itself, filtered.
   [[nodiscard]] Eigen::VectorXd effect_force_column(const ctl::DynamicEffect& e) const;
