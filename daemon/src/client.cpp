@@ -4,6 +4,7 @@
 
 #include <chrono>
 #include <lcm/lcm-cpp.hpp>
+#include <algorithm>
 #include <random>
 
 #include "cpm/daemon/loop.hpp"
@@ -35,13 +36,92 @@ Client::Client(const LcmConfig& cfg) : cfg_(cfg) {
   lcm_->subscribe(cfg_.stats_channel, &Client::on_stats_msg, this);
   std::random_device rd;
   next_id_ = (static_cast<std::int64_t>(rd() & 0x7fffffu) << 32) ^ (static_cast<std::int64_t>(::getpid()) << 8);
+  nonce_ = static_cast<std::int64_t>(((std::uint64_t{rd()} << 32) ^ rd()) & 0x7FFFFFFFFFFFFFFFull) | 1;
 }
 
-Client::~Client() = default;
+Client::~Client() {
+  try {
+    if (session_ != 0) {
+      cpm_msgs::control_command_t c{};
+      c.command = cpm_msgs::control_command_t::CMD_RELEASE;
+      c.id = next_id();
+      stamp(c);
+      lcm_->publish(cfg_.control_channel, &c);  // not waited for: it expires anyway
+    }
+  } catch (...) {
+  }
+}
+
+namespace {
+double steady_now() { return std::chrono::duration<double>(Clock::now().time_since_epoch()).count(); }
+std::int64_t wall_us() {
+  return std::chrono::duration_cast<std::chrono::microseconds>(
+             std::chrono::system_clock::now().time_since_epoch()).count();
+}
+}  // namespace
+
+template <class M>
+void Client::stamp(M& m) {
+  m.session = session_;
+  m.seq = ++seq_;
+  m.utime = wall_us();
+  last_sent_ = steady_now();
+}
+
+bool Client::lost_session(const cpm_msgs::ack_t& a) noexcept {
+  return !a.accepted && a.reason == cpm_msgs::ack_t::REASON_NOT_HOLDER;
+}
+
+void Client::acquire(double timeout_s) {
+  cpm_msgs::control_command_t c{};
+  c.command = cpm_msgs::control_command_t::CMD_ACQUIRE;
+  c.id = next_id();
+  c.session = nonce_;
+  c.utime = wall_us();
+  lcm_->publish(cfg_.control_channel, &c);
+  const cpm_msgs::ack_t a = wait_ack(c.id, timeout_s);
+  if (!a.accepted || a.session == 0) throw Error("cpmd refused to let this process command the machine: " + a.message);
+  session_ = a.session;
+  seq_ = 0;
+  last_sent_ = steady_now();
+}
+
+bool Client::release(double timeout_s) {
+  if (session_ == 0) return true;
+  cpm_msgs::control_command_t c{};
+  c.command = cpm_msgs::control_command_t::CMD_RELEASE;
+  c.id = next_id();
+  stamp(c);
+  session_ = 0;
+  lcm_->publish(cfg_.control_channel, &c);
+  try {
+    return wait_ack(c.id, timeout_s).accepted;
+  } catch (const Error&) {
+    return false;
+  }
+}
+
+void Client::keep_alive() {
+  if (session_ == 0 || steady_now() - last_sent_ < 0.25) return;
+  cpm_msgs::control_command_t c{};
+  c.command = cpm_msgs::control_command_t::CMD_PING;
+  c.id = next_id();
+  stamp(c);
+  pings_.insert(c.id);
+  lcm_->publish(cfg_.control_channel, &c);
+}
 
 std::int64_t Client::next_id() { return ++next_id_; }
 
-void Client::on_ack(const lcm::ReceiveBuffer*, const std::string&, const cpm_msgs::ack_t* m) { acks_[m->id] = *m; }
+void Client::on_ack(const lcm::ReceiveBuffer*, const std::string&, const cpm_msgs::ack_t* m) {
+  if (pings_.erase(m->id)) {
+    // A keep-alive refused: the session is gone (daemon restarted, or it
+    // expired); the next command acquires a new one.
+    if (lost_session(*m)) session_ = 0;
+    return;
+  }
+  acks_[m->id] = *m;
+}
 void Client::on_state_msg(const lcm::ReceiveBuffer*, const std::string&, const cpm_msgs::state_t* m) {
   last_state_ = *m;
   if (state_cb_) state_cb_(*m);
@@ -56,9 +136,10 @@ int Client::handle(double timeout_s) {
   for (;;) {
     const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(end - Clock::now()).count();
     if (left <= 0) break;
-    const int rc = lcm_->handleTimeout(static_cast<int>(left));
+    keep_alive();
+    const int rc = lcm_->handleTimeout(static_cast<int>(std::min<long>(left, 100)));
     if (rc < 0) throw Error("lcm: receive failed");
-    if (rc == 0) break;
+    if (rc == 0) continue;
     ++n;
   }
   return n;
@@ -72,6 +153,7 @@ cpm_msgs::ack_t Client::wait_ack(std::int64_t id, double timeout_s) {
       acks_.erase(it);
       return a;
     }
+    keep_alive();
     lcm_->handleTimeout(20);
   }
   if (auto it = acks_.find(id); it != acks_.end()) return it->second;
@@ -80,11 +162,25 @@ cpm_msgs::ack_t Client::wait_ack(std::int64_t id, double timeout_s) {
 }
 
 cpm_msgs::ack_t Client::control(cpm_msgs::control_command_t cmd, double timeout_s) {
-  cmd.id = next_id();
-  cmd.utime = std::chrono::duration_cast<std::chrono::microseconds>(
-                  std::chrono::system_clock::now().time_since_epoch()).count();
-  lcm_->publish(cfg_.control_channel, &cmd);
-  return wait_ack(cmd.id, timeout_s);
+  using C = cpm_msgs::control_command_t;
+  if (cmd.command == C::CMD_ACQUIRE) {
+    acquire(timeout_s);
+    cpm_msgs::ack_t a{};
+    a.accepted = true;
+    a.session = session_;
+    return a;
+  }
+  const bool stop = cmd.command == C::CMD_STOP;
+  for (int attempt = 0;; ++attempt) {
+    if (session_ == 0 && !stop) acquire(timeout_s);
+    cmd.id = next_id();
+    stamp(cmd);  // a stop without a session goes out with session 0: cpmd takes it from anyone
+    lcm_->publish(cfg_.control_channel, &cmd);
+    cpm_msgs::ack_t a = wait_ack(cmd.id, timeout_s);
+    if (cmd.command == C::CMD_RELEASE) session_ = 0;
+    if (!lost_session(a) || attempt > 0 || stop) return a;
+    session_ = 0;  // expired or the daemon restarted: acquire once more
+  }
 }
 
 cpm_msgs::ack_t Client::control(std::int8_t command, double timeout_s) {
@@ -94,28 +190,37 @@ cpm_msgs::ack_t Client::control(std::int8_t command, double timeout_s) {
 }
 
 std::int64_t Client::send_trajectory(cpm_msgs::trajectory_command_t cmd) {
+  if (session_ == 0) acquire();
   if (cmd.id == 0) cmd.id = next_id();
-  cmd.utime = std::chrono::duration_cast<std::chrono::microseconds>(
-                  std::chrono::system_clock::now().time_since_epoch()).count();
+  stamp(cmd);
   lcm_->publish(cfg_.trajectory_channel, &cmd);
   return cmd.id;
 }
 
 cpm_msgs::ack_t Client::trajectory(cpm_msgs::trajectory_command_t cmd, double timeout_s) {
+  cpm_msgs::ack_t a = wait_ack(send_trajectory(cmd), timeout_s);
+  if (!lost_session(a)) return a;
+  session_ = 0;  // expired or the daemon restarted: acquire once more
   return wait_ack(send_trajectory(cmd), timeout_s);
 }
 
 std::optional<cpm_msgs::state_t> Client::state(double timeout_s) {
   last_state_.reset();
   const auto end = Clock::now() + std::chrono::duration<double>(timeout_s);
-  while (!last_state_ && Clock::now() < end) lcm_->handleTimeout(20);
+  while (!last_state_ && Clock::now() < end) {
+    keep_alive();
+    lcm_->handleTimeout(20);
+  }
   return last_state_;
 }
 
 std::optional<cpm_msgs::loop_stats_t> Client::stats(double timeout_s) {
   last_stats_.reset();
   const auto end = Clock::now() + std::chrono::duration<double>(timeout_s);
-  while (!last_stats_ && Clock::now() < end) lcm_->handleTimeout(50);
+  while (!last_stats_ && Clock::now() < end) {
+    keep_alive();
+    lcm_->handleTimeout(50);
+  }
   return last_stats_;
 }
 

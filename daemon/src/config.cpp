@@ -311,12 +311,17 @@ DaemonConfig parse_config(const std::string& text, const std::string& name, cons
   if (m["enable_timeout"]) L.enable_timeout = r.positive(m["enable_timeout"], "limits.enable_timeout", 60.0, "s");
   if (m["saturation_time"]) L.saturation_time = r.positive(m["saturation_time"], "limits.saturation_time", 60.0, "s");
 
-  const auto n = r.map(root["lcm"], "lcm", {"url"}, {"channels", "state_decimation"});
+  const auto n = r.map(root["lcm"], "lcm", {"url"}, {"channels", "state_decimation", "session_timeout"});
   c.lcm.url = r.text(n["url"], "lcm.url");
   if (c.lcm.url.find("://") == std::string::npos)
     r.fail(n["url"], "lcm.url", "expected an LCM URL such as udpm://239.255.76.67:7667?ttl=0");
   if (n["state_decimation"])
     c.lcm.state_decimation = static_cast<int>(r.integer(n["state_decimation"], "lcm.state_decimation", 1, 1000));
+  if (n["session_timeout"]) {
+    c.lcm.session_timeout = r.positive(n["session_timeout"], "lcm.session_timeout", 3600.0, "s");
+    if (c.lcm.session_timeout < 0.5)
+      r.fail(n["session_timeout"], "lcm.session_timeout", "must be at least 0.5 s (clients ping every 0.25 s)");
+  }
   if (n["channels"]) {
     const auto ch = r.map(n["channels"], "lcm.channels", {}, {"state", "stats", "trajectory", "control", "ack"});
     if (ch["state"]) c.lcm.state_channel = r.text(ch["state"], "lcm.channels.state");

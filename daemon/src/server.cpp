@@ -14,6 +14,7 @@
 #include <map>
 #include <memory>
 #include <lcm/lcm-cpp.hpp>
+#include <random>
 #include <sstream>
 
 namespace cpm::daemon {
@@ -163,6 +164,11 @@ Validation validate_segment(const trajectory_command_t& c, const Vec3& start, co
 Server::Server(const DaemonConfig& cfg, ControlLoop& loop, ModelStore& models)
     : cfg_(cfg), loop_(loop), models_(models), law_(cfg.controller.law), gains_(cfg.controller.gains),
       scratch_(std::make_unique<Command>()) {
+  now_ = [] {
+    return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
+  };
+  std::random_device rd;
+  session_salt_ = (std::uint64_t{rd()} << 32) ^ rd();
   lcm_ = std::make_unique<lcm::LCM>(cfg_.lcm.url);
   if (!lcm_->good()) throw Error("lcm: cannot open '" + cfg_.lcm.url + "' (is there a multicast route? see docs/daemon.md)");
   // Untyped subscriptions: receive() decodes. lcm-gen's typed decoding
@@ -183,7 +189,7 @@ namespace {
 // well-formed message. A length below 1 makes the generated decoder call
 // std::string::assign with a negative size.
 bool control_string_length_ok(const void* data, std::size_t size) {
-  constexpr std::size_t kFixed = 8 + 8 + 8 + 1 + 1 + 1 + 3 * 8 + 3 * 8;  // hash .. kd
+  constexpr std::size_t kFixed = 8 + 8 + 8 + 8 + 8 + 1 + 1 + 1 + 3 * 8 + 3 * 8;  // hash .. kd
   if (size < kFixed + 4) return false;
   const auto* p = static_cast<const std::uint8_t*>(data) + kFixed;
   const std::int32_t len = static_cast<std::int32_t>((std::uint32_t{p[0]} << 24) | (std::uint32_t{p[1]} << 16) |
@@ -223,7 +229,7 @@ bool Server::receive(const std::string& channel, const void* data, std::size_t s
 Server::~Server() = default;
 
 void Server::publish_ack(std::int64_t id, std::int8_t source, std::int8_t code, bool ok, std::int16_t reason,
-                         const std::string& message, Mode mode, std::int16_t depth) {
+                         const std::string& message, Mode mode, std::int16_t depth, std::int64_t session) {
   ack_t a;
   a.utime = std::chrono::duration_cast<std::chrono::microseconds>(
                 std::chrono::system_clock::now().time_since_epoch()).count();
@@ -235,6 +241,7 @@ void Server::publish_ack(std::int64_t id, std::int8_t source, std::int8_t code, 
   a.message = message;
   a.mode = static_cast<std::int8_t>(mode);
   a.queue_depth = depth;
+  a.session = session;
   lcm_->publish(cfg_.lcm.ack_channel, &a);
 }
 
@@ -245,7 +252,98 @@ bool Server::send(Command& c) {
   return false;
 }
 
+std::int64_t Server::session() const {
+  if (session_ == 0 || now_() - last_heard_ > cfg_.lcm.session_timeout) return 0;
+  return session_;
+}
+
+namespace {
+std::string seconds(double s) {
+  char b[32];
+  std::snprintf(b, sizeof b, "%.2f s", s);
+  return b;
+}
+}  // namespace
+
+bool Server::admit(std::int64_t id, std::int8_t source, std::int8_t code, std::int64_t session, std::int64_t seq) {
+  const double now = now_();
+  const std::int64_t held = this->session();
+  auto refuse = [&](std::int16_t reason, const std::string& why) {
+    publish_ack(id, source, code, false, reason, why, loop_.mode(), latest_.queue_depth);
+    return false;
+  };
+  if (held == 0) {
+    if (session_ != 0 && session == session_)
+      return refuse(ack_t::REASON_NOT_HOLDER, "the session expired: nothing heard from its holder for " +
+                                                  seconds(now - last_heard_) + " (lcm.session_timeout " +
+                                                  seconds(cfg_.lcm.session_timeout) + "); acquire it again");
+    return refuse(ack_t::REASON_NOT_HOLDER,
+                  "no session: acquire one with CMD_ACQUIRE before commanding (the cpm tools do)");
+  }
+  if (session != held)
+    return refuse(ack_t::REASON_NOT_HOLDER,
+                  "another commander holds the machine (last heard " + seconds(now - last_heard_) +
+                      " ago; its session ends when it releases it or after " + seconds(cfg_.lcm.session_timeout) +
+                      " of silence)");
+  if (seq <= last_seq_)
+    return refuse(ack_t::REASON_STALE_SEQ, "seq " + std::to_string(seq) + " is not above " +
+                                               std::to_string(last_seq_) +
+                                               ", the session's last accepted one: a replayed, duplicated or "
+                                               "reordered command is not played");
+  last_seq_ = seq;
+  last_heard_ = now;
+  return true;
+}
+
+void Server::acquire(const control_command_t& m) {
+  const double now = now_();
+  const std::int64_t held = session();
+  if (held != 0 && m.session != session_nonce_) {
+    publish_ack(m.id, 1, m.command, false, ack_t::REASON_NOT_HOLDER,
+                "another commander holds the machine (last heard " + seconds(now - last_heard_) +
+                    " ago); it is free again when that commander releases it or after " +
+                    seconds(cfg_.lcm.session_timeout) + " of silence",
+                loop_.mode(), latest_.queue_depth);
+    return;
+  }
+  if (held == 0) {
+    // splitmix64 of salt, nonce and time: unguessable from outside the host
+    // only as far as the bus is private (docs/daemon.md).
+    std::uint64_t z = session_salt_ ^ static_cast<std::uint64_t>(m.session) ^
+                      (static_cast<std::uint64_t>(now * 1e9) * 0x9E3779B97F4A7C15ull);
+    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+    z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+    z ^= z >> 31;
+    session_ = static_cast<std::int64_t>(z & 0x7FFFFFFFFFFFFFFFull);
+    if (session_ == 0) session_ = 1;
+    session_nonce_ = m.session;
+    last_seq_ = 0;
+  }
+  // else: the holder's acquire repeated (its ack was lost): the same session.
+  last_heard_ = now;
+  publish_ack(m.id, 1, m.command, true, ack_t::REASON_NONE, "", loop_.mode(), latest_.queue_depth, session_);
+}
+
 void Server::on_control(const lcm::ReceiveBuffer*, const std::string&, const control_command_t* m) {
+  if (m->command == control_command_t::CMD_ACQUIRE) return acquire(*m);
+  if (m->command == control_command_t::CMD_STOP) {
+    // A stop is taken from anyone: it only brings the platform to rest, and
+    // whoever sees a danger must be able to stop it. It does not take the
+    // session; from the holder it counts as a sign of life.
+    const std::int64_t held = session();
+    if (held != 0 && m->session == held && m->seq > last_seq_) {
+      last_seq_ = m->seq;
+      last_heard_ = now_();
+    }
+  } else if (!admit(m->id, 1, m->command, m->session, m->seq)) {
+    return;
+  }
+  if (m->command == control_command_t::CMD_RELEASE) {
+    session_ = 0;
+    session_nonce_ = 0;
+    publish_ack(m->id, 1, m->command, true, ack_t::REASON_NONE, "", loop_.mode(), latest_.queue_depth);
+    return;
+  }
   Command& c = *scratch_;
   c = Command{};
   c.id = m->id;
@@ -311,6 +409,7 @@ void Server::on_control(const lcm::ReceiveBuffer*, const std::string&, const con
 }
 
 void Server::on_trajectory(const lcm::ReceiveBuffer*, const std::string&, const trajectory_command_t* m) {
+  if (!admit(m->id, 2, m->kind, m->session, m->seq)) return;
   Vec3 start;
   if (inflight_segments_ > 0) start = planned_end_;
   else if (ack_newer_than_state_ || !have_state_) start = ack_end_;

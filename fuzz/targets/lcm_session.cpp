@@ -16,8 +16,14 @@
 //   op % 4 == 3: next byte: bit 0 e-stop open, bit 1 drive fault on axis 1
 // CMD_LOAD_MODEL paths are replaced by "builtin:elkady" or a missing file:
 // a fuzzer must not read the host's files.
+// The target acquires the session first and, unless bit 2 of the op is set,
+// writes it into the message (bytes 24..31); unless bit 3 is set, it writes
+// the next seq too (bytes 32..39): the fuzzer gets past the session check
+// and still reaches the refusals (wrong session, stale seq). The session
+// clock is the loop's cycle count, so expiry is deterministic.
 #include <cmath>
 #include <memory>
+#include <lcm/lcm-cpp.hpp>
 
 #include "cpm/daemon/server.hpp"
 #include "cpm/daemon/sim_backend.hpp"
@@ -44,8 +50,8 @@ std::vector<std::uint8_t> tame_control(const std::uint8_t* d, std::size_t n) {
   std::vector<std::uint8_t> out(d, d + n);
   control_command_t m;
   try {
-    if (n < 79) return out;
-    const std::uint8_t* p = d + 75;
+    if (n < 95) return out;
+    const std::uint8_t* p = d + 91;  // model_path's length prefix (after session and seq)
     const std::int32_t len = static_cast<std::int32_t>((std::uint32_t{p[0]} << 24) | (std::uint32_t{p[1]} << 16) |
                                                        (std::uint32_t{p[2]} << 8) | p[3]);
     if (len < 1) return out;  // the server must drop this one itself
@@ -58,6 +64,17 @@ std::vector<std::uint8_t> tame_control(const std::uint8_t* d, std::size_t n) {
   out.assign(static_cast<std::size_t>(m.getEncodedSize()), 0);
   m.encode(out.data(), 0, static_cast<int>(out.size()));
   return out;
+}
+
+struct AckTap {
+  std::int64_t session = 0;
+  void on(const lcm::ReceiveBuffer*, const std::string&, const cpm_msgs::ack_t* a) {
+    if (a->accepted && a->session != 0) session = a->session;
+  }
+};
+
+void put64(std::vector<std::uint8_t>& b, std::size_t at, std::int64_t v) {
+  for (int i = 0; i < 8; ++i) b[at + static_cast<std::size_t>(i)] = static_cast<std::uint8_t>(static_cast<std::uint64_t>(v) >> (56 - 8 * i));
 }
 
 }  // namespace
@@ -73,9 +90,29 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   ModelStore models(std::make_unique<ctl::Machine>(ctl::MachineModel::elkady()));
   ControlLoop loop(cfg, sim, models.current(), ctl::Controller(models.current(), cfg.controller.law, cfg.controller.gains));
   Server server(cfg, loop, models);
+  std::int64_t k = 0;
+  server.set_clock([&k, &cfg] { return static_cast<double>(k) / cfg.loop.rate_hz; });
+  AckTap tap;
+  server.bus().subscribe(cfg.lcm.ack_channel, &AckTap::on, &tap);
+  {
+    control_command_t acq{};
+    acq.command = control_command_t::CMD_ACQUIRE;
+    acq.session = 1;  // nonce
+    std::vector<std::uint8_t> b(static_cast<std::size_t>(acq.getEncodedSize()));
+    acq.encode(b.data(), 0, static_cast<int>(b.size()));
+    server.receive(cfg.lcm.control_channel, b.data(), b.size());
+    while (server.bus().handleTimeout(0) > 0) {
+    }
+    FUZZ_CHECK(tap.session != 0, "the first acquire was refused");
+  }
+  std::int64_t seq = 0;
+  auto stamp = [&](std::vector<std::uint8_t>& b, std::uint8_t op) {
+    if (b.size() < 40) return;
+    if (!(op & 4)) put64(b, 24, tap.session);
+    if (!(op & 8)) put64(b, 32, ++seq);
+  };
 
   const double force_limit = std::min(cfg.limits.force, models.current().model().force_limit);
-  std::int64_t k = 0;
   // At most 500 cycles (2 s of machine time) per input: a slow input is
   // less coverage per second, not more.
   auto run = [&](int n) {
@@ -112,10 +149,13 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
         in.skip(len);
         try {
           if (op % 4 == 0) {
-            const auto tamed = tame_control(p, len);
+            auto tamed = tame_control(p, len);
+            stamp(tamed, op);
             server.receive(cfg.lcm.control_channel, tamed.data(), tamed.size());
           } else {
-            server.receive(cfg.lcm.trajectory_channel, p, len);
+            std::vector<std::uint8_t> b(p, p + len);
+            stamp(b, op);
+            server.receive(cfg.lcm.trajectory_channel, b.data(), b.size());
           }
         } catch (const std::exception& e) {
           fuzz::fail(__FILE__, __LINE__, std::string("Server::receive let an exception out: ") + e.what());

@@ -42,13 +42,36 @@ struct Session {
   Session() : h(config()) {
     server = std::make_unique<Server>(h.cfg, *h.loop, models);
     server->bus().subscribe(h.cfg.lcm.ack_channel, &Session::on_ack, this);
+    // Commands need the session (test_session_*.cpp tests that); this
+    // commander holds it and publish() stamps it on every well-formed command.
+    control_command_t acq{};
+    acq.command = control_command_t::CMD_ACQUIRE;
+    acq.session = 12345;  // nonce
+    publish(h.cfg.lcm.control_channel, encode(acq));
+    if (acks.size() == 1 && acks[0].accepted) sid = acks[0].session;
+    acks.clear();
+  }
+  std::int64_t sid = 0, seq = 0;
+  // Session and seq sit at bytes 24..39 of both command types (after the
+  // hash, utime and id); bytes with a wrong hash or too short stay as they are.
+  void stamp(std::vector<std::uint8_t>& b) {
+    if (sid == 0 || b.size() < 40) return;
+    std::uint64_t hash = 0;
+    for (int i = 0; i < 8; ++i) hash = (hash << 8) | b[static_cast<std::size_t>(i)];
+    if (hash != static_cast<std::uint64_t>(control_command_t::getHash()) &&
+        hash != static_cast<std::uint64_t>(trajectory_command_t::getHash()))
+      return;
+    const std::uint64_t v[2] = {static_cast<std::uint64_t>(sid), static_cast<std::uint64_t>(++seq)};
+    for (int k = 0; k < 2; ++k)
+      for (int i = 0; i < 8; ++i) b[static_cast<std::size_t>(24 + 8 * k + i)] = static_cast<std::uint8_t>(v[k] >> (56 - 8 * i));
   }
   void on_ack(const lcm::ReceiveBuffer*, const std::string&, const ack_t* a) { acks.push_back(*a); }
   void pump() {
     while (server->bus().handleTimeout(0) > 0) {
     }
   }
-  void publish(const std::string& channel, const std::vector<std::uint8_t>& bytes) {
+  void publish(const std::string& channel, std::vector<std::uint8_t> bytes) {
+    stamp(bytes);
     server->bus().publish(channel, bytes.data(), static_cast<unsigned>(bytes.size()));
     pump();  // the server's subscriptions decode and validate
   }

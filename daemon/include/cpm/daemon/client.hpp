@@ -6,6 +6,7 @@
 #include <map>
 #include <memory>
 #include <optional>
+#include <set>
 #include <string>
 
 #include <cpm_msgs/ack_t.hpp>
@@ -23,10 +24,23 @@ class ReceiveBuffer;
 
 namespace cpm::daemon {
 
+// Commands need the session cpmd grants to one commander at a time
+// (docs/daemon.md): the client acquires it with its first command, stamps
+// every command with it and an increasing seq, pings while it waits so the
+// session does not expire, acquires again when the daemon restarted or the
+// session expired, and releases it when destroyed. A stop is sent without a
+// session when none is held (cpmd takes a stop from anyone).
 class Client {
  public:
   explicit Client(const LcmConfig& cfg);  // throws Error when LCM cannot start
-  ~Client();
+  ~Client();  // releases the session, if held
+
+  // Acquire the session now (throws Error naming the reason, e.g. "another
+  // commander holds the machine"); the commands below do it when needed.
+  void acquire(double timeout_s = 2.0);
+  // Give it up (no-op without one); returns whether cpmd confirmed it.
+  bool release(double timeout_s = 1.0);
+  [[nodiscard]] std::int64_t session() const noexcept { return session_; }
 
   // A fresh command id (random base per client, then counting).
   std::int64_t next_id();
@@ -51,10 +65,19 @@ class Client {
   void on_ack(const lcm::ReceiveBuffer*, const std::string&, const cpm_msgs::ack_t* m);
   void on_state_msg(const lcm::ReceiveBuffer*, const std::string&, const cpm_msgs::state_t* m);
   void on_stats_msg(const lcm::ReceiveBuffer*, const std::string&, const cpm_msgs::loop_stats_t* m);
+  template <class M>
+  void stamp(M& m);
+  void keep_alive();  // a ping when the holder has been silent for 0.25 s
+  static bool lost_session(const cpm_msgs::ack_t& a) noexcept;
 
   LcmConfig cfg_;
   std::unique_ptr<lcm::LCM> lcm_;
   std::int64_t next_id_ = 0;
+  std::int64_t nonce_ = 0;    // this client's acquire nonce
+  std::int64_t session_ = 0;  // 0: none held
+  std::int64_t seq_ = 0;
+  double last_sent_ = 0.0;    // steady clock (s) of the last stamped command
+  std::set<std::int64_t> pings_;  // keep-alive ids whose acks nobody waits for
   std::map<std::int64_t, cpm_msgs::ack_t> acks_;
   std::optional<cpm_msgs::state_t> last_state_;
   std::optional<cpm_msgs::loop_stats_t> last_stats_;

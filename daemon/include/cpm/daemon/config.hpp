@@ -54,6 +54,9 @@ struct LcmConfig {
   std::string control_channel = "CPMD_CONTROL";
   std::string ack_channel = "CPMD_ACK";
   int state_decimation = 1;  // publish the state every N cycles
+  // A commander's session ends after this long without a command or ping
+  // from it (s); clients ping every 0.25 s while they hold one.
+  double session_timeout = 2.0;
 };
 
 struct SimConfig {

@@ -6,6 +6,7 @@
 #pragma once
 
 #include <atomic>
+#include <functional>
 #include <map>
 #include <memory>
 #include <string>
@@ -73,6 +74,11 @@ class Server {
   // The daemon's LCM handle (tests on memq:// subscribe to the acks and
   // publish raw bytes on it; handle() then runs the daemon's subscriptions).
   [[nodiscard]] lcm::LCM& bus() noexcept { return *lcm_; }
+  // The clock sessions expire by (s, monotonic); tests replace it.
+  void set_clock(std::function<double()> now) { now_ = std::move(now); }
+  // The session held now (0: none, or the holder went silent for
+  // lcm.session_timeout s).
+  [[nodiscard]] std::int64_t session() const;
 
  private:
   void on_raw(const lcm::ReceiveBuffer* rbuf, const std::string& channel);
@@ -81,8 +87,11 @@ class Server {
   void on_trajectory(const lcm::ReceiveBuffer* rbuf, const std::string& channel,
                      const cpm_msgs::trajectory_command_t* msg);
   void publish_ack(std::int64_t id, std::int8_t source, std::int8_t code, bool ok, std::int16_t reason,
-                   const std::string& message, Mode mode, std::int16_t depth);
+                   const std::string& message, Mode mode, std::int16_t depth, std::int64_t session = 0);
   bool send(Command& c);
+  // Who may command (docs/daemon.md): false after publishing the refusal.
+  bool admit(std::int64_t id, std::int8_t source, std::int8_t code, std::int64_t session, std::int64_t seq);
+  void acquire(const cpm_msgs::control_command_t& m);
 
   DaemonConfig cfg_;
   ControlLoop& loop_;
@@ -98,6 +107,12 @@ class Server {
   ctl::Gains gains_;
   std::unique_ptr<Command> scratch_;
   std::int64_t undecodable_ = 0;
+  std::function<double()> now_;
+  std::int64_t session_ = 0;        // 0: nobody holds the machine
+  std::int64_t session_nonce_ = 0;  // the holder's acquire nonce
+  std::int64_t last_seq_ = 0;       // the holder's last admitted seq
+  double last_heard_ = 0.0;         // now_() when the holder last spoke
+  std::uint64_t session_salt_ = 0;  // random per daemon start: sessions do not repeat across restarts
   std::map<std::int64_t, const ctl::Machine*> pending_models_;
   std::map<std::int64_t, std::pair<ctl::ControlLaw, ctl::Gains>> pending_laws_;  // a Command is large: build it off the stack
 };
