@@ -149,8 +149,9 @@ TEST_P(PlantedEffect, AtThreeAndTenTimesTheNoiseItIsFirstOnTheRightAxisWithinThr
 // viscous, Coulomb, cogging, force gain, payload: meet the must-show.
 INSTANTIATE_TEST_SUITE_P(DynamicLibrary, PlantedEffect, ::testing::Values(0, 1, 3, 5, 6));
 // Known gaps (run with --gtest_also_run_disabled_tests): Stribeck at 10x has
-// a 2-3 % parameter bias (beyond 3 sigma); a spring at 3x is partly absorbed
-// by the plane-tilt nuisance and lost to another axis.
+// a 1 % parameter bias (3.7 sigma; was 2.2 %, see docs/identification.md); a
+// spring at 3x is partly absorbed by the plane-tilt nuisance and lost to
+// another axis.
 INSTANTIATE_TEST_SUITE_P(DISABLED_KnownGaps, PlantedEffect, ::testing::Values(2, 4));
 
 TEST(NoMissingEffect, VerdictIsNoneAtLeast95PercentOfSeeds) {
