@@ -35,9 +35,19 @@ struct Series {
 };
 
 // A plot as inline SVG: axes with ticks, labelled, one or more series.
+// A "nice" tick step (1, 2 or 5 times a power of ten) for about `n` ticks.
+double nice_step(double range, int n) {
+  const double raw = range / n;
+  const double mag = std::pow(10.0, std::floor(std::log10(raw)));
+  for (double m : {1.0, 2.0, 5.0})
+    if (m * mag >= raw) return m * mag;
+  return 10.0 * mag;
+}
+
 std::string svg_plot(const std::string& title, const std::string& xlabel, const std::string& ylabel,
                      const std::vector<Series>& series, bool logx = false) {
-  const double W = 460, H = 230, l = 58, r = 12, t = 24, b = 40;
+  // The legend sits in its own row under the title, not over the data.
+  const double W = 460, H = 244, l = 58, r = 12, t = 38, b = 40;
   double x0 = 1e300, x1 = -1e300, y0 = 1e300, y1 = -1e300;
   for (const auto& s : series)
     for (std::size_t k = 0; k < s.x.size(); ++k) {
@@ -47,30 +57,40 @@ std::string svg_plot(const std::string& title, const std::string& xlabel, const 
     }
   if (!(x1 > x0)) { x0 -= 1; x1 += 1; }
   if (!(y1 > y0)) { y0 -= 1; y1 += 1; }
-  const double pad = 0.05 * (y1 - y0);
-  y0 -= pad; y1 += pad;
+  // Axes on round numbers: the range widened to whole tick steps.
+  const double ystep = nice_step(y1 - y0, 4);
+  y0 = std::floor(y0 / ystep) * ystep;
+  y1 = std::ceil(y1 / ystep) * ystep;
+  const double xstep = logx ? 1.0 : nice_step(x1 - x0, 5);
+  if (!logx) {
+    x0 = std::floor(x0 / xstep) * xstep;
+    x1 = std::ceil(x1 / xstep) * xstep;
+  }
   auto X = [&](double v) { return l + (W - l - r) * ((logx ? std::log10(std::max(1e-300, v)) : v) - x0) / (x1 - x0); };
   auto Y = [&](double v) { return H - b - (H - t - b) * (v - y0) / (y1 - y0); };
+  auto Xa = [&](double a) { return l + (W - l - r) * (a - x0) / (x1 - x0); };  // axis units (log10 for logx)
   std::ostringstream o;
   o << "<svg xmlns='http://www.w3.org/2000/svg' width='" << W << "' height='" << H
     << "' style='background:#fff;border:1px solid #ddd;margin:4px'>";
   o << "<text x='" << W / 2 << "' y='15' text-anchor='middle' font-size='13' font-weight='bold'>" << esc(title) << "</text>";
   o << "<rect x='" << l << "' y='" << t << "' width='" << W - l - r << "' height='" << H - t - b
     << "' fill='none' stroke='#888'/>";
-  for (int k = 0; k <= 4; ++k) {
-    const double yv = y0 + (y1 - y0) * k / 4.0, xv = x0 + (x1 - x0) * k / 4.0;
-    o << "<line x1='" << l << "' x2='" << W - r << "' y1='" << Y(yv) << "' y2='" << Y(yv) << "' stroke='#eee'/>";
-    o << "<text x='" << l - 4 << "' y='" << Y(yv) + 4 << "' text-anchor='end' font-size='10'>" << num(yv, 3) << "</text>";
-    const double xl = logx ? std::pow(10.0, xv) : xv;
-    o << "<text x='" << l + (W - l - r) * k / 4.0 << "' y='" << H - b + 14 << "' text-anchor='middle' font-size='10'>"
-      << num(xl, 3) << "</text>";
+  for (double yv = y0; yv <= y1 + 0.5 * ystep; yv += ystep) {
+    const double yr = std::abs(yv) < 1e-9 * ystep ? 0.0 : yv;
+    o << "<line x1='" << l << "' x2='" << W - r << "' y1='" << Y(yr) << "' y2='" << Y(yr) << "' stroke='#eee'/>";
+    o << "<text x='" << l - 4 << "' y='" << Y(yr) + 4 << "' text-anchor='end' font-size='10'>" << num(yr, 4) << "</text>";
+  }
+  for (double xa = std::ceil(x0 / xstep) * xstep; xa <= x1 + 0.5 * xstep; xa += xstep) {
+    const double xr = std::abs(xa) < 1e-9 * xstep ? 0.0 : xa;
+    o << "<text x='" << Xa(xr) << "' y='" << H - b + 14 << "' text-anchor='middle' font-size='10'>"
+      << num(logx ? std::pow(10.0, xr) : xr, 4) << "</text>";
   }
   if (y0 < 0 && y1 > 0)
     o << "<line x1='" << l << "' x2='" << W - r << "' y1='" << Y(0) << "' y2='" << Y(0) << "' stroke='#aaa'/>";
   o << "<text x='" << (l + W - r) / 2 << "' y='" << H - 6 << "' text-anchor='middle' font-size='11'>" << esc(xlabel) << "</text>";
   o << "<text x='12' y='" << (t + H - b) / 2 << "' text-anchor='middle' font-size='11' transform='rotate(-90 12 "
     << (t + H - b) / 2 << ")'>" << esc(ylabel) << "</text>";
-  int li = 0;
+  double legend_used = 0.0;
   for (const auto& s : series) {
     if (s.line) {
       o << "<polyline fill='none' stroke='" << s.colour << "' stroke-width='1.2' points='";
@@ -83,9 +103,10 @@ std::string svg_plot(const std::string& title, const std::string& xlabel, const 
       o << "</g>";
     }
     if (!s.label.empty()) {
-      o << "<text x='" << W - r - 4 << "' y='" << t + 14 + 13 * li << "' text-anchor='end' font-size='11' fill='"
+      // Entries from the right edge leftwards, about 6 px a character.
+      o << "<text x='" << W - r - legend_used << "' y='" << t - 7 << "' text-anchor='end' font-size='11' fill='"
         << s.colour << "'>" << esc(s.label) << "</text>";
-      ++li;
+      legend_used += 6.0 * static_cast<double>(s.label.size()) + 14.0;
     }
   }
   o << "</svg>";
