@@ -69,7 +69,8 @@ case "$cmd" in
     log="$build/logs/$target.log"
     mkdir -p "$(dirname "$log")"
     set +e
-    "$exe" -max_total_time="$seconds" -timeout=10 -error_exitcode=1 -timeout_exitcode=1 -rss_limit_mb=2048 -max_len="$(max_len "$target")" \
+    # A fixed seed (FUZZ_SEED, default 1) keeps CI's runs alike from one to the next.
+    "$exe" -seed="${FUZZ_SEED:-1}" -max_total_time="$seconds" -timeout=10 -error_exitcode=1 -timeout_exitcode=1 -rss_limit_mb=2048 -max_len="$(max_len "$target")" \
       -print_final_stats=1 -artifact_prefix="$findings/" "$work" "$repo/fuzz/corpus/$target" >"$log" 2>&1
     rc=$?
     set -e

@@ -33,7 +33,9 @@ class Reader {
                  const std::set<std::string>& optional = {}) const {
     if (!n.IsMap()) fail(n, path.empty() ? "(top level)" : path, "expected a mapping of keys");
     for (const auto& kv : n) {
-      const std::string key = kv.first.as<std::string>();
+      // A complex key (`? [a, b]`, a mapping, a null) is no key of ours.
+      if (!kv.first.IsScalar()) fail(kv.first, path.empty() ? "(top level)" : path, "a key must be a plain name");
+      const std::string key = kv.first.Scalar();
       if (!required.count(key) && !optional.count(key)) {
         std::string known;
         for (const auto& k : required) known += (known.empty() ? "" : ", ") + k;
@@ -221,7 +223,25 @@ void parse_canopen(const Reader& r, const YAML::Node& n, double rate_hz, bool sk
 
 }  // namespace
 
+namespace {
+DaemonConfig parse_config_checked(const std::string& text, const std::string& name,
+                                  const std::string& base_dir);
+}  // namespace
+
 DaemonConfig parse_config(const std::string& text, const std::string& name, const std::string& base_dir) {
+  // Every refusal is an Error naming file, line and key; a yaml-cpp exception
+  // that a check did not anticipate is turned into one too, never let out.
+  try {
+    return parse_config_checked(text, name, base_dir);
+  } catch (const YAML::Exception& e) {
+    throw Error(name + ":" + std::to_string(e.mark.line + 1) + ":" + std::to_string(e.mark.column + 1) +
+                ": " + e.msg);
+  }
+}
+
+namespace {
+DaemonConfig parse_config_checked(const std::string& text, const std::string& name,
+                                  const std::string& base_dir) {
   YAML::Node root;
   try {
     root = YAML::Load(text);
@@ -333,6 +353,7 @@ DaemonConfig parse_config(const std::string& text, const std::string& name, cons
   if (root["canopen"]) parse_canopen(r, root["canopen"], c.loop.rate_hz, c.loop.skip_late_slots, c.canopen);
   return c;
 }
+}  // namespace
 
 DaemonConfig load_config(const std::string& path) {
   std::ifstream f(path);
