@@ -511,7 +511,7 @@ CandidateResult evaluate_dynamic_candidate(const MotionProblem& P, const Engine&
                             undet ? -1.0 : std::sqrt(std::max(0.0, cov(j, j))), false});
       }
       base_after(f, true);
-      c.n_params = rank;
+      c.n_params = E.base_rank_beyond_nuisance();
       if (!un.empty()) {
         std::string names;
         for (int j : un) names += (names.empty() ? "" : ", ") + P.base_params[j].name;
@@ -562,7 +562,8 @@ Diagnosis diagnose_motion(const io::MotionData& data, const ctl::Machine& model,
   for (const auto& [name, axis] : todo) {
     CandidateResult c = evaluate_dynamic_candidate(P, E, model.model(), name, axis, opt);
     if (name == "payload_mass") detail::score_candidate(c, E, E.rss_given(), 1, 1, baseline_ms);
-    else if (name == "inertia_error") detail::score_candidate(c, E, E.rss_given(), rank, rank, baseline_ms);
+    else if (name == "inertia_error")
+      detail::score_candidate(c, E, E.rss_given(), E.base_rank_beyond_nuisance(), rank, baseline_ms);
     else detail::score_candidate(c, E, E.rss_base(), c.n_params, rank + c.n_params, baseline_ms);
     D.candidates.push_back(std::move(c));
   }

@@ -55,4 +55,35 @@ SgKernel savitzky_golay(int half_width, int order, int derivative, double offset
   return k;
 }
 
+SgKernel zoh_force_kernel(const SgKernel& est, int derivative) {
+  if (derivative != 1 && derivative != 2) throw Error("zoh_force_kernel: derivative must be 1 or 2");
+  const int m = est.half_width;
+  SgKernel g;
+  g.half_width = m;
+  g.h.assign(static_cast<std::size_t>(2 * m + 1), 0.0);
+  // A unit acceleration over interval j only, from rest (units dt = 1): the
+  // velocity is 1 at every sample after it, the position 1/2 at its end and
+  // then grows by 1 per sample.
+  for (int j = -m; j < m; ++j) {
+    double a_hat = 0.0;
+    for (int i = j + 1; i <= m; ++i)
+      a_hat += est.h[static_cast<std::size_t>(i + m)] * (derivative == 1 ? 1.0 : (i - j) - 0.5);
+    g.h[static_cast<std::size_t>(j + m)] = a_hat;
+  }
+  return g;
+}
+
+SgKernel zoh_state_kernel(const SgKernel& force) {
+  const int m = force.half_width;
+  SgKernel s;
+  s.half_width = m;
+  s.h.assign(static_cast<std::size_t>(2 * m + 1), 0.0);
+  for (int i = -m; i <= m; ++i) {
+    const double left = i > -m ? force.h[static_cast<std::size_t>(i - 1 + m)] : 0.0;  // interval i-1 ends at i
+    const double right = force.h[static_cast<std::size_t>(i + m)];                     // interval i starts at i
+    s.h[static_cast<std::size_t>(i + m)] = 0.5 * (left + right);
+  }
+  return s;
+}
+
 }  // namespace cpm::ident

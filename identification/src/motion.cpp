@@ -149,8 +149,6 @@ MotionProblem prepare_motion(const io::MotionData& data, const ctl::Machine& mod
   const SgKernel sh = savitzky_golay(m, opt.order, 0, 0.5);
   const SgKernel d1h = savitzky_golay(m, opt.order, 1, 0.5);
   const SgKernel d2h = savitzky_golay(m, opt.order, 2, 0.5);
-  P.smooth_state = sh;
-  P.smooth_force = s0;
   P.accel_kernel = d1h;
 
   // Noise of the logged positions and velocities, per axis.
@@ -186,6 +184,18 @@ MotionProblem prepare_motion(const io::MotionData& data, const ctl::Machine& mod
   } else {
     P.accel_source = "1st derivative of the velocities (zero-phase Savitzky-Golay)";
     P.accel_noise = acc_noise_v;
+  }
+  // Both sides of the equation through the same weights: the force side
+  // through those with which the acceleration estimate sums the interval
+  // accelerations of the zero-order hold, the effects (continuous forces)
+  // through their trapezoid version. Measured accelerations are samples of
+  // their own: a smoother at the force's sample and half a sample later.
+  if (measured) {
+    P.smooth_force = s0;
+    P.smooth_state = sh;
+  } else {
+    P.smooth_force = zoh_force_kernel(P.accel_kernel, a_from_d ? 2 : 1);
+    P.smooth_state = zoh_state_kernel(P.smooth_force);
   }
 
   // Per-sample state estimate (inside each segment, m samples from its ends).
@@ -260,8 +270,12 @@ MotionProblem prepare_motion(const io::MotionData& data, const ctl::Machine& mod
   P.f.resize(R);
   P.drive_gain = model.drive_gain();
   P.f_smooth.resize(R);
+  P.a_columns.resize(R);
   const int ml = 4 * m;
   const SgKernel s_long = savitzky_golay(ml, opt.order, 0, 0.0);
+  const SgKernel sh_long = savitzky_golay(ml, opt.order, 0, 0.5);
+  const SgKernel d1h_long = savitzky_golay(ml, opt.order, 1, 0.5);
+  const SgKernel d2h_long = savitzky_golay(ml, opt.order, 2, 0.5);
   for (int r = 0; r < R; ++r) {
     const int k = P.sample[r];
     P.t[r] = data.t[k] + 0.5 * P.dt;
@@ -271,12 +285,18 @@ MotionProblem prepare_motion(const io::MotionData& data, const ctl::Machine& mod
       if (measured) P.a[r][i] = sh.apply(&data.a[k][i], 3);
       else if (a_from_d) P.a[r][i] = d2h.apply(&data.d[k][i], 3) * fs * fs;
       else P.a[r][i] = d1h.apply(&data.v[k][i], 3) * fs;
-      P.f[r][i] = s0.apply(&data.f[k][i], 3);
+      P.f[r][i] = P.smooth_force.apply(&data.f[k][i], 3);
     }
     int seg_start = k;
     while (seg_start > 0 && P.segment_end[seg_start - 1] == P.segment_end[k]) --seg_start;
     const bool fits = k - ml >= seg_start && k + ml < P.segment_end[k];
-    for (int i = 0; i < 3; ++i) P.f_smooth[r][i] = fits ? s_long.apply(&data.f[k][i], 3) : P.f[r][i];
+    for (int i = 0; i < 3; ++i) {
+      P.f_smooth[r][i] = fits ? s_long.apply(&data.f[k][i], 3) : P.f[r][i];
+      if (!fits) P.a_columns[r][i] = P.a[r][i];
+      else if (measured) P.a_columns[r][i] = sh_long.apply(&data.a[k][i], 3);
+      else if (a_from_d) P.a_columns[r][i] = d2h_long.apply(&data.d[k][i], 3) * fs * fs;
+      else P.a_columns[r][i] = d1h_long.apply(&data.v[k][i], 3) * fs;
+    }
   }
 
   // The model and its base columns: dynamics is linear in A, B, C, E, so
@@ -358,17 +378,19 @@ MotionProblem prepare_motion(const io::MotionData& data, const ctl::Machine& mod
       kin_in[r].t = P.t[r];
     }
   }
-  // The rigid-body actuator force of a machine at every row; for the model
-  // itself also the A..E columns (the dynamics is linear in them: each
-  // column is the difference to a machine with that constant + 1).
-  auto rigid = [&](const ctl::Machine& mach, bool primary, Eigen::VectorXd& out) {
+  // The rigid-body actuator force of a machine at every row, with the
+  // accelerations `acc`; for the model itself (`primary`) also the A..E
+  // columns (the dynamics is linear in them: each column is the difference
+  // to a machine with that constant + 1). The residual is evaluated with the
+  // row accelerations P.a, every column with P.a_columns (see motion.hpp).
+  auto rigid = [&](const ctl::Machine& mach, const std::vector<Vec3>& acc, bool primary, Eigen::VectorXd& out) {
     out.resize(3 * R);
     const bool affine = kinematics_is_affine(mach.kinematics());
     for (int r = 0; r < R; ++r) {
       const int k = P.sample[r];
       ctl::TaskState ts;
       Status s = mach.task_state(P.d[r], P.v[r], kin_in[r], ts);
-      Vec3 p_dd = ts.J * P.a[r];
+      Vec3 p_dd = ts.J * acc[r];
       if (s && !affine) {
         // p_dd = J a + (d/dt J) v: the second directional derivative of p(d) along v.
         const double vn = P.v[r].norm();
@@ -403,18 +425,19 @@ MotionProblem prepare_motion(const io::MotionData& data, const ctl::Machine& mod
       }
     }
   };
-  Eigen::VectorXd F_model;
-  rigid(model, true, F_model);
+  Eigen::VectorXd F_model, F_columns;
+  rigid(model, P.a, false, F_model);
+  rigid(model, P.a_columns, true, F_columns);
   for (int r = 0; r < R; ++r)
     for (int i = 0; i < 3; ++i) P.residual(3 * r + i) = P.drive_gain[i] * P.f[r][i] - F_model(3 * r + i);
   for (std::size_t q = 0; q < pert.size(); ++q) {
     Eigen::VectorXd Fq;
     try {
-      rigid(pert[q], false, Fq);
+      rigid(pert[q], P.a_columns, false, Fq);
     } catch (const Error&) {
       continue;  // a perturbed machine that cannot follow: leave its column at zero
     }
-    P.base.col(n_model_base + static_cast<int>(q)) = (Fq - F_model) / pert_step[q];
+    P.base.col(n_model_base + static_cast<int>(q)) = (Fq - F_columns) / pert_step[q];
   }
   // The model's own additive effects and their linear parameters.
   for (int e = 0; e < n_eff; ++e) {

@@ -47,6 +47,11 @@ class Engine {
   [[nodiscard]] double rss_base() const noexcept { return base_.rss; }  // base refitted
   [[nodiscard]] const JointFit& base_fit() const noexcept { return base_; }
   [[nodiscard]] int base_rank() const noexcept { return rank_; }
+  // Identifiable base columns that are not nuisance: what a base refit adds
+  // to the model as given (whose fit already holds the nuisance).
+  [[nodiscard]] int base_rank_beyond_nuisance() const noexcept {
+    return rank_ - static_cast<int>(ident_n_.size());
+  }
   // Base parameters that the data cannot determine (their column is in the span of the others).
   [[nodiscard]] const std::vector<int>& unidentifiable_base() const noexcept { return unident_; }
 

@@ -28,4 +28,19 @@ struct SgKernel {
 // Throws Error when order >= 2m+1 or derivative > order.
 SgKernel savitzky_golay(int half_width, int order, int derivative, double offset = 0.0);
 
+// Under a zero-order hold the acceleration is a_j over [t_j, t_j+1), and an
+// acceleration estimate made from sampled velocities (derivative = 1: the
+// kernel applied to v, times 1/dt) or positions (derivative = 2: applied to
+// d, times 1/dt^2) is exactly a weighted sum of those interval accelerations:
+//     a_hat_k = sum_j g_j a_{k+j},   j = -m .. m-1.
+// zoh_force_kernel returns g (h[j+m] multiplies the value held over interval
+// k+j; the last weight is 0). Filtering the commanded forces with g makes
+// them consistent with a_hat whatever the motion's frequency content (the
+// sharp force of friction at a reversal included), where a smoother of its
+// own would differ from the estimator beyond the polynomial degree.
+SgKernel zoh_force_kernel(const SgKernel& accel_estimator, int derivative);
+// The same weights for a force that acts continuously (an effect evaluated
+// at the samples): each interval's mean taken as the mean of its two ends.
+SgKernel zoh_state_kernel(const SgKernel& force_kernel);
+
 }  // namespace cpm::ident

@@ -4,15 +4,19 @@
 //
 // Acceleration: from a1..a3 when the log has them; otherwise estimated from
 // the velocities (first derivative) or the positions (second derivative) of
-// a zero-phase Savitzky-Golay fit, whichever adds less noise. The SAME
-// smoothing kernel is applied to both sides of the equation (the commanded
-// force and every regressor column), so the kernel's amplitude response
-// cancels in the regression instead of biasing it; the state side is
-// evaluated half a sample later than the force side, because a force
-// commanded at t_k acts (zero-order hold) over [t_k, t_k+1). What is left:
-// terms nonlinear in the state (M(q), sgn) are evaluated on filtered states
-// (second order in the motion within one kernel width), and the noise the
-// acceleration estimate adds, reported in `accel_noise` / `force_noise`.
+// a zero-phase Savitzky-Golay fit, whichever adds less noise. Both sides of
+// the equation go through the same weights: a force commanded at t_k acts
+// (zero-order hold) over [t_k, t_k+1), and the acceleration estimate is
+// exactly a weighted sum of those intervals' mean accelerations
+// (filter.hpp, zoh_force_kernel); the commanded forces are filtered with
+// those weights, every effect column with their trapezoid version. The
+// equation then holds after filtering whatever the motion's frequency
+// content, the sharp force of friction at a reversal included. The base
+// columns use a longer acceleration estimate (`a_columns`) so that they do
+// not share the residual's noise. What is left: terms nonlinear in the
+// state (M(q), sgn) are evaluated on filtered states (second order in the
+// motion within one kernel width), and the noise the acceleration estimate
+// adds, reported in `accel_noise` / `force_noise`.
 //
 // The filtered rows are decimated by `stride` (default: the kernel half
 // width) so that neighbouring rows are nearly independent; the statistics
@@ -80,7 +84,16 @@ struct MotionProblem {
   std::vector<Vec3> f_smooth;      // the force smoothed 4x longer: the force-gain regressor,
                                    // nearly free of the noise the controller put into F
                                    // (which the residual also carries: a shared-noise bias)
-  std::vector<Vec3> platform_force;  // model's M p_dd + G p_dot + K at the row (N)
+  // Acceleration for the regressor columns (base, nuisance): the same
+  // estimate over a 4x longer kernel. The residual carries -M times the
+  // noise of `a`; a column built on `a` would carry the same noise and bias
+  // (attenuate) the inertia it fits, and a clean column correlated with the
+  // acceleration (the force, a spring on an axis that moves sinusoidally)
+  // would then look significant in its place. The long estimate's noise
+  // shares ~(1/4)^3 of that covariance; for motion below a few Hz its
+  // signal is the same.
+  std::vector<Vec3> a_columns;    // m/s^2
+  std::vector<Vec3> platform_force;  // model's M p_dd + G p_dot + K at the row, with a_columns (N)
   Eigen::VectorXd residual;       // g F - model force (N), 3 rows per kept row
   Eigen::MatrixXd base;           // columns of the base parameters (N per unit)
   std::vector<BaseParameter> base_params;
@@ -95,8 +108,8 @@ struct MotionProblem {
   Vec3 force_noise = Vec3::Zero();      // the same through the inertia (N)
   int half_width = 0;             // kernel half width (samples)
   int stride = 0;
-  SgKernel smooth_state;          // smoothing at +1/2 sample (state side)
-  SgKernel smooth_force;          // smoothing at 0 (force side)
+  SgKernel smooth_state;          // filter of the effect columns (continuous forces, per sample)
+  SgKernel smooth_force;          // filter of the commanded force (held over each sample interval)
   SgKernel accel_kernel;          // the kernel that made the acceleration (its noise dominates)
   std::vector<std::string> warnings;
 
