@@ -29,9 +29,13 @@ void rank_and_decide(Diagnosis& D, const Engine& E, const DiagnoseOptions& opt, 
     c.p_adjusted = std::min(1.0, c.p_value * c.trials * family);
     c.significant = c.identifiable && c.p_adjusted < opt.alpha && c.delta_bic < 0.0 &&
                     !(c.params.size() && c.params[0].at_bound && c.params[0].value == 0.0);
+    // BIC against the model as given: the parameters beyond it (the nuisance is
+    // fitted in every model alike and does not count).
     const int k_total = c.k_total > 0 ? c.k_total : rank + c.n_params;
-    c.score = c.rss > 0.0 && E.rss_given() > 0.0
-                  ? ne_ref * std::log(c.rss / E.rss_given()) + k_total * std::log(std::max(2.0, ne_ref))
+    const int k_added = std::max(0, k_total - E.nuisance_rank());
+    const double fr = E.floor_rss();
+    c.score = c.rss + fr > 0.0 && E.rss_given() + fr > 0.0
+                  ? ne_ref * std::log((c.rss + fr) / (E.rss_given() + fr)) + k_added * std::log(std::max(2.0, ne_ref))
                   : 0.0;
   }
   std::stable_sort(D.candidates.begin(), D.candidates.end(), [](const auto& a, const auto& b) {
@@ -125,12 +129,11 @@ void rank_and_decide(Diagnosis& D, const Engine& E, const DiagnoseOptions& opt, 
         X << acc, c.columns;
         const JointFit f = E.fit(X);
         if (!f.full_rank) continue;
-        const int q = static_cast<int>(c.columns.cols()) + (c.n_params - static_cast<int>(c.columns.cols()));
-        const double N = E.rows(), ne = std::max(f.n_eff, 10.0);
+        const int q = c.n_params;
         const int k_total = rank + static_cast<int>(X.cols());
-        const double F = ((cur.rss - f.rss) / q) / (f.rss / std::max(1.0, N - k_total)) * (ne / N);
-        const double p = std::min(1.0, f_tail(F, q, std::max(1.0, ne - k_total)) * c.trials * family);
-        const double dbic = ne * std::log(f.rss / cur.rss) + q * std::log(ne);
+        const NestedTest t = E.nested(cur.rss, f.rss, q, k_total, std::max(f.n_eff, 10.0));
+        const double p = std::min(1.0, t.p_value * c.trials * family);
+        const double dbic = t.delta_bic;
         if (p < opt.alpha && dbic < best_bic) {
           best = static_cast<int>(j);
           best_bic = dbic;

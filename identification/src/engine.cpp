@@ -132,6 +132,21 @@ JointFit Engine::fit(const Eigen::MatrixXd& X, bool with_base) const {
   return f;
 }
 
+NestedTest Engine::nested(double rss_parent, double rss, int q, int k_total, double n_eff) const {
+  NestedTest t;
+  if (q <= 0 || !(rss >= 0.0)) return t;
+  const double N = rows(), fr = floor_rss();
+  const double ne = std::max(n_eff, static_cast<double>(k_total) + 2.0);
+  const double gain = std::max(0.0, rss_parent - rss);
+  const double den = (rss + fr) / std::max(1.0, N - k_total);
+  t.f_stat = den > 0.0 ? (gain / q) / den * (ne / N) : 0.0;
+  t.p_value = f_tail(t.f_stat, q, std::max(1.0, ne - k_total));
+  t.delta_bic = rss + fr > 0.0 && rss_parent + fr > 0.0
+                    ? ne * std::log((rss + fr) / (rss_parent + fr)) + q * std::log(ne)
+                    : 0.0;
+  return t;
+}
+
 double Engine::effective_rows(const Eigen::VectorXd& rw) const {
   std::vector<std::vector<double>> s(static_cast<std::size_t>(std::max(1, p_.n_series)));
   for (Eigen::Index r = 0; r < rw.size(); ++r) s[static_cast<std::size_t>(p_.series[r])].push_back(rw(r));

@@ -103,12 +103,9 @@ FitResult fit_motion(const io::MotionData& data, const ctl::MachineModel& model,
   const Engine Ef(L);
   CandidateResult base = evaluate_dynamic_candidate(P, Ef, work, "inertia_error", -1, opt);
   {
-    const int rank = Ef.base_rank(), q = std::max(1, Ef.base_rank_beyond_nuisance());
-    const double ne = std::max(base.n_eff, 10.0);
-    const double F = ((Ef.rss_given() - Ef.rss_base()) / q) /
-                     (Ef.rss_base() / std::max(1.0, static_cast<double>(Ef.rows() - rank))) * (ne / Ef.rows());
-    const double p = f_tail(F, q, std::max(1.0, ne - rank));
-    R.base_refitted = p < opt.alpha;
+    const NestedTest t = Ef.nested(Ef.rss_given(), Ef.rss_base(), std::max(1, Ef.base_rank_beyond_nuisance()),
+                                   Ef.base_rank(), std::max(base.n_eff, 10.0));
+    R.base_refitted = t.p_value < opt.alpha;
     R.base_change = base.params;
   }
   // The new model.

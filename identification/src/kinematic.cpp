@@ -321,6 +321,8 @@ KinematicProblem prepare_kinematic(const io::DataSet& data, const kin::Kinematic
   return P;
 }
 
+constexpr double kKinematicResolution = 1e-9;  // m
+
 LinearProblem kinematic_linear_problem(const KinematicProblem& P) {
   LinearProblem L;
   const int N = P.rows();
@@ -336,6 +338,11 @@ LinearProblem kinematic_linear_problem(const KinematicProblem& P) {
   // Equal weights (one instrument); the scale cancels in every test.
   const double s = std::max(Engine::rms(P.residual), 1e-12);
   L.w = Eigen::VectorXd::Constant(N, 1.0 / s);
+  // Resolution: 1 nm. Below any instrument's, and above what linearising
+  // µm-sized effects at the calibrated point leaves (their square over the
+  // bar length: (4 µm)^2 / 0.1 m = 0.2 nm); exact data then do not name an
+  // effect on rounding.
+  L.floor_variance = (kKinematicResolution / s) * (kKinematicResolution / s);
   L.series.resize(static_cast<std::size_t>(N));
   for (int r = 0; r < N; ++r) L.series[static_cast<std::size_t>(r)] = r % P.per_sample;
   L.n_series = P.per_sample;
@@ -634,15 +641,13 @@ std::vector<StructureFinding> find_kinematic_structure(const KinematicProblem& P
   const Engine E(kinematic_linear_problem(P));
   const Span sp = span_of(P);
   const int rank = E.base_rank();
-  const double N = E.rows();
   auto test = [&](const Eigen::MatrixXd& X, double trials, double& p, Eigen::VectorXd& beta) {
     const JointFit f = E.fit(X);
     const int q = static_cast<int>(X.cols());
-    const double ne = std::max(f.n_eff, rank + q + 2.0);
-    const double F = ((E.rss_base() - f.rss) / q) / (f.rss / std::max(1.0, N - rank - q)) * (ne / N);
-    p = std::min(1.0, f_tail(F, q, std::max(1.0, ne - rank - q)) * trials);
+    const NestedTest t = E.nested(E.rss_base(), f.rss, q, rank + q, f.n_eff);
+    p = std::min(1.0, t.p_value * trials);
     beta = f.beta;
-    return F > 0.0 && f.full_rank;
+    return t.f_stat > 0.0 && f.full_rank;
   };
   const double family = 3.0 * (2.0 + (P.has_dir ? 1.0 : 0.0)) + (P.has_time ? 1.0 : 0.0);
   DiagnoseOptions o = opt;

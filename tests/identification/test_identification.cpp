@@ -304,6 +304,37 @@ TEST(NoMissingEffect, AccelerationFromThePositionsRaisesNoFalseAlarm) {
   EXPECT_GE(none, static_cast<int>(std::ceil(0.95 * n)));
 }
 
+// Encoders far quieter than the default (noise-free, or quantized at 1 µm or
+// 0.1 µm): what the model's own approximations leave (plane offsets, the
+// filtering of nonlinear terms; 4e-4 N after a 0.4 kg payload) must not be
+// named as an effect, and a change of the base (payload, inertia error) must
+// be named as such, not credited to whichever candidate also refits the base
+// and mops up that leftover (before: a spring of 0.01 N/m or a Stribeck
+// breakaway of 0.001 N "explained" a 2.28 N payload).
+TEST(QuietEncoders, NeitherInventAnEffectNorCreditTheBaseToAnother) {
+  const ctl::Machine nominal(ctl::MachineModel::elkady());
+  struct Regime { const char* name; double position_noise, velocity_noise, resolution; };
+  const Regime regimes[] = {{"noise-free", 0, 0, 0}, {"1 um steps", 0, 0, 1e-6}, {"0.1 um steps, 2e-4 m/s", 0, 2e-4, 1e-7}};
+  const std::vector<std::tuple<std::string, int, std::vector<double>>> plants[] = {
+      {}, {{"payload_mass", -1, {0.4}}}, {{"inertia_error", -1, {0.0, 0.02, 0.3, 0.0}}}, {{"coulomb_friction", 1, {1.0}}}};
+  for (const auto& rg : regimes)
+    for (const auto& pl : plants) {
+      test::SimSpec s;
+      s.duration = 10.0;
+      s.seed = 701;
+      s.position_noise = rg.position_noise;
+      s.velocity_noise = rg.velocity_noise;
+      s.resolution = rg.resolution;
+      s.effects = pl;
+      const Diagnosis D = diagnose_motion(test::simulate(s), nominal);
+      const std::string planted =
+          pl.empty() ? "none"
+                     : std::get<0>(pl[0]) + (std::get<1>(pl[0]) >= 0 ? "[axis " + std::to_string(std::get<1>(pl[0]) + 1) + "]" : "");
+      const std::string got = D.verdict >= 0 ? D.candidates[static_cast<std::size_t>(D.verdict)].label() : "none";
+      EXPECT_EQ(got, planted) << rg.name << ": " << D.verdict_text;
+    }
+}
+
 TEST(Confounding, ViscousAgainstCoulombAtOneSpeedIsReportedWithTheMeasurementThatSeparatesThem) {
   // Axis 1 sweeps back and forth at one constant speed: b v and f_c sgn(v) are the same column.
   struct Shuttle final : ctl::Trajectory {

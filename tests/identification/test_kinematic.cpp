@@ -192,6 +192,19 @@ TEST(KinematicNoEffect, VerdictIsNoneAtLeast95PercentOfSeeds) {
   EXPECT_GE(none, static_cast<int>(std::ceil(0.95 * total)));
 }
 
+// Exact data (no noise at all): the residual after the base is rounding
+// (1e-17 m); nothing is named on it, and a planted effect still is.
+TEST(KinematicNoEffect, ExactDataNameNothingButTheEffectThatIsThere) {
+  test::KinSimOptions so;
+  so.noise = 0.0;
+  const auto poses = ballbar_poses();
+  EXPECT_LT(diagnose(test::kim_ballbar({}, poses, so)).verdict, 0);
+  EXPECT_LT(diagnose(test::kim_positions({}, poses, so)).verdict, 0);
+  const Diagnosis D = diagnose(test::kim_positions({{"cyclic_error", 1, {4e-6, 0.016, 0.3}}}, poses, so));
+  ASSERT_GE(D.verdict, 0);
+  EXPECT_EQ(D.candidates[static_cast<std::size_t>(D.verdict)].label(), "cyclic_error[axis 2]");
+}
+
 // Must show: confounded pairs are reported, not guessed. Backlash with every
 // pose approached from the same side is a constant shift of the axis: the
 // pivot error dq absorbs it; the report says so and how to separate them.

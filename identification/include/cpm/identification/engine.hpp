@@ -26,6 +26,20 @@ struct LinearProblem {
   Eigen::VectorXd w;                 // row weights (1 / noise sigma of the row)
   std::vector<int> series;           // row -> series (e.g. axis); rows of a series are in time order
   int n_series = 1;
+  // Resolution of the residual itself, as a variance per row in weighted
+  // units: what the model's own approximations leave even on noise-free
+  // data. Added to every RSS the statistics compare, so that on data far
+  // quieter than that resolution a crumb of approximation error is not
+  // called a physical effect. 0: the noise alone decides.
+  double floor_variance = 0.0;
+};
+
+// A nested model against its parent: q parameters added, k_total fitted in
+// all, n_eff effective rows; both RSS with the problem's resolution floor.
+struct NestedTest {
+  double f_stat = 0.0;
+  double p_value = 1.0;
+  double delta_bic = 0.0;   // < 0 favours the nested model
 };
 
 struct JointFit {
@@ -49,9 +63,9 @@ class Engine {
   [[nodiscard]] int base_rank() const noexcept { return rank_; }
   // Identifiable base columns that are not nuisance: what a base refit adds
   // to the model as given (whose fit already holds the nuisance).
-  [[nodiscard]] int base_rank_beyond_nuisance() const noexcept {
-    return rank_ - static_cast<int>(ident_n_.size());
-  }
+  [[nodiscard]] int base_rank_beyond_nuisance() const noexcept { return rank_ - nuisance_rank(); }
+  // Identifiable nuisance columns: fitted in every model, the model as given included.
+  [[nodiscard]] int nuisance_rank() const noexcept { return static_cast<int>(ident_n_.size()); }
   // Base parameters that the data cannot determine (their column is in the span of the others).
   [[nodiscard]] const std::vector<int>& unidentifiable_base() const noexcept { return unident_; }
 
@@ -73,6 +87,10 @@ class Engine {
   [[nodiscard]] Eigen::MatrixXd covariance(const Eigen::MatrixXd& Jc, const JointFit& f,
                                            int n_params_total, bool with_base = true) const;
   [[nodiscard]] double effective_rows(const Eigen::VectorXd& weighted_residual) const;
+  // The RSS a fit cannot go below: rows x floor_variance.
+  [[nodiscard]] double floor_rss() const noexcept { return p_.floor_variance * rows(); }
+  // F-test and BIC of a model with RSS `rss` against its parent (`rss_parent`).
+  [[nodiscard]] NestedTest nested(double rss_parent, double rss, int q, int k_total, double n_eff) const;
   // Weighted RMS -> data units: RMS of an unweighted residual.
   static double rms(const Eigen::VectorXd& r) {
     return r.size() ? std::sqrt(r.squaredNorm() / static_cast<double>(r.size())) : 0.0;
