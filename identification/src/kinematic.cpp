@@ -566,6 +566,156 @@ CandidateResult evaluate_kinematic_candidate(const KinematicProblem& P, const En
 }
 
 // ---------------------------------------------------------------------------
+// actuator_scale at the model as given
+
+namespace {
+
+int column_rank(const Eigen::MatrixXd& A) {
+  if (A.cols() == 0) return 0;
+  Eigen::MatrixXd As = A;
+  for (Eigen::Index j = 0; j < As.cols(); ++j) {
+    const double n = As.col(j).norm();
+    if (n > 0.0) As.col(j) /= n;
+  }
+  Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(As);
+  qr.setThreshold(1e-7);
+  return static_cast<int>(qr.rank());
+}
+
+// effects.md lists actuator_scale "so that a nominal-only model can name it":
+// the calibrated base absorbs a scale (it is c_i), so the scales are judged
+// where the model is. H0 = the model as given with only the set-up refitted
+// (ball-bar: the pivot; an uncalibrated bar's offset goes with the mean),
+// Hs = H0 + the three actuator scales, Hb = the full calibration (the base's
+// own nonlinear fit). Scale i is named when Hb adds to Hs nothing significant,
+// or less than 1 % of what it explains in all, and scale i is significant
+// within Hs. H0 and Hs are fitted by Gauss-Newton on the residual of the given
+// model with the scales as its own effects (their definition in effects.md):
+// a pivot a millimetre off is too far for one linearisation.
+struct GivenFit {
+  Eigen::VectorXd y;        // measurement - model at the fitted point (m)
+  Eigen::MatrixXd columns;  // d residual / d (set-up, free scales) there
+  Vec3 s = Vec3::Zero(), dq = Vec3::Zero();
+};
+
+GivenFit fit_at_the_given_model(const KinematicProblem& P, const std::array<bool, 3>& free_scale,
+                                const Eigen::VectorXd& w) {
+  const int N = P.rows(), ns = P.kind == "ballbar" ? 3 : 0;
+  std::vector<int> axes;
+  for (int i = 0; i < 3; ++i)
+    if (free_scale[static_cast<std::size_t>(i)]) axes.push_back(i);
+  GivenFit g;
+  auto residual_at = [&](const Vec3& s, const Vec3& dq) {
+    kin::KinematicModel m = P.given;
+    for (int i = 0; i < 3; ++i) m.effects[i].actuator_scale += s[i];
+    Eigen::VectorXd r = residual_impl(P, m, dq, 0.0);
+    if (P.kind == "ballbar" && P.with_dl && r.size()) r.array() -= r.mean();
+    return r;
+  };
+  const double h = 1e-6;
+  for (int it = 0; it < 5; ++it) {
+    const Eigen::VectorXd r = residual_at(g.s, g.dq);
+    Eigen::MatrixXd X(N, ns + static_cast<int>(axes.size()));
+    for (int k = 0; k < ns; ++k) {
+      const Vec3 e = h * Vec3::Unit(k);
+      X.col(k) = (residual_at(g.s, g.dq + e) - residual_at(g.s, g.dq - e)) / (2.0 * h);
+    }
+    for (std::size_t a = 0; a < axes.size(); ++a) {
+      const Vec3 e = h * Vec3::Unit(axes[a]);
+      X.col(ns + static_cast<int>(a)) = (residual_at(g.s + e, g.dq) - residual_at(g.s - e, g.dq)) / (2.0 * h);
+    }
+    g.y = -r;
+    g.columns = X;
+    if (X.cols() == 0) break;
+    const Eigen::MatrixXd Xw = w.asDiagonal() * X;
+    const Eigen::VectorXd step = Xw.colPivHouseholderQr().solve(w.cwiseProduct(g.y));
+    for (int k = 0; k < ns; ++k) g.dq[k] += step(k);
+    for (std::size_t a = 0; a < axes.size(); ++a) g.s[axes[a]] += step(ns + static_cast<int>(a));
+    if (step.cwiseAbs().maxCoeff() < 1e-12) break;
+  }
+  g.y = -residual_at(g.s, g.dq);
+  return g;
+}
+
+void judge_scales_at_the_given_model(const KinematicProblem& P, const DiagnoseOptions& opt,
+                                     std::vector<CandidateResult>& candidates) {
+  const LinearProblem L = kinematic_linear_problem(P);
+  const Eigen::VectorXd w = L.w;
+  const int N = P.rows();
+  // Statistics on one engine: rows, weights, series and resolution of these data.
+  auto engine_for = [&](const GivenFit& g) {
+    LinearProblem Lg = L;
+    Lg.y = g.y;
+    Lg.B = Eigen::MatrixXd(N, 0);
+    Lg.base_names.clear();
+    Lg.base_units.clear();
+    Lg.base_values.clear();
+    Lg.nuisance.clear();
+    return Engine(std::move(Lg));
+  };
+  const GivenFit all = fit_at_the_given_model(P, {true, true, true}, w);
+  const GivenFit setup_only = fit_at_the_given_model(P, {false, false, false}, w);
+  const Engine EA = engine_for(all), E0 = engine_for(setup_only);
+  const double rss_s = EA.rss_given(), rss_0 = E0.rss_given();
+  const double rss_b = w.cwiseProduct(P.residual).squaredNorm();  // the full calibration
+  const int k_s = column_rank(w.asDiagonal() * all.columns), k_b = column_rank(w.asDiagonal() * P.base);
+  const JointFit fa = EA.fit(Eigen::MatrixXd(N, 0), false);
+  const NestedTest full = EA.nested(rss_s, std::min(rss_s, rss_b), std::max(1, k_b - k_s), k_b, fa.n_eff);
+  const double share_left = rss_0 > rss_b ? std::max(0.0, rss_s - rss_b) / (rss_0 - rss_b) : 1.0;
+  const bool scales_suffice = k_s == all.columns.cols() && k_b > k_s && (full.p_value >= opt.alpha || share_left < 0.01);
+  // Covariance of the scales at the fitted point (set-up jointly).
+  Eigen::MatrixXd cov;
+  if (scales_suffice) {
+    LinearProblem Lc = L;
+    Lc.y = all.y;
+    const int ns = static_cast<int>(all.columns.cols()) - 3;
+    Lc.B = all.columns.leftCols(ns);
+    Lc.base_names.assign(static_cast<std::size_t>(ns), "pivot");
+    Lc.base_units.assign(static_cast<std::size_t>(ns), "m");
+    Lc.base_values.assign(static_cast<std::size_t>(ns), 0.0);
+    Lc.nuisance.assign(static_cast<std::size_t>(ns), 0);
+    const Engine Ec(std::move(Lc));
+    const Eigen::MatrixXd S = all.columns.rightCols(3);
+    cov = Ec.covariance(S, Ec.fit(S), k_s, true);
+  }
+  for (auto& c : candidates) {
+    if (c.effect != "actuator_scale" || c.axis < 0 || c.axis > 2) continue;
+    if (!scales_suffice) {
+      c.note += "; at the model as given the scales alone leave " + fmt(100.0 * share_left, 3) +
+                " % of what a full calibration explains (p = " + fmt(full.p_value, 2) + ")";
+      continue;
+    }
+    const int i = c.axis;
+    std::array<bool, 3> others{true, true, true};
+    others[static_cast<std::size_t>(i)] = false;
+    const GivenFit without = fit_at_the_given_model(P, others, w);
+    const NestedTest t = EA.nested(engine_for(without).rss_given(), rss_s, 1, k_s, fa.n_eff);
+    c.identifiable = true;
+    c.refits_base = false;
+    c.columns = Eigen::MatrixXd(N, 0);
+    c.params.assign(1, {"s", "1", all.s[i], std::sqrt(std::max(0.0, cov(i, i))), false});
+    c.rss = rss_s;
+    c.n_eff = fa.n_eff;
+    c.residual_after = all.y;
+    c.fitted = -P.residual_given - all.y;
+    c.rms_after = Engine::rms(all.y);
+    const double given_ms = std::pow(Engine::rms(P.residual_given), 2);
+    c.explained = given_ms > 0.0 ? std::clamp(1.0 - c.rms_after * c.rms_after / given_ms, 0.0, 1.0) : 0.0;
+    c.explained_beyond_base = 0.0;
+    c.n_params = 1;
+    c.k_total = k_s;
+    c.f_stat = t.f_stat;
+    c.p_value = t.p_value;
+    c.delta_bic = t.delta_bic;
+    c.note = "judged at the model as given: its three actuator scales (and the set-up) explain " +
+             fmt(100.0 * (1.0 - share_left), 4) + " % of what a full calibration explains (the rest: p = " +
+             fmt(full.p_value, 2) + "); a calibrated model holds it in c" + std::to_string(i + 1);
+  }
+}
+
+}  // namespace
+
+// ---------------------------------------------------------------------------
 // Diagnosis
 
 Diagnosis diagnose_kinematic(std::shared_ptr<const KinematicProblem> Pp, const DiagnoseOptions& opt) {
@@ -601,6 +751,7 @@ Diagnosis diagnose_kinematic(std::shared_ptr<const KinematicProblem> Pp, const D
       D.candidates.push_back(std::move(c));
     }
   }
+  judge_scales_at_the_given_model(P, opt, D.candidates);
   // Noise floor: the instrument's declared sigma, else the residual sigma of
   // the best description (dof-corrected).
   {

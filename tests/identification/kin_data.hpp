@@ -24,8 +24,8 @@ struct PlantedKinematic {
   std::array<double, 3> params{};
 };
 
-inline ctl::MachineModel kim_truth_with(const std::vector<PlantedKinematic>& planted) {
-  ctl::MachineModel m = cal::kim_true_machine();
+inline ctl::MachineModel kim_truth_with(const std::vector<PlantedKinematic>& planted, bool kim_errors = true) {
+  ctl::MachineModel m = kim_errors ? cal::kim_true_machine() : ctl::MachineModel::elkady();
   for (const auto& p : planted) {
     if (!p.effect) continue;
     const auto t = *kin::kinematic_effect_from_name(p.effect);
@@ -68,11 +68,12 @@ struct KinSimOptions {
   bool with_time = true;
   bool length_offset_known = true;
   bool one_direction = false; // every pose approached from the + side on every axis
+  bool kim_errors = true;     // false: the true planes are nominal (only the planted effects and the pivot error)
 };
 
 inline io::BallbarData kim_ballbar(const std::vector<PlantedKinematic>& planted, const std::vector<Vec3>& poses,
                                    const KinSimOptions& o = {}) {
-  const auto truth = kim_truth_with(planted);
+  const auto truth = kim_truth_with(planted, o.kim_errors);
   const auto nominal = ctl::MachineModel::elkady();
   cal::BallbarSimulation sim;
   sim.pivot_nominal = cal::kim_pivot();
@@ -91,7 +92,7 @@ inline io::BallbarData kim_ballbar(const std::vector<PlantedKinematic>& planted,
 
 inline io::PositionData kim_positions(const std::vector<PlantedKinematic>& planted, const std::vector<Vec3>& poses,
                                       const KinSimOptions& o = {}) {
-  const auto truth = kim_truth_with(planted);
+  const auto truth = kim_truth_with(planted, o.kim_errors);
   const auto nominal = ctl::MachineModel::elkady();
   auto inputs = cal::sequence_inputs(nominal, poses, o.dwell, 60.0);
   if (o.one_direction)
