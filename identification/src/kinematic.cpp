@@ -557,7 +557,7 @@ CandidateResult evaluate_kinematic_candidate(const KinematicProblem& P, const En
       c.fitted.setZero();
       c.identifiable = false;
       c.note = "absorbed by the calibrated base: the scale c" + std::to_string(axis + 1) +
-               " is this effect (s = c - 1 shown); not ranked";
+               " is this effect (s = c - 1 shown; to put it in the model, calibrate: cpm calibrate)";
       break;
     }
   }
