@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "cmd_client_common.hpp"
+#include "state_log.hpp"
 
 namespace cpm::cli::client {
 namespace {
@@ -20,39 +21,6 @@ using cpm_msgs::state_t;
 
 std::atomic<bool> g_interrupted{false};
 void on_sigint(int) { g_interrupted.store(true); }
-
-struct MotionRow {
-  double t;
-  double d[3], v[3], f[3];
-};
-
-MotionRow row_of(const state_t& s) {
-  MotionRow r{};
-  r.t = s.t;
-  for (int i = 0; i < 3; ++i) {
-    r.d[i] = s.d[i];
-    r.v[i] = s.d_dot[i];
-    r.f[i] = s.force[i];
-  }
-  return r;
-}
-
-// The motion layout of data-formats.md (kind = motion), written atomically.
-void write_motion_csv(const std::string& path, const std::vector<MotionRow>& rows, double rate, const std::string& note) {
-  std::ostringstream os;
-  os << "# kind = motion\n";
-  if (rate > 0) os << "# rate = " << rate << "\n";
-  os << "# " << note << "\n";
-  os << "t,d1,d2,d3,v1,v2,v3,f1,f2,f3\n" << std::setprecision(17);
-  for (const auto& r : rows) {
-    os << r.t;
-    for (double x : r.d) os << ',' << x;
-    for (double x : r.v) os << ',' << x;
-    for (double x : r.f) os << ',' << x;
-    os << '\n';
-  }
-  write_file_atomically(path, os.str());
-}
 
 int watch(Args& a) {
   const double duration = a.number("duration", -1);
@@ -95,18 +63,17 @@ int record(Args& a) {
   a.finish();
   if (duration < 0 && !until_idle) throw UsageError("give --duration S or --until-idle");
   daemon::Client c(l);
-  std::vector<MotionRow> rows;
+  StateToMotion rows;
   // Counted against the loop's cycle counter (state_t.cycles), not the slot
   // index (state_t.cycle): a late cycle skips slots that never ran, which are
   // no lost message.
-  std::int64_t first = -1, last = -1, first_run = -1, last_run = -1, skipped0 = 0, skipped = 0;
+  std::int64_t first = -1, first_run = -1, last_run = -1, skipped0 = 0, skipped = 0;
   bool moved = false, idle = false;
   c.on_state([&](const state_t& s) {
     if (first < 0) first = s.cycle, first_run = s.cycles, skipped0 = s.skipped;
-    last = s.cycle;
     last_run = s.cycles;
     skipped = s.skipped - skipped0;
-    rows.push_back(row_of(s));
+    rows.add(s);
     if (s.mode == state_t::MODE_MOVING || s.mode == state_t::MODE_STOPPING) moved = true;
     if (moved && s.mode != state_t::MODE_MOVING && s.mode != state_t::MODE_STOPPING) idle = true;
   });
@@ -116,17 +83,21 @@ int record(Args& a) {
     if (duration >= 0 && std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count() >= duration) break;
     c.handle(0.05);
   }
-  if (rows.empty()) throw Error("no state received from cpmd (channel " + l.state_channel + ")");
-  // Nominal rate from the cycle numbers (missing states do not change it).
-  const double rate = last > first ? static_cast<double>(last - first) / (rows.back().t - rows.front().t) : 0.0;
+  if (first < 0) throw Error("no state received from cpmd (channel " + l.state_channel + ")");
+  if (rows.rows() == 0)
+    throw Error("no state of cpmd with the drives applying force (" + std::to_string(rows.inactive()) +
+                " states with the drives off or faulted): enable the machine and move it");
   const long expected = static_cast<long>(last_run - first_run + 1);
-  char note[200];
-  std::snprintf(note, sizeof note, "recorded by cpm record from %s: %zu states of %ld cycles run (%lld slots skipped by late cycles)",
-                l.state_channel.c_str(), rows.size(), expected, static_cast<long long>(skipped));
-  write_motion_csv(*out, rows, std::round(rate), note);
-  std::printf("record: %zu rows over %.3f s to %s (%ld cycles run, %ld missing; %lld slots skipped by late cycles)\n",
-              rows.size(), rows.back().t - rows.front().t, out->c_str(), expected,
-              expected - static_cast<long>(rows.size()), static_cast<long long>(skipped));
+  char note[240];
+  std::snprintf(note, sizeof note, "cpm record from %s: %zu states of %ld cycles run (%lld slots skipped by late cycles)",
+                l.state_channel.c_str(), rows.rows() + static_cast<std::size_t>(rows.inactive()), expected,
+                static_cast<long long>(skipped));
+  const io::MotionData m = rows.finish(*out, note);
+  io::write_motion(*out, m);
+  std::printf("record: %zu rows over %.3f s to %s (%ld cycles run, %ld missing; %lld slots skipped by late cycles; "
+              "%ld states with the drives off left out)\n",
+              m.t.size(), m.t.back() - m.t.front(), out->c_str(), expected,
+              expected - static_cast<long>(rows.rows()) - rows.inactive(), static_cast<long long>(skipped), rows.inactive());
   return 0;
 }
 
@@ -137,24 +108,15 @@ int log_to_csv(Args& a) {
   const auto pos = a.positionals();
   if (pos.size() != 1) throw UsageError("give the lcm-logger file");
   a.finish();
-  lcm::LogFile log(pos[0], "r");
-  if (!log.good()) throw Error(pos[0] + ": cannot open as an LCM log");
-  std::vector<MotionRow> rows;
-  long bad = 0;
-  for (const lcm::LogEvent* ev = log.readNextEvent(); ev; ev = log.readNextEvent()) {
-    if (ev->channel != channel) continue;
-    state_t s;
-    if (s.decode(ev->data, 0, ev->datalen) < 0) {
-      ++bad;
-      continue;
-    }
-    rows.push_back(row_of(s));
-  }
-  if (rows.empty()) throw Error(pos[0] + ": no decodable state_t on channel " + channel);
-  const double rate = rows.size() > 1 ? (rows.size() - 1) / (rows.back().t - rows.front().t) : 0.0;
-  write_motion_csv(*out, rows, std::round(rate), "converted by cpm lcm-log-to-csv from " + pos[0] + " channel " + channel);
-  std::printf("lcm-log-to-csv: %zu rows to %s%s\n", rows.size(), out->c_str(),
-              bad ? (" (" + std::to_string(bad) + " undecodable events skipped)").c_str() : "");
+  const StateLogRead r = read_state_log(pos[0], channel, false);
+  io::MotionData m = r.data;
+  m.info.path = *out;
+  m.info.metadata["source"] = "cpm lcm-log-to-csv from " + pos[0] + ", channel " + channel;
+  io::write_motion(*out, m);
+  std::printf("lcm-log-to-csv: %zu rows to %s", m.t.size(), out->c_str());
+  if (r.undecodable) std::printf(" (%ld undecodable or non-finite events skipped)", r.undecodable);
+  if (r.inactive) std::printf(" (%ld states with the drives off left out)", r.inactive);
+  std::printf("\n");
   return 0;
 }
 

@@ -10,6 +10,7 @@
 #include "cpm/identification/report.hpp"
 #include "cpm/io/data_files.hpp"
 #include "cpm/io/model_file.hpp"
+#include "state_log.hpp"
 
 namespace cpm::cli {
 namespace {
@@ -23,7 +24,7 @@ int run(Args& a) {
   mo.half_window = a.number("window", mo.half_window * 1e3) * 1e-3;
   a.finish();
   if (!data_path) throw UsageError("--data FILE is required");
-  const io::DataSet ds = io::read_data_file(*data_path);
+  const io::DataSet ds = read_measurements(*data_path);
   const io::ModelFile mf = io::load_model_file(model_path);
   const std::string title = "cpm compare: " + model_path + " on " + *data_path;
   if (!std::holds_alternative<io::MotionData>(ds)) {

@@ -8,6 +8,7 @@
 #include "cpm/identification/report.hpp"
 #include "cpm/io/data_files.hpp"
 #include "cpm/io/model_file.hpp"
+#include "state_log.hpp"
 
 namespace cpm::cli {
 namespace {
@@ -25,7 +26,7 @@ int run(Args& a) {
   a.finish();
   if (!data_path) throw UsageError("--data FILE is required");
   if (!(o.alpha > 0.0 && o.alpha < 1.0)) throw UsageError("--alpha must be within (0, 1)");
-  const io::DataSet ds = io::read_data_file(*data_path);
+  const io::DataSet ds = read_measurements(*data_path);
   const io::ModelFile mf = io::load_model_file(model_path);
   ident::Diagnosis D;
   if (!std::holds_alternative<io::MotionData>(ds)) {

@@ -9,6 +9,7 @@
 #include "cpm/identification/report.hpp"
 #include "cpm/io/data_files.hpp"
 #include "cpm/io/model_file.hpp"
+#include "state_log.hpp"
 
 namespace cpm::cli {
 namespace {
@@ -21,7 +22,7 @@ int run_kinematic(const io::DataSet& ds, const std::vector<ident::FitRequest>& r
   io::ModelFile mf = io::load_model_file(model_path);
   std::optional<io::DataSet> hold;
   if (holdout_path) {
-    hold = io::read_data_file(*holdout_path);
+    hold = read_measurements(*holdout_path);
     if (io::kind_of(*hold) != io::kind_of(ds))
       throw Error(*holdout_path + ": kind = " + io::kind_name(io::kind_of(*hold)) + ", but the fitted data are kind = " +
                   io::kind_name(io::kind_of(ds)));
@@ -106,7 +107,7 @@ int run(Args& a) {
   if (adds.empty()) throw UsageError("--add EFFECT[:AXIS] is required (e.g. --add coulomb_friction:2)");
   std::vector<ident::FitRequest> req;
   for (const auto& s : adds) req.push_back(ident::parse_fit_request(s));
-  const io::DataSet ds = io::read_data_file(*data_path);
+  const io::DataSet ds = read_measurements(*data_path);
   if (!std::holds_alternative<io::MotionData>(ds)) {
     const std::string kind = io::kind_name(io::kind_of(ds));
     for (const auto& r : req) ident::check_effect_for_kind(r.effect, kind);
