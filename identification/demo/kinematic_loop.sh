@@ -12,8 +12,10 @@
 # a 4 µm cyclic error of 16 mm wavelength on limb 2). The ball-bar poses are
 # 192 points on two hemispheres (100 and 150 mm) about Kim's pivot: denser
 # than Kim's 32, because a periodic error needs several samples per period.
-# (Effects needing the dir or t columns, backlash and thermal drift, need a
-# simulator that writes them: cpm simulate-measurement does not yet.)
+# They are visited in a shuffled order, 20 s apart, and the file carries the
+# t and dir columns, so backlash and thermal drift can be planted too:
+#   LIMB=1 EFFECT='backlash: {b: 4.0e-6}' ...
+#   LIMB=3 EFFECT='thermal_drift: {e: 2.0e-5, tau: 1200}' ...
 set -euo pipefail
 CPM=${CPM:-build/bin/cpm}
 OUT=${1:-/tmp/cpm-demo-kinematic}
@@ -41,7 +43,7 @@ awk 'BEGIN {
     }
   } }' > "$OUT/poses.csv"
 "$CPM" simulate-measurement --truth "$OUT/truth.yaml" --poses "$OUT/poses.csv" \
-  --pivot-error=-0.000018,0.000017,-0.00103 --seed 3 --out "$OUT/ballbar.csv"
+  --pivot-error=-0.000018,0.000017,-0.00103 --seed 3 --dwell 20 --order shuffled --out "$OUT/ballbar.csv"
 
 echo "== 3. calibrate (Kim's ball-bar method)"
 "$CPM" calibrate --data "$OUT/ballbar.csv" --out "$OUT/calibrated.yaml" --json "$OUT/calibrate.json" | tail -n 3

@@ -1,7 +1,10 @@
 // cpm simulate-measurement: what a ball-bar or a laser tracker would read on
 // a true machine commanded through a controller's model, as a measurement
 // file of data-formats.md (for trying the calibration and for tests).
+#include <algorithm>
+#include <cmath>
 #include <cstdio>
+#include <random>
 
 #include "calib_common.hpp"
 #include "cpm/calibration/poses.hpp"
@@ -29,27 +32,42 @@ int run(Args& a) {
   else if (shape == "gaussian") noise.shape = cal::NoiseShape::gaussian;
   else throw UsageError("--noise-shape must be uniform or gaussian");
   noise.seed = static_cast<std::uint64_t>(a.integer("seed", 1));
+  const double dwell = a.number("dwell", 0.0);
+  const std::string order = a.option_or("order", "file");
   const auto out = a.option("out");
   a.finish();
+  if (!(dwell >= 0.0) || !std::isfinite(dwell)) throw UsageError("--dwell must be a number of seconds >= 0");
+  if (order != "file" && order != "shuffled") throw UsageError("--order must be file or shuffled");
   if (!poses_path) throw UsageError("--poses FILE.csv is required (cpm plan-poses writes one)");
   if (!out) throw UsageError("--out FILE.csv is required");
   const io::ModelFile truth = io::load_model_file(truth_path);
   const io::ModelFile model = io::load_model_file(model_path);
-  const std::vector<Vec3> cmd = cal::read_poses_csv(*poses_path);
+  std::vector<Vec3> cmd = cal::read_poses_csv(*poses_path);
+  // Visiting in a shuffled order brings every axis into the poses from both
+  // directions (backlash needs that); a dwell gives each pose its time and
+  // approach direction (the t and dir columns: thermal drift, backlash).
+  if (order == "shuffled") {
+    std::mt19937_64 rng(noise.seed * 2654435761u + 17u);
+    std::shuffle(cmd.begin(), cmd.end(), rng);
+  }
+  std::vector<kin::KinematicInputs> inputs;
+  if (dwell > 0.0) inputs = cal::sequence_inputs(model.model, cmd, dwell, dwell);
   if (kind == "ballbar") {
     bs.pivot_true = bs.pivot_nominal + pivot_error;
     bs.noise = noise;
+    bs.inputs = inputs;
     io::BallbarData d = cal::simulate_ballbar(truth.model, model.model, cmd, bs);
     io::write_ballbar(*out, d);
   } else if (kind == "position") {
-    io::PositionData d = cal::simulate_positions(truth.model, model.model, cmd, noise);
+    io::PositionData d = cal::simulate_positions(truth.model, model.model, cmd, noise, inputs);
     io::write_position(*out, d);
   } else {
     throw UsageError("--kind must be ballbar or position");
   }
-  std::printf("wrote %s: %zu %s rows, true machine %s, commanded through %s, noise %s %.3g µm\n",
+  std::printf("wrote %s: %zu %s rows, true machine %s, commanded through %s, noise %s %.3g µm%s\n",
               out->c_str(), cmd.size(), kind.c_str(), truth_path.c_str(), model_path.c_str(),
-              shape.c_str(), noise.size * 1e6);
+              shape.c_str(), noise.size * 1e6,
+              dwell > 0.0 ? ", with t and dir1..dir3 (poses visited in order, one per dwell)" : "");
   return 0;
 }
 
@@ -58,7 +76,10 @@ const Command reg{"simulate-measurement",
                   "--poses POSES.csv --out FILE.csv [--kind ballbar|position] [--truth TRUE.yaml]\n"
                   "       [--model MODEL.yaml] [--pivot X,Y,Z] [--pivot-error DX,DY,DZ] [--length-offset M]\n"
                   "       [--length-offset-unknown] [--noise M] [--noise-shape uniform|gaussian] [--seed N]\n"
-                  "  Ball-bar noise is +-0.5 µm uniform by default (QC10), positions 5 µm gaussian."};
+                  "       [--dwell S] [--order file|shuffled]\n"
+                  "  Ball-bar noise is +-0.5 µm uniform by default (QC10), positions 5 µm gaussian.\n"
+                  "  --dwell S visits the poses S seconds apart and writes t and dir1..dir3 (what backlash and\n"
+                  "  thermal drift need); --order shuffled visits them in a random order (both directions)."};
 
 }  // namespace
 }  // namespace cpm::cli
