@@ -66,6 +66,37 @@ void rank_and_decide(Diagnosis& D, const Engine& E, const DiagnoseOptions& opt, 
     }
   }
 
+  // Candidates that are base directions (payload, inertia error) are judged
+  // against the model as given, where the base does not absorb the others:
+  // compare there, off the nuisance only. A force-gain error on the axis that
+  // carries the weight is mostly "the weight is off", what a payload is too.
+  // `rival` holds, per such candidate, the others that explain the data about
+  // as well there (BIC within 10): a verdict for it is then ambiguous.
+  std::vector<std::vector<std::string>> rival(D.candidates.size());
+  const double fr = E.floor_rss();
+  for (int a = 0; a < top; ++a) {
+    CandidateResult& ca = D.candidates[a];
+    const bool base_direction = !ca.refits_base || ca.columns.cols() == 0;
+    if (!base_direction || !ca.identifiable || ca.fitted.size() != E.rows()) continue;
+    const Eigen::VectorXd u = E.project_off_nuisance(ca.fitted);
+    if (u.squaredNorm() <= 0.0) continue;
+    for (std::size_t b = 0; b < D.candidates.size(); ++b) {
+      const CandidateResult& cb = D.candidates[b];
+      if (static_cast<int>(b) == a || cb.columns.cols() == 0 || !cb.refits_base) continue;
+      const Eigen::MatrixXd Xb = E.project_off_nuisance(cb.columns);
+      const Eigen::VectorXd coef = Xb.colPivHouseholderQr().solve(u);
+      const double share = std::clamp((Xb * coef).squaredNorm() / u.squaredNorm(), 0.0, 1.0);
+      if (share < 0.81) continue;
+      bool dup = false;
+      for (const auto& o : ca.confounded) dup |= o.with == cb.label();
+      if (!dup) ca.confounded.push_back({cb.label(), cb.effect, cb.axis, std::sqrt(share), advice(ca, cb)});
+      const double rss_b = E.rss(cb.columns, false);
+      const double score_b = ne_ref * std::log((rss_b + fr) / (E.rss_given() + fr)) +
+                             cb.n_params * std::log(std::max(2.0, ne_ref));
+      if (score_b - ca.score < 10.0) rival[static_cast<std::size_t>(a)].push_back(cb.label());
+    }
+  }
+
   // A candidate the base absorbs completely (e.g. a constant force when the
   // axis moves one way only) still looks like others on its axis: report the
   // pair from the raw columns, so the verdict does not hide it.
@@ -95,8 +126,10 @@ void rank_and_decide(Diagnosis& D, const Engine& E, const DiagnoseOptions& opt, 
     std::vector<std::string> alts;
     for (const auto& cf : v.confounded) {
       if (cf.effect.empty() || cf.correlation < 0.85) continue;
+      const auto& riv = rival[0];
+      const bool close_given = std::find(riv.begin(), riv.end(), cf.with) != riv.end();
       for (const auto& o : D.candidates)
-        if (o.label() == cf.with && ((o.significant && o.score - v.score < 10.0) || !o.identifiable)) {
+        if (o.label() == cf.with && ((o.significant && o.score - v.score < 10.0) || !o.identifiable || close_given)) {
           D.ambiguous = true;
           alts.push_back(cf.with + " (" + cf.separate_by + ")");
         }

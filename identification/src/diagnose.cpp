@@ -92,6 +92,13 @@ std::string separate_advice(const CandidateResult& a, const CandidateResult& b,
   const int ax = a.axis >= 0 ? a.axis : b.axis;
   const std::string axis_text = ax >= 0 ? "axis " + std::to_string(ax + 1) : "the axes";
   const bool one_direction = ax >= 0 && x.one_way[ax];
+  const bool payload_vs_gain = (a.effect == "payload_mass" && b.effect == "force_gain") ||
+                               (a.effect == "force_gain" && b.effect == "payload_mass") ||
+                               (a.effect == "inertia_error" && b.effect == "force_gain") ||
+                               (a.effect == "force_gain" && b.effect == "inertia_error");
+  if (payload_vs_gain)
+    return "accelerate the other axes harder (a payload or an inertia error acts on every axis, a drive gain "
+           "only on " + axis_text + ")";
   if (da.direction != db.direction && one_direction)
     return "move " + axis_text + " in both directions";
   if ((da.direction && db.direction) || (da.speed != db.speed))
@@ -248,7 +255,7 @@ CandidateResult evaluate_dynamic_candidate(const MotionProblem& P, const Engine&
     if (X.cols()) {
       const Eigen::VectorXd share = E.base_share(X);
       const Eigen::MatrixXd cosb = E.base_cosines(X);
-      if (!f.full_rank || share.minCoeff() > 0.995) {
+      if (!f.full_rank || share.minCoeff() > 1.0 - 1e-6) {
         c.identifiable = false;
         std::string with;
         for (Eigen::Index j = 0; j < X.cols(); ++j) {

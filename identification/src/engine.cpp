@@ -79,6 +79,12 @@ Eigen::MatrixXd Engine::project_off_base(const Eigen::MatrixXd& X) const {
   return Xw;
 }
 
+Eigen::MatrixXd Engine::project_off_nuisance(const Eigen::MatrixXd& X) const {
+  Eigen::MatrixXd Xw = p_.w.asDiagonal() * X;
+  if (Qn_.cols()) Xw -= Qn_ * (Qn_.transpose() * Xw);
+  return Xw;
+}
+
 double Engine::rss(const Eigen::MatrixXd& X, bool with_base) const {
   if (X.cols() == 0) return with_base ? base_.rss : rss0_;
   if (with_base) {
@@ -86,8 +92,7 @@ double Engine::rss(const Eigen::MatrixXd& X, bool with_base) const {
     const Eigen::VectorXd b = lstsq(Xp, yperp_, nullptr);
     return (yperp_ - Xp * b).squaredNorm();
   }
-  Eigen::MatrixXd Xw = p_.w.asDiagonal() * X;
-  if (Qn_.cols()) Xw -= Qn_ * (Qn_.transpose() * Xw);
+  const Eigen::MatrixXd Xw = project_off_nuisance(X);
   const Eigen::VectorXd b = lstsq(Xw, yn_, nullptr);
   return (yn_ - Xw * b).squaredNorm();
 }

@@ -335,6 +335,35 @@ TEST(QuietEncoders, NeitherInventAnEffectNorCreditTheBaseToAnother) {
     }
 }
 
+// A drive gain on z, the axis that carries the weight: its column is 99.8 %
+// the weight, which the base's E also explains, but the rest (the gain on z's
+// inertia alone) measures it. At 3 % it is named on axis 3 (before, with
+// columns over 99.5 % in the base span refused, the base smeared it into A on
+// every axis and force_gain[axis 2] was named); at 1 % it is mostly "the
+// weight is off", which a payload is too: the verdict says it cannot tell.
+TEST(Confounding, ADriveGainOnTheWeightBearingAxisIsNamedOrSaidToBeAPayloadsTwin) {
+  const ctl::Machine nominal(ctl::MachineModel::elkady());
+  test::SimSpec s;
+  s.duration = 16.0;
+  s.seed = 301;
+  s.effects = {{"force_gain", 2, {0.03}}};
+  const Diagnosis D = diagnose_motion(test::simulate(s), nominal);
+  ASSERT_GE(D.verdict, 0) << D.verdict_text;
+  const CandidateResult& v = D.candidates[static_cast<std::size_t>(D.verdict)];
+  EXPECT_EQ(v.label(), "force_gain[axis 3]") << D.verdict_text;
+  EXPECT_LE(std::fabs(v.params[0].value - 0.03), 3.0 * v.params[0].std_error) << v.params[0].value;
+  s.effects = {{"force_gain", 2, {0.01}}};
+  const Diagnosis S = diagnose_motion(test::simulate(s), nominal);
+  ASSERT_GE(S.verdict, 0) << S.verdict_text;
+  const std::string named = S.candidates[static_cast<std::size_t>(S.verdict)].label();
+  if (named != "force_gain[axis 3]") {
+    EXPECT_TRUE(named == "payload_mass" || named == "inertia_error") << S.verdict_text;
+    EXPECT_TRUE(S.ambiguous) << S.verdict_text;
+    EXPECT_NE(S.verdict_text.find("force_gain[axis 3]"), std::string::npos) << S.verdict_text;
+    EXPECT_NE(S.verdict_text.find("accelerate the other axes harder"), std::string::npos) << S.verdict_text;
+  }
+}
+
 TEST(Confounding, ViscousAgainstCoulombAtOneSpeedIsReportedWithTheMeasurementThatSeparatesThem) {
   // Axis 1 sweeps back and forth at one constant speed: b v and f_c sgn(v) are the same column.
   struct Shuttle final : ctl::Trajectory {

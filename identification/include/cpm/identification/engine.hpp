@@ -76,6 +76,9 @@ class Engine {
   [[nodiscard]] double rss(const Eigen::MatrixXd& X, bool with_base = true) const;
   // X (weighted) with its base-span part removed.
   [[nodiscard]] Eigen::MatrixXd project_off_base(const Eigen::MatrixXd& X) const;
+  // X (weighted) with its nuisance-span part removed: the space in which
+  // candidates that are base directions (payload, inertia error) are judged.
+  [[nodiscard]] Eigen::MatrixXd project_off_nuisance(const Eigen::MatrixXd& X) const;
   // Share of each column of X that lies in the base span (R^2, 0..1), and
   // the cosine with each base column (rows: columns of X).
   [[nodiscard]] Eigen::VectorXd base_share(const Eigen::MatrixXd& X) const;
