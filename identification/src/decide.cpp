@@ -76,7 +76,7 @@ void rank_and_decide(Diagnosis& D, const Engine& E, const DiagnoseOptions& opt, 
   const double fr = E.floor_rss();
   for (int a = 0; a < top; ++a) {
     CandidateResult& ca = D.candidates[a];
-    const bool base_direction = !ca.refits_base || ca.columns.cols() == 0;
+    const bool base_direction = ca.effect == "payload_mass" || ca.effect == "inertia_error";
     if (!base_direction || !ca.identifiable || ca.fitted.size() != E.rows()) continue;
     const Eigen::VectorXd u = E.project_off_nuisance(ca.fitted);
     if (u.squaredNorm() <= 0.0) continue;
