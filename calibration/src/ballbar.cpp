@@ -206,7 +206,49 @@ BallbarFit fit_ballbar(const kin::KinematicModel& start, const std::vector<Vec3>
   const ResidualFunction f = [&](const VecX& x, VecX& r, MatX* J) {
     ballbar_residuals(x, d0, d, lengths, pivot, r, J);
   };
-  {
+  // Partial: the directions of eta the poses determine, as the columns of
+  // `span` (scaled), found where the model is.
+  MatX span;
+  if (o.partial) {
+    eta = ballbar_parameters_of(start, pivot, pivot).vector(with_dl);
+    VecX r;
+    MatX J;
+    f(eta, r, &J);
+    VecX scale(J.cols());
+    for (Eigen::Index j = 0; j < J.cols(); ++j) scale[j] = J.col(j).norm() > 0.0 ? 1.0 / J.col(j).norm() : 0.0;
+    const Eigen::JacobiSVD<MatX> svd(J * scale.asDiagonal(), Eigen::ComputeThinV);
+    const VecX& sv = svd.singularValues();
+    int k = 0;
+    while (k < sv.size() && sv[k] > o.refuse_relative_singular_value * sv[0]) ++k;
+    span = scale.asDiagonal() * svd.matrixV().leftCols(k);
+    if (k < J.cols()) {
+      const auto names = ballbar_parameter_names(with_dl);
+      for (Eigen::Index c = k; c < J.cols(); ++c) {
+        std::string combo;
+        const VecX v = svd.matrixV().col(c);
+        for (Eigen::Index j = 0; j < v.size(); ++j)
+          if (std::fabs(v[j]) > 0.1) {
+            char t[64];
+            std::snprintf(t, sizeof t, "%s%+.2f %s", combo.empty() ? "" : " ", v[j], names[static_cast<std::size_t>(j)].c_str());
+            combo += t;
+          }
+        fit.warnings.push_back("partial calibration: these poses cannot determine " + combo +
+                               "; kept at the model's value");
+      }
+    }
+  }
+  if (o.partial && span.cols() < eta.size()) {
+    if (span.cols() == 0) throw DegeneratePoses("ball-bar calibration: these poses determine no parameter");
+    const VecX eta0 = eta;
+    const ResidualFunction fz = [&](const VecX& z, VecX& r, MatX* J) {
+      MatX Jf;
+      ballbar_residuals(eta0 + span * z, d0, d, lengths, pivot, r, J ? &Jf : nullptr);
+      if (J) *J = Jf * span;
+    };
+    VecX z = VecX::Zero(span.cols());
+    fit.lm = levenberg_marquardt(fz, z, o.lm);
+    eta = eta0 + span * z;
+  } else {
     // Refuse a pose set whose Jacobian is singular at the start: no amount of
     // iteration will determine what it cannot see.
     VecX r;
@@ -243,8 +285,8 @@ BallbarFit fit_ballbar(const kin::KinematicModel& start, const std::vector<Vec3>
           "; spread the poses over the hemisphere around the pivot: several heights and azimuths "
           "all around it (cpm plan-poses --layout kim)");
     }
+    fit.lm = levenberg_marquardt(f, eta, o.lm);
   }
-  fit.lm = levenberg_marquardt(f, eta, o.lm);
   if (!fit.lm.converged)
     fit.warnings.push_back("the nonlinear least squares did not converge: " + fit.lm.reason);
   VecX r;

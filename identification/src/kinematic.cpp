@@ -292,6 +292,9 @@ KinematicProblem prepare_kinematic(const io::DataSet& data, const kin::Kinematic
   if (P.kind == "ballbar") {
     cal::BallbarOptions o;
     o.length_offset_known = !P.with_dl;
+    // A circular test (one plane) cannot determine the out-of-plane
+    // parameters: calibrate what it determines, keep the rest as the model has it.
+    o.partial = true;
     P.ballbar_fit = cal::fit_ballbar(P.given, dt, P.length, P.pivot, o);
     P.base_value = P.ballbar_fit->params.vector(P.with_dl);
     P.base_names = cal::ballbar_parameter_names(P.with_dl);
@@ -386,17 +389,45 @@ CandidateResult evaluate_kinematic_candidate(const KinematicProblem& P, const En
     return c;
   }
   const double stroke = sp.hi[axis] - sp.lo[axis];
+  // Whether these data can see column j of an effect at all: the part of it
+  // outside the base span, at the parameter's largest physical size, changes
+  // them by at least 3 noise standard deviations (resolution included). A
+  // circle in one plane cannot see what tilts out of it: there the fit would
+  // return a wild number with a meaningless standard error.
+  const double noise_unit = std::sqrt(1.0 + E.problem().floor_variance);
+  auto visible = [&](const Eigen::MatrixXd& X, int j, double bound) {
+    const Eigen::MatrixXd Xp = E.project_off_base(X.col(j));
+    return Xp.norm() * bound >= 3.0 * noise_unit;
+  };
+  auto bound_of = [&](int param) { return std::max(std::fabs(in.params[param].lower), std::fabs(in.params[param].upper)); };
   auto finish = [&](const Eigen::MatrixXd& X, const JointFit& f, const Eigen::MatrixXd& jac,
                     const std::vector<double>& values) {
+    bool any_visible = false, any_column = false;
+    for (Eigen::Index j = 0; j < X.cols(); ++j) {
+      any_column |= X.col(j).norm() > 0.0;
+      any_visible |= visible(X, static_cast<int>(j), bound_of(in.n_params == X.cols() ? static_cast<int>(j) : 0));
+    }
+    // A fit that failed (the column in the base span, or nothing) keeps the
+    // base's residual; the confounding below still says with what and how to
+    // separate them. A column outside the span but too small to matter is
+    // simply not seen.
+    const char* unseen_note = "these data cannot see it: even at its largest physical size its part that the "
+                              "calibrated base cannot take up changes them by less than 3 noise standard deviations";
+    if (!any_column) {
+      not_identifiable(unseen_note);
+      return;
+    }
+    const bool unseen = !any_visible;
+    const bool degenerate = unseen || !f.full_rank || !f.beta.allFinite() || !f.residual.allFinite();
     c.columns = X;
-    c.rss = f.rss;
-    c.n_eff = f.n_eff;
-    c.residual_after = f.residual;
-    c.fitted = X * f.beta;
-    const Eigen::MatrixXd cov = E.covariance(jac, f, rank + static_cast<int>(jac.cols()), true);
+    c.rss = degenerate ? E.rss_base() : f.rss;
+    c.n_eff = degenerate ? E.base_fit().n_eff : f.n_eff;
+    c.residual_after = degenerate ? E.base_fit().residual : f.residual;
+    c.fitted = degenerate ? Eigen::VectorXd::Zero(E.rows()) : Eigen::VectorXd(X * f.beta);
+    const Eigen::MatrixXd cov = degenerate ? Eigen::MatrixXd() : E.covariance(jac, f, rank + static_cast<int>(jac.cols()), true);
     for (int j = 0; j < in.n_params; ++j) {
       const double se = j < cov.rows() ? std::sqrt(std::max(0.0, cov(j, j))) : -1.0;
-      c.params.push_back({in.params[j].name, in.params[j].unit, values[static_cast<std::size_t>(j)], se, false});
+      c.params.push_back({in.params[j].name, in.params[j].unit, degenerate ? 0.0 : values[static_cast<std::size_t>(j)], se, false});
     }
     for (std::size_t b = 0; b < P.base_names.size(); ++b)
       c.base_after.push_back({P.base_names[b], P.base_units[b],
@@ -420,10 +451,14 @@ CandidateResult evaluate_kinematic_candidate(const KinematicProblem& P, const En
     // microns): a column mostly in the base span can still be measured by
     // the part outside it, whose size the standard error reflects. Only a
     // column (numerically) inside the span cannot be told apart.
-    if (!f.full_rank || share.minCoeff() > 1.0 - 1e-6) {
+    const bool in_span = !share.allFinite() || share.minCoeff() > 1.0 - 1e-6;
+    if (in_span || (degenerate && !unseen)) {
       c.identifiable = false;
       c.note = "in these data it cannot be told apart from the calibrated base" +
                (with.empty() ? std::string() : " (parameter " + with + ")") + ": " + base_advice(P, effect, with, axis);
+    } else if (unseen) {
+      c.identifiable = false;
+      c.note = unseen_note;
     }
   };
 
@@ -492,9 +527,28 @@ CandidateResult evaluate_kinematic_candidate(const KinematicProblem& P, const En
       break;
     }
     case KinematicEffectType::guide_angular_error: {
-      const Eigen::MatrixXd X = hcat({effect_difference(P, *type, axis, 0, 1e-4), effect_difference(P, *type, axis, 1, 1e-4)});
+      // Two tilts; a pose set may see one only (a circle in the plane of the
+      // other axes sees no tilt toward the third): fit what it sees, say so.
+      const Eigen::MatrixXd both = hcat({effect_difference(P, *type, axis, 0, 1e-4), effect_difference(P, *type, axis, 1, 1e-4)});
+      const bool va = visible(both, 0, bound_of(0)), vb = visible(both, 1, bound_of(1));
+      if (va == vb) {
+        const JointFit f = E.fit(both);
+        finish(both, f, both, {f.beta(0), f.beta(1)});
+        break;
+      }
+      const int j = va ? 0 : 1;
+      const Eigen::MatrixXd X = hcat({both.col(j)});
       const JointFit f = E.fit(X);
-      finish(X, f, X, {f.beta(0), f.beta(1)});
+      finish(X, f, X, {f.beta(0), 0.0});
+      if (c.identifiable && c.params.size() == 2) {
+        if (j == 1) std::swap(c.params[0], c.params[1]);
+        for (int k = 0; k < 2; ++k) c.params[static_cast<std::size_t>(k)].name = in.params[k].name;
+        c.params[static_cast<std::size_t>(1 - j)].value = 0.0;
+        c.params[static_cast<std::size_t>(1 - j)].std_error = -1.0;
+        c.n_params = 1;
+        c.note = "these data cannot see the tilt " + std::string(in.params[1 - j].name) + ": fitted " +
+                 in.params[j].name + " only";
+      }
       break;
     }
     case KinematicEffectType::limb_twist: {
@@ -539,7 +593,8 @@ CandidateResult evaluate_kinematic_candidate(const KinematicProblem& P, const En
                                         })});
       finish(X, f, jac, {e, tau});
       c.trials = std::max(1.0, std::log(hi / lo) / std::log(3.0));
-      if (tau >= 0.99 * hi) c.note = "tau at the top of the search (" + fmt(hi) + " s): the data see a linear drift";
+      if (c.identifiable && tau >= 0.99 * hi)
+        c.note = "tau at the top of the search (" + fmt(hi) + " s): the data see a linear drift";
       break;
     }
     case KinematicEffectType::actuator_scale: {
@@ -653,7 +708,13 @@ void judge_scales_at_the_given_model(const KinematicProblem& P, const DiagnoseOp
     Lg.nuisance.clear();
     return Engine(std::move(Lg));
   };
-  const GivenFit all = fit_at_the_given_model(P, {true, true, true}, w);
+  // Only the scales of axes that move (a circle in XY leaves z's scale unseen).
+  const Span sp = span_of(P);
+  std::array<bool, 3> moving{};
+  for (int i = 0; i < 3; ++i) moving[static_cast<std::size_t>(i)] = sp.hi[i] - sp.lo[i] >= 1e-3;
+  const int n_moving = static_cast<int>(std::count(moving.begin(), moving.end(), true));
+  if (n_moving == 0) return;
+  const GivenFit all = fit_at_the_given_model(P, moving, w);
   const GivenFit setup_only = fit_at_the_given_model(P, {false, false, false}, w);
   const Engine EA = engine_for(all), E0 = engine_for(setup_only);
   const double rss_s = EA.rss_given(), rss_0 = E0.rss_given();
@@ -662,38 +723,42 @@ void judge_scales_at_the_given_model(const KinematicProblem& P, const DiagnoseOp
   const JointFit fa = EA.fit(Eigen::MatrixXd(N, 0), false);
   const NestedTest full = EA.nested(rss_s, std::min(rss_s, rss_b), std::max(1, k_b - k_s), k_b, fa.n_eff);
   const double share_left = rss_0 > rss_b ? std::max(0.0, rss_s - rss_b) / (rss_0 - rss_b) : 1.0;
-  const bool scales_suffice = k_s == all.columns.cols() && k_b > k_s && (full.p_value >= opt.alpha || share_left < 0.01);
+  const int ns = static_cast<int>(all.columns.cols()) - n_moving;  // set-up columns
+  const int k_setup = column_rank(w.asDiagonal() * all.columns.leftCols(ns));
+  const bool scales_suffice = k_s == k_setup + n_moving && k_b > k_s && (full.p_value >= opt.alpha || share_left < 0.01);
   // Covariance of the scales at the fitted point (set-up jointly).
   Eigen::MatrixXd cov;
   if (scales_suffice) {
     LinearProblem Lc = L;
     Lc.y = all.y;
-    const int ns = static_cast<int>(all.columns.cols()) - 3;
     Lc.B = all.columns.leftCols(ns);
     Lc.base_names.assign(static_cast<std::size_t>(ns), "pivot");
     Lc.base_units.assign(static_cast<std::size_t>(ns), "m");
     Lc.base_values.assign(static_cast<std::size_t>(ns), 0.0);
     Lc.nuisance.assign(static_cast<std::size_t>(ns), 0);
     const Engine Ec(std::move(Lc));
-    const Eigen::MatrixXd S = all.columns.rightCols(3);
+    const Eigen::MatrixXd S = all.columns.rightCols(n_moving);
     cov = Ec.covariance(S, Ec.fit(S), k_s, true);
   }
   for (auto& c : candidates) {
     if (c.effect != "actuator_scale" || c.axis < 0 || c.axis > 2) continue;
+    if (!moving[static_cast<std::size_t>(c.axis)]) continue;
     if (!scales_suffice) {
       c.note += "; at the model as given the scales alone leave " + fmt(100.0 * share_left, 3) +
                 " % of what a full calibration explains (p = " + fmt(full.p_value, 2) + ")";
       continue;
     }
     const int i = c.axis;
-    std::array<bool, 3> others{true, true, true};
+    std::array<bool, 3> others = moving;
     others[static_cast<std::size_t>(i)] = false;
     const GivenFit without = fit_at_the_given_model(P, others, w);
+    int ci = 0;  // index of scale i among the free ones
+    for (int j = 0; j < i; ++j) ci += moving[static_cast<std::size_t>(j)] ? 1 : 0;
     const NestedTest t = EA.nested(engine_for(without).rss_given(), rss_s, 1, k_s, fa.n_eff);
     c.identifiable = true;
     c.refits_base = false;
     c.columns = Eigen::MatrixXd(N, 0);
-    c.params.assign(1, {"s", "1", all.s[i], std::sqrt(std::max(0.0, cov(i, i))), false});
+    c.params.assign(1, {"s", "1", all.s[i], std::sqrt(std::max(0.0, cov(ci, ci))), false});
     c.rss = rss_s;
     c.n_eff = fa.n_eff;
     c.residual_after = all.y;

@@ -221,6 +221,53 @@ TEST(KinematicPlanted, ActuatorScaleIsNamedWhenTheModelIsNominalOnly) {
   EXPECT_NE(s2->note.find("full calibration"), std::string::npos) << s2->note;
 }
 
+// The ISO 230-4 circular test (one XY circle of 150 mm, both directions) is
+// the most common ball-bar measurement. It cannot determine the out-of-plane
+// parameters: the base is calibrated where the circle sees (c1, c2, theta_z,
+// the pivot in the plane), the rest kept as the model has it, and what the
+// circle cannot see is said so, not fitted to a wild number (or NaN).
+TEST(KinematicCircle, ACircularTestIsDiagnosedOnWhatItCanSee) {
+  const auto nominal = ctl::MachineModel::elkady();
+  const Vec3 c(0.430, 0.430, 0.400);
+  std::vector<Vec3> poses;
+  for (int dir : {+1, -1})
+    for (int k = 0; k < 360; ++k) {
+      const double a = dir * 2.0 * std::numbers::pi * k / 360.0;
+      poses.push_back(c + 0.150 * Vec3(std::cos(a), std::sin(a), 0.0));
+    }
+  auto circle = [&](const std::vector<test::PlantedKinematic>& planted, bool kim) {
+    cal::BallbarSimulation sim;
+    sim.pivot_nominal = c;
+    sim.pivot_true = c + Vec3(2e-5, -1e-5, 3e-6);
+    sim.noise = {cal::NoiseShape::uniform, 0.5e-6, 1};
+    sim.inputs = cal::sequence_inputs(nominal, poses, 0.1);
+    io::BallbarData b = cal::simulate_ballbar(test::kim_truth_with(planted, kim), nominal, poses, sim);
+    for (int k = 0; k < 720; ++k) b.extra.run.push_back(k < 360 ? 1 : 2);
+    return diagnose(b);
+  };
+  EXPECT_LT(circle({}, true).verdict, 0);
+  const Diagnosis B = circle({{"backlash", 0, {6e-6, 0, 0}}}, true);
+  ASSERT_GE(B.verdict, 0) << B.verdict_text;
+  const auto& v = B.candidates[static_cast<std::size_t>(B.verdict)];
+  EXPECT_EQ(v.label(), "backlash[axis 1]");
+  EXPECT_LE(std::fabs(v.params[0].value - 6e-6), 3.0 * v.params[0].std_error) << v.params[0].value;
+  for (const auto& cand : B.candidates) {
+    EXPECT_TRUE(std::isfinite(cand.rms_after)) << cand.label();
+    if (cand.axis == 2) {
+      EXPECT_FALSE(cand.identifiable) << cand.label() << ": axis 3 does not move";
+    }
+    for (const auto& p : cand.params) {
+      if (p.std_error >= 0 && cand.identifiable) {
+        EXPECT_LT(std::fabs(p.value), 1e3 * (p.std_error + 1e-12)) << cand.label();
+      }
+    }
+  }
+  EXPECT_EQ(ident::diagnosis_json(B).find("nan"), std::string::npos);
+  const Diagnosis S = circle({{"actuator_scale", 1, {1e-4, 0, 0}}}, false);
+  ASSERT_GE(S.verdict, 0) << S.verdict_text;
+  EXPECT_EQ(S.candidates[static_cast<std::size_t>(S.verdict)].label(), "actuator_scale[axis 2]");
+}
+
 // Exact data (no noise at all): the residual after the base is rounding
 // (1e-17 m); nothing is named on it, and a planted effect still is.
 TEST(KinematicNoEffect, ExactDataNameNothingButTheEffectThatIsThere) {

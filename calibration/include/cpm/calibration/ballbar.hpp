@@ -84,6 +84,11 @@ struct BallbarOptions {
   IdentifiabilityOptions identifiability;
   bool length_offset_known = true;  // false: fit dl
   double refuse_relative_singular_value = 1e-8;  // at the start: refuse the pose set below this
+  // Instead of refusing a pose set that cannot determine every parameter (a
+  // circle in one plane: the out-of-plane tilt, scale and pivot height), fit
+  // the combinations it determines, starting from `start`'s own parameters,
+  // and keep the others at those values; the warnings name what was kept.
+  bool partial = false;
   double sigma = 0.0;  // the bar's standard deviation (m) when known, for a consistency check
 };
 
