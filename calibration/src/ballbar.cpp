@@ -222,6 +222,11 @@ BallbarFit fit_ballbar(const kin::KinematicModel& start, const std::vector<Vec3>
     while (k < sv.size() && sv[k] > o.refuse_relative_singular_value * sv[0]) ++k;
     span = scale.asDiagonal() * svd.matrixV().leftCols(k);
     if (k < J.cols()) {
+      VecX inv(J.cols());
+      for (Eigen::Index j = 0; j < J.cols(); ++j) inv[j] = scale[j] > 0.0 ? 1.0 / scale[j] : 0.0;
+      fit.determined = span * svd.matrixV().leftCols(k).transpose() * inv.asDiagonal();
+    }
+    if (k < J.cols()) {
       const auto names = ballbar_parameter_names(with_dl);
       for (Eigen::Index c = k; c < J.cols(); ++c) {
         std::string combo;

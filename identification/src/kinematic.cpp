@@ -311,7 +311,9 @@ KinematicProblem prepare_kinematic(const io::DataSet& data, const kin::Kinematic
     cal::position_residuals(P.position_fit->model.planes, P.given.d0, dt, P.p, r, &J);
     for (const auto& w : P.position_fit->warnings) P.notes.push_back("calibration: " + w);
   }
-  P.base = J;
+  P.base_map = Eigen::MatrixXd::Identity(J.cols(), J.cols());
+  if (P.ballbar_fit && P.ballbar_fit->determined.size()) P.base_map = P.ballbar_fit->determined;
+  P.base = J * P.base_map;
   P.residual = P.residual_of(P.base_value, {});
   P.sensitivity.resize(P.rows(), 3);
   Vec3 dq;
@@ -431,7 +433,7 @@ CandidateResult evaluate_kinematic_candidate(const KinematicProblem& P, const En
     }
     for (std::size_t b = 0; b < P.base_names.size(); ++b)
       c.base_after.push_back({P.base_names[b], P.base_units[b],
-                              P.base_value(static_cast<Eigen::Index>(b)) + f.base_delta(static_cast<Eigen::Index>(b)),
+                              P.base_value(static_cast<Eigen::Index>(b)) + (P.base_map * f.base_delta)(static_cast<Eigen::Index>(b)),
                               -1.0, false});
     const Eigen::VectorXd share = E.base_share(X);
     const Eigen::MatrixXd cosb = E.base_cosines(X);
@@ -1044,7 +1046,7 @@ JointResult joint_fit(const KinematicProblem& P, const std::vector<FitRequest>& 
     kin::set_params(R.added[c.axis], t, v);
     at += static_cast<int>(c.columns.cols());
   }
-  R.base_value = P.base_value + R.fit.base_delta;
+  R.base_value = P.base_value + P.base_map * R.fit.base_delta;
   R.model = P.model_of(R.base_value, combine(P.given.effects, R.added));
   R.base_model = P.model_of(P.base_value, P.given.effects);
   R.model.validate();

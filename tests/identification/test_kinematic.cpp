@@ -235,7 +235,7 @@ TEST(KinematicCircle, ACircularTestIsDiagnosedOnWhatItCanSee) {
       const double a = dir * 2.0 * std::numbers::pi * k / 360.0;
       poses.push_back(c + 0.150 * Vec3(std::cos(a), std::sin(a), 0.0));
     }
-  auto circle = [&](const std::vector<test::PlantedKinematic>& planted, bool kim) {
+  auto circle_data = [&](const std::vector<test::PlantedKinematic>& planted, bool kim) {
     cal::BallbarSimulation sim;
     sim.pivot_nominal = c;
     sim.pivot_true = c + Vec3(2e-5, -1e-5, 3e-6);
@@ -243,7 +243,10 @@ TEST(KinematicCircle, ACircularTestIsDiagnosedOnWhatItCanSee) {
     sim.inputs = cal::sequence_inputs(nominal, poses, 0.1);
     io::BallbarData b = cal::simulate_ballbar(test::kim_truth_with(planted, kim), nominal, poses, sim);
     for (int k = 0; k < 720; ++k) b.extra.run.push_back(k < 360 ? 1 : 2);
-    return diagnose(b);
+    return b;
+  };
+  auto circle = [&](const std::vector<test::PlantedKinematic>& planted, bool kim) {
+    return diagnose(circle_data(planted, kim));
   };
   EXPECT_LT(circle({}, true).verdict, 0);
   const Diagnosis B = circle({{"backlash", 0, {6e-6, 0, 0}}}, true);
@@ -263,6 +266,13 @@ TEST(KinematicCircle, ACircularTestIsDiagnosedOnWhatItCanSee) {
     }
   }
   EXPECT_EQ(ident::diagnosis_json(B).find("nan"), std::string::npos);
+  // The fit recalibrates only what the circle determines (a tilt it cannot see stays put).
+  const ident::KinematicFit F =
+      ident::fit_kinematic(circle_data({{"backlash", 0, {6e-6, 0, 0}}}, true), nominal.kinematics, {{"backlash", 0}});
+  EXPECT_LT(F.on_fit.after, 0.35e-6) << F.on_fit.before;
+  ASSERT_TRUE(F.cross_validation.has_value());
+  EXPECT_LT(F.cross_validation->after, 0.4e-6);
+  EXPECT_NO_THROW(F.model.validate());
   const Diagnosis S = circle({{"actuator_scale", 1, {1e-4, 0, 0}}}, false);
   ASSERT_GE(S.verdict, 0) << S.verdict_text;
   EXPECT_EQ(S.candidates[static_cast<std::size_t>(S.verdict)].label(), "actuator_scale[axis 2]");

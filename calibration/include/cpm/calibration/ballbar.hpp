@@ -94,6 +94,10 @@ struct BallbarOptions {
 
 struct BallbarFit {
   BallbarParameters params;           // in the ball-bar frame
+  // Partial fits only (BallbarOptions::partial, poses that cannot determine
+  // every parameter): the projector onto what they determine, in eta's units
+  // (a change d of eta moves the fit by determined * d). Empty otherwise.
+  MatX determined;
   LmReport lm;
   Identifiability identifiability;    // over eta
   FrameTransform frame;               // ball-bar frame -> machine frame

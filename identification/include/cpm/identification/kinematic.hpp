@@ -65,7 +65,11 @@ struct KinematicProblem {
   std::optional<cal::PositionFit> position_fit;
   Eigen::VectorXd residual_given;     // model as given (m); ball-bar with dl unknown: its mean removed
   Eigen::VectorXd residual;           // at the calibrated base (m)
-  Eigen::MatrixXd base;               // d residual / d base parameter
+  Eigen::MatrixXd base;               // d residual / d base parameter (what the data determine of it)
+  // A change d of the base parameters found against `base` moves them by
+  // base_map * d: the identity, or for a circular test the projector onto
+  // what the poses determine (cal::BallbarFit::determined).
+  Eigen::MatrixXd base_map;
   Eigen::MatrixXd sensitivity;        // rows x 3: d residual / d d~_i
   std::vector<std::string> warnings, notes;
 
