@@ -6,6 +6,7 @@ import math
 import sys
 
 NUM = (int, float)
+NUM_OR_NULL = "number or null"  # a ratio of two '>= one period' bounds has no value
 REQUIRED = {
     "machine": {"cpu_model": str, "cores": int, "kernel": str, "preempt_rt": bool, "virtualization": str,
                 "realtime_allowed": bool, "date": str},
@@ -24,7 +25,7 @@ REQUIRED = {
     "diagnose": {"motion_1khz": dict, "ballbar_32_file": dict, "ballbar_192": dict},
 }
 LATENCY = {"cycles": int, "min_us": NUM, "mean_us": NUM, "p50_us": NUM, "p99_us": NUM, "p999_us": NUM,
-           "max_us": NUM, "period_jitter_bound_us": NUM, "realtime": bool}
+           "max_us": NUM, "period_jitter_bound_us": NUM, "late_slots": int, "bounds": dict, "realtime": bool}
 BUS = {"frames_per_cycle": int, "bits_per_cycle": int, "load": NUM, "worst_cycle_load": NUM, "max_rate_hz": NUM}
 BUDGETS = {"control_cycle_median", "allocations_per_cycle", "wakeup_p99_ratio", "plant_rtf"}
 
@@ -35,14 +36,16 @@ def check(obj, spec, where, errors):
             errors.append(f"{where}.{key}: missing")
             continue
         v = obj[key]
-        if kind is NUM:
+        if kind is NUM_OR_NULL:
+            ok = v is None or (isinstance(v, NUM) and not isinstance(v, bool) and math.isfinite(v))
+        elif kind is NUM:
             ok = isinstance(v, NUM) and not isinstance(v, bool) and math.isfinite(v)
         elif kind is int:
             ok = isinstance(v, int) and not isinstance(v, bool)
         else:
             ok = isinstance(v, kind)
         if not ok:
-            errors.append(f"{where}.{key}: {v!r} is not {getattr(kind, '__name__', 'a number')}")
+            errors.append(f"{where}.{key}: {v!r} is not {kind if isinstance(kind, str) else getattr(kind, '__name__', 'a number')}")
 
 
 def main():
@@ -55,7 +58,7 @@ def main():
     lat = r.get("latency", {})
     for who in ("cpmd", "cyclictest"):
         check(lat.get(who, {}), LATENCY, f"latency.{who}", errors)
-    check(lat.get("ratio", {}), {k: NUM for k in ("p50", "p99", "p999", "max")}, "latency.ratio", errors)
+    check(lat.get("ratio", {}), {k: NUM_OR_NULL for k in ("p50", "p99", "p999", "max")}, "latency.ratio", errors)
     for m in ("shipped", "alternative"):
         check(r.get("bus", {}).get(m, {}), BUS, f"bus.{m}", errors)
     for d in ("motion_1khz", "ballbar_32_file", "ballbar_192"):
@@ -64,7 +67,7 @@ def main():
     if got != BUDGETS:
         errors.append(f"budgets: {sorted(got)} instead of {sorted(BUDGETS)}")
     for b in r.get("budgets", []):
-        check(b, {"measured": NUM, "limit": NUM, "pass": bool}, f"budgets.{b.get('id')}", errors)
+        check(b, {"measured": NUM_OR_NULL, "limit": NUM, "pass": bool}, f"budgets.{b.get('id')}", errors)
     if not r.get("table"):
         errors.append("table: missing")
     if errors:
