@@ -112,6 +112,32 @@ def cyclictest_latency(doc, realtime, period_us):
     return f
 
 
+def seconds_of(bash_time):
+    """'1m2.500s' (bash's `times`) in seconds."""
+    m, rest = bash_time.split("m")
+    return 60 * float(m) + float(rest.rstrip("s"))
+
+
+def machine_use(path):
+    """Per step of the run: the share of all cores busy (every process) and the
+    share this run's own processes took; the difference is the background."""
+    marks = []
+    with open(path) as f:
+        for line in f:
+            name, stat, times = line.rstrip("\n").split("|")
+            v = [int(x) for x in stat.split()[1:]]
+            user, system = (seconds_of(x) for x in times.split())
+            marks.append((name, sum(v), v[3] + v[4], user + system))   # total, idle + iowait (jiffies), own (s)
+    hz = os.sysconf("SC_CLK_TCK")
+    out = {}
+    for (_, t0, i0, o0), (name, t1, i1, o1) in zip(marks, marks[1:]):
+        capacity_s = (t1 - t0) / hz                  # CPU seconds of all cores in the step
+        busy = ((t1 - t0) - (i1 - i0)) / hz
+        out[name] = {"busy": busy / capacity_s, "own": (o1 - o0) / capacity_s,
+                     "other": max(0.0, (busy - (o1 - o0)) / capacity_s)}
+    return out
+
+
 def gbench(doc, prefix):
     for b in doc["benchmarks"]:
         if b["name"].startswith(prefix) and b.get("run_type", "iteration") == "iteration":
@@ -197,6 +223,7 @@ def build(a):
         "plant_step": perf["plant_step"],
         "rtf": perf["rtf"],
         "allocation_test": a.allocation_test,
+        "machine_use": machine_use(os.path.join(d, "cpu_marks.txt")),
         "latency": {
             "seconds": a.seconds, "priority": a.priority, "interval_us": a.interval_us,
             "order": "sequential: cpmd first, then cyclictest, same priority, period and memory locking",
@@ -330,6 +357,10 @@ def render(r, rows):
     w[0] = max(w[0], len("group"))
     head = ("group", "figure", "measured", "reference / budget", "verdict")
     fmt = lambda x: " | ".join(s.ljust(w[i]) for i, s in enumerate(x)).rstrip()  # noqa: E731
+    use = r["machine_use"]
+    lines.append("other processes' share of all cores while measuring: " + ", ".join(
+        f"{k.replace('_', ' ')} {100 * v['other']:.0f} %" for k, v in use.items()) +
+        ("  (a busy machine: figures are not comparable)" if any(v["other"] > 0.1 for v in use.values()) else ""))
     lines.append(fmt(head))
     lines.append("-+-".join("-" * n for n in w))
     for x in rows:

@@ -64,6 +64,14 @@ command -v cyclictest >/dev/null || { echo "bench/run.sh: cyclictest missing: ba
 out=$(mktemp -d)
 trap 'rm -rf "$out"' EXIT
 mkdir -p "$(dirname "$json")"
+# CPU accounting at each step's boundary: the machine's counters (/proc/stat)
+# and this script's children (times), so that the report can say how much of
+# the machine other processes took while each figure was measured.
+mark() {
+  times >"$out/times.txt"   # in this shell: a $(times) subshell would see no children
+  echo "$1|$(head -1 /proc/stat)|$(tail -1 "$out/times.txt")" >>"$out/cpu_marks.txt"
+}
+mark start
 
 say "1/5 control cycle, plant, real-time factors, bus, Kim's ball-bar in C++ ($cycles cycles)"
 "$B/bin/cpm_perf" --source "$root" --cycles $cycles --repeat $repeat --kim-problem "$out/kim_problem.json" \
@@ -87,9 +95,11 @@ rate=$(sed -n 's/^ *rate_hz: *\([0-9.]*\).*/\1/p' config/sim.yaml | head -1)
 interval_us=$("$PY" -c "print(round(1e6 / $rate))")
 if chrt -f "$prio" true 2>/dev/null; then rt=1; ct_sched=(-p "$prio"); else rt=0; ct_sched=(--policy=other -p 0); fi
 
+mark compute
 say "5/5 wake-up latency: cpmd for ${seconds} s, then cyclictest for ${seconds} s (priority $prio, $interval_us us)"
 bash daemon/latency-run.sh "$B" "$seconds" "$out/cpmd_stats.json" >"$out/cpmd_run.log" 2>&1 ||
   { cat "$out/cpmd_run.log" >&2; echo "bench/run.sh: the cpmd latency run failed" >&2; exit 1; }
+mark cpmd_run
 # --default-system: cyclictest leaves power management as it is (it would
 # otherwise hold /dev/cpu_dma_latency at 0, which cpmd does not): both runs
 # see the same C-states. -m: memory locked, as cpmd's lock_memory.
@@ -97,6 +107,7 @@ bash daemon/latency-run.sh "$B" "$seconds" "$out/cpmd_stats.json" >"$out/cpmd_ru
 cyclictest -q -m -t 1 "${ct_sched[@]}" -i "$interval_us" -D "$seconds" -h 2000 --default-system \
   --histfile="$out/cyclictest.hist" --json="$out/cyclictest.json" >"$out/cyclictest.log" 2>&1 ||
   { cat "$out/cyclictest.log" >&2; echo "bench/run.sh: cyclictest failed" >&2; exit 1; }
+mark cyclictest_run
 
 "$PY" bench/report.py --dir "$out" --json "$json" --quick $quick --seconds "$seconds" --priority "$prio" \
   --interval-us "$interval_us" --realtime-allowed $rt --allocation-test $alloc
