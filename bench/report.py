@@ -43,7 +43,7 @@ def bin_ceiling_us(floor, max_us):
 def percentiles(hist, max_us, late=0, period_us=None, qs=(0.5, 0.99, 0.999)):
     """Nearest-rank percentiles over the slots of a run: `hist` {bin floor µs: count}
     in the daemon's bins, plus `late` slots known only to be late by a period or
-    more (cpmd's skipped slots). Each is (value, bound): the upper edge of its bin
+    more (the slots skipped after a stall). Each is (value, bound): the upper edge of its bin
     with '<=' (never above the measured maximum), or, among the slots late by a
     period or more, whose order the histogram cannot give, the period with '>='."""
     total = sum(hist.values()) + late
@@ -94,9 +94,11 @@ def cpmd_latency(stats, period_us):
     return f
 
 
-def cyclictest_latency(doc, realtime, period_us):
-    """cyclictest's 1 µs histogram in the daemon's bins. cyclictest does not skip:
-    after a stall it wakes at once for each missed slot, each a sample a period or more late."""
+def cyclictest_latency(doc, realtime, period_us, seconds):
+    """cyclictest's 1 µs histogram in the daemon's bins. After a stall cyclictest,
+    like cpmd, takes one sample (the whole lateness) and moves on to the first
+    slot still ahead: the slots it skipped are the run's slots it has no sample
+    for (seconds / period - cycles; its start-up may shift this by a slot or two)."""
     t = doc["thread"]["0"]
     hist = {}
     counted = 0
@@ -107,8 +109,10 @@ def cyclictest_latency(doc, realtime, period_us):
     overflow = t["cycles"] - counted          # above the -h range (2 ms)
     if overflow > 0:
         hist[TOP_US] = hist.get(TOP_US, 0) + overflow
-    f = latency_figures(hist, 0, period_us, float(t["max"]), float(t["min"]), float(t["avg"]), t["cycles"])
-    f.update({"realtime": realtime, "memory_locked": True, "version": doc.get("rt_test_version:", "")})
+    skipped = max(0, round(seconds * 1e6 / period_us) - t["cycles"])
+    f = latency_figures(hist, skipped, period_us, float(t["max"]), float(t["min"]), float(t["avg"]), t["cycles"])
+    f.update({"realtime": realtime, "memory_locked": True, "skipped": skipped,
+              "version": doc.get("rt_test_version:", "")})
     return f
 
 
@@ -192,7 +196,7 @@ def build(a):
     load = lambda name: json.load(open(os.path.join(d, name)))  # noqa: E731
     perf, sp, gb = load("perf.json"), load("scipy.json"), load("gbench.json")
     cpmd = cpmd_latency(load("cpmd_stats.json"), a.interval_us)
-    ct = cyclictest_latency(load("cyclictest.json"), bool(a.realtime_allowed), a.interval_us)
+    ct = cyclictest_latency(load("cyclictest.json"), bool(a.realtime_allowed), a.interval_us, a.seconds)
 
     def ratio_of(k):
         """cpmd / cyclictest and what kind of figure it is: '=' (maxima), '<=' or '>='
@@ -295,14 +299,14 @@ def table(r):
         f"cpmd: {sched(c)}, {c['cycles']} cycles", f"cyclictest: {sched(t)}, {t['cycles']} cycles")
     for k, name in (("p50", "p50"), ("p99", "p99"), ("p999", "p99.9"), ("max", "max")):
         verdict = ok(B["wakeup_p99_ratio"]) if k == "p99" else ""
-        fig = lambda x: (x["bounds"].get(k, "") + " " if k in x["bounds"] else "") + f"{x[k + '_us']:.4g} us"  # noqa: E731
+        fig = lambda x: (x["bounds"].get(k, "") + " " if k in x["bounds"] else "") + f"{x[k + '_us']:.0f} us"  # noqa: E731
         qb = L["ratio_bound"][k]
         ratio = (f"ratio {'' if qb in ('~', '=') else qb + ' '}{q[k]:.2f}" if q[k] is not None
                  else "no ratio (both >= a period)")
         row("wake-up latency", name + (" over slots" if k != "max" else ""), "cpmd " + fig(c),
             "cyclictest " + fig(t) + ("; budget ratio <= 1.2" if k == "p99" else ""), f"{ratio} {verdict}".strip())
     row("wake-up latency", "slots late by a period or more", f"cpmd {c['late_slots']} ({c['skipped']} skipped)",
-        f"cyclictest {t['late_slots']}")
+        f"cyclictest {t['late_slots']} ({t['skipped']} skipped)")
     row("wake-up latency", "mean / min (us)", f"cpmd {c['mean_us']:.1f} / {c['min_us']:.1f}",
         f"cyclictest {t['mean_us']:.1f} / {t['min_us']:.1f}")
     row("wake-up latency", "period jitter bound (max - min)", f"cpmd {c['period_jitter_bound_us']:.1f} us",
@@ -372,7 +376,7 @@ def render(r, rows):
 def markdown(r):
     esc = lambda x: x.replace("|", "\\|")  # noqa: E731
     lines = ["| group | figure | measured | reference / budget | verdict |", "|---|---|---|---|---|"]
-    lines += ["| " + " | ".join(esc(c) for c in row) + " |" for row in r["table"]]
+    lines += ["| " + " | ".join(esc(c) for c in row) + " |" for row in table(r)]
     return "\n".join(lines)
 
 

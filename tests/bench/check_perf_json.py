@@ -57,7 +57,7 @@ def main():
             check(r[section], spec, section, errors)
     lat = r.get("latency", {})
     for who in ("cpmd", "cyclictest"):
-        check(lat.get(who, {}), LATENCY, f"latency.{who}", errors)
+        check(lat.get(who, {}), dict(LATENCY, skipped=int), f"latency.{who}", errors)
     check(lat.get("ratio", {}), {k: NUM_OR_NULL for k in ("p50", "p99", "p999", "max")}, "latency.ratio", errors)
     for m in ("shipped", "alternative"):
         check(r.get("bus", {}).get(m, {}), BUS, f"bus.{m}", errors)
