@@ -4,25 +4,13 @@
 
 #include "cpm/control/controller.hpp"
 #include "cpm/sim/plant.hpp"
+#include "bench_models.hpp"
 
 namespace {
 
 using namespace cpm;
 
-// A calibrated model with dynamic effects: the work a real cycle does.
-ctl::MachineModel calibrated_model_with_effects() {
-  ctl::MachineModel m = ctl::MachineModel::elkady();
-  m.kinematics.planes[0].normal = Vec3(1.0, 2e-3, -1e-3).normalized();
-  m.kinematics.planes[1].normal = Vec3(-2e-3, 1.0, 1e-3).normalized();
-  m.kinematics.planes[2].normal = Vec3(1e-3, 1e-3, 1.0).normalized();
-  for (int i = 0; i < 3; ++i) {
-    m.kinematics.planes[i].scale = 1.0 + 1e-4 * (i + 1);
-    m.kinematics.planes[i].offset = 1e-4 * (i - 1);
-    ctl::add_effect(m, "viscous_friction", i, {8.0});
-    ctl::add_effect(m, "coulomb_friction", i, {3.0});
-  }
-  return m;
-}
+using bench::calibrated_model_with_effects;
 
 void control_step(benchmark::State& state, ctl::ControlLaw law, bool calibrated) {
   const ctl::Machine model(calibrated ? calibrated_model_with_effects() : ctl::MachineModel::elkady());

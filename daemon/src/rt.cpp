@@ -106,8 +106,10 @@ void RtThread::run(std::int64_t max_cycles) {
       const std::int64_t now_slot = (woke - t0) / period;
       loop_.record_schedule(true, now_slot - k);
       k = now_slot;
-      const std::int64_t late = woke - (t0 + k * period);
-      loop_.cycle(k, late);
+      // The statistics keep how late the thread woke after the time it asked
+      // for (loop_stats_t, as cyclictest measures it), not its offset into
+      // the slot it skipped to: a stall of several periods shows as one.
+      loop_.cycle(k, woke - deadline);
     } else {
       loop_.cycle(k, woke - deadline);
     }

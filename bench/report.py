@@ -1,0 +1,411 @@
+#!/usr/bin/python3
+"""The table and JSON of bench/run.sh, from the raw outputs of one run.
+
+    report.py --dir RAW --json OUT --quick 0|1 --seconds S --priority P --interval-us I
+              --realtime-allowed 0|1 --allocation-test passed|failed
+    report.py --markdown OUT.json      the table of a finished run in Markdown (docs/performance.md)
+
+RAW holds perf.json (cpm_perf), scipy.json (scipy_ballbar.py), gbench.json
+(cpm_bench), cpmd_stats.json (cpmd --stats-json) and cyclictest.json.
+Standard library only. Units: ns and µs for times of the cycle, s for tools,
+bit and Hz for the bus; shares are of the loop period.
+"""
+import argparse
+import datetime
+import json
+import math
+import os
+import platform
+import subprocess
+
+# The daemon's histogram (daemon/src/loop.cpp, msgs/lcm/loop_stats_t.lcm):
+# 1 µs bins below 200 µs, 50 µs bins to 2 ms, one bin for everything above.
+FINE_LIMIT_US, COARSE_WIDTH_US, TOP_US = 200, 50, 2000
+
+
+def bin_floor_us(us):
+    """Lower edge (µs) of the daemon's bin holding a latency of `us` (integer µs)."""
+    if us < FINE_LIMIT_US:
+        return us
+    if us < TOP_US:
+        return FINE_LIMIT_US + COARSE_WIDTH_US * ((us - FINE_LIMIT_US) // COARSE_WIDTH_US)
+    return TOP_US
+
+
+def bin_ceiling_us(floor, max_us):
+    if floor < FINE_LIMIT_US:
+        return floor + 1
+    if floor < TOP_US:
+        return floor + COARSE_WIDTH_US
+    return max_us
+
+
+def percentiles(hist, max_us, late=0, period_us=None, qs=(0.5, 0.99, 0.999)):
+    """Nearest-rank percentiles over the slots of a run: `hist` {bin floor µs: count}
+    in the daemon's bins, plus `late` slots known only to be late by a period or
+    more (the slots skipped after a stall). Each is (value, bound): the upper edge of its bin
+    with '<=' (never above the measured maximum), or, among the slots late by a
+    period or more, whose order the histogram cannot give, the period with '>='."""
+    total = sum(hist.values()) + late
+    out = {}
+    for q in qs:
+        rank = max(1, math.ceil(q * total))
+        seen = 0
+        out[q] = (period_us, ">=")
+        for floor in sorted(hist):
+            if period_us is not None and floor >= period_us:
+                break
+            seen += hist[floor]
+            if seen >= rank:
+                out[q] = (min(bin_ceiling_us(floor, max_us), max_us), "<=")
+                break
+    return out
+
+
+def latency_figures(hist, late, period_us, max_us, min_us, mean_us, cycles):
+    p = percentiles(hist, max_us, late, period_us)
+    late_slots = late + sum(n for floor, n in hist.items() if floor >= period_us)
+    return {"cycles": cycles, "min_us": min_us, "mean_us": mean_us, "p50_us": p[0.5][0], "p99_us": p[0.99][0],
+            "p999_us": p[0.999][0], "max_us": max_us,
+            "bounds": {"p50": p[0.5][1], "p99": p[0.99][1], "p999": p[0.999][1]},
+            # Slots in which the loop did not run on time: woke a whole period late, or skipped.
+            "late_slots": late_slots,
+            # A period is the difference of two wake-ups: its error is bounded by the spread of the latency.
+            "period_jitter_bound_us": max_us - min_us}
+
+
+def cpmd_latency(stats, period_us):
+    s = stats["series"]["wakeup_latency"]
+    hist = {}
+    for k, n in s["histogram_us"].items():
+        hist[int(k)] = hist.get(int(k), 0) + n
+    f = latency_figures(hist, stats["skipped"], period_us, s["max_ns"] / 1000.0, s["min_ns"] / 1000.0,
+                        s["mean_ns"] / 1000.0, s["count"])
+    f.update({"realtime": stats["realtime"], "memory_locked": stats["memory_locked"], "overruns": stats["overruns"],
+              "skipped": stats["skipped"]})
+    phases = {}
+    for name, series in stats["series"].items():
+        if name == "wakeup_latency" or not series["count"]:
+            continue
+        h = {int(k): n for k, n in series["histogram_us"].items()}
+        phases[name] = {"mean_ns": series["mean_ns"], "p99_us": percentiles(h, series["max_ns"] / 1000.0)[0.99][0],
+                        "max_us": series["max_ns"] / 1000.0}
+    f["phases"] = phases
+    return f
+
+
+def cyclictest_latency(doc, realtime, period_us, seconds):
+    """cyclictest's 1 µs histogram in the daemon's bins. After a stall cyclictest,
+    like cpmd, takes one sample (the whole lateness) and moves on to the first
+    slot still ahead: the slots it skipped are the run's slots it has no sample
+    for (seconds / period - cycles; its start-up may shift this by a slot or two)."""
+    t = doc["thread"]["0"]
+    hist = {}
+    counted = 0
+    for k, n in t["histogram"].items():
+        b = bin_floor_us(int(k))
+        hist[b] = hist.get(b, 0) + n
+        counted += n
+    overflow = t["cycles"] - counted          # above the -h range (2 ms)
+    if overflow > 0:
+        hist[TOP_US] = hist.get(TOP_US, 0) + overflow
+    skipped = max(0, round(seconds * 1e6 / period_us) - t["cycles"])
+    f = latency_figures(hist, skipped, period_us, float(t["max"]), float(t["min"]), float(t["avg"]), t["cycles"])
+    f.update({"realtime": realtime, "memory_locked": True, "skipped": skipped,
+              "version": doc.get("rt_test_version:", "")})
+    return f
+
+
+def seconds_of(bash_time):
+    """'1m2.500s' (bash's `times`) in seconds."""
+    m, rest = bash_time.split("m")
+    return 60 * float(m) + float(rest.rstrip("s"))
+
+
+def machine_use(path):
+    """Per step of the run: the share of all cores busy (every process) and the
+    share this run's own processes took; the difference is the background."""
+    marks = []
+    with open(path) as f:
+        for line in f:
+            name, stat, times = line.rstrip("\n").split("|")
+            v = [int(x) for x in stat.split()[1:]]
+            user, system = (seconds_of(x) for x in times.split())
+            marks.append((name, sum(v), v[3] + v[4], user + system))   # total, idle + iowait (jiffies), own (s)
+    hz = os.sysconf("SC_CLK_TCK")
+    out = {}
+    for (_, t0, i0, o0), (name, t1, i1, o1) in zip(marks, marks[1:]):
+        capacity_s = (t1 - t0) / hz                  # CPU seconds of all cores in the step
+        busy = ((t1 - t0) - (i1 - i0)) / hz
+        out[name] = {"busy": busy / capacity_s, "own": (o1 - o0) / capacity_s,
+                     "other": max(0.0, (busy - (o1 - o0)) / capacity_s)}
+    return out
+
+
+def gbench(doc, prefix):
+    for b in doc["benchmarks"]:
+        if b["name"].startswith(prefix) and b.get("run_type", "iteration") == "iteration":
+            scale = {"ns": 1e-9, "us": 1e-6, "ms": 1e-3, "s": 1.0}[b["time_unit"]]
+            return {"name": b["name"], "seconds": b["real_time"] * scale, "iterations": b["iterations"],
+                    "samples": int(b.get("samples", 0))}
+    raise SystemExit(f"report.py: no benchmark {prefix} in the Google Benchmark output")
+
+
+def machine(realtime_allowed):
+    model = "unknown"
+    flags = ""
+    with open("/proc/cpuinfo") as f:
+        for line in f:
+            if line.startswith("model name") and model == "unknown":
+                model = line.split(":", 1)[1].strip()
+            if line.startswith("flags") and not flags:
+                flags = line
+    virt = ""
+    try:
+        virt = subprocess.run(["systemd-detect-virt"], capture_output=True, text=True).stdout.strip()
+    except OSError:
+        pass
+    if not virt:
+        virt = "hypervisor flag set" if " hypervisor" in flags else "none detected"
+    u = platform.uname()
+    return {"cpu_model": model, "cores": os.cpu_count(), "kernel": u.release, "kernel_build": u.version,
+            "preempt_rt": "PREEMPT_RT" in u.version, "virtualization": virt,
+            "realtime_allowed": bool(realtime_allowed),
+            "date": datetime.date.today().isoformat()}
+
+
+def budgets(r):
+    cc, lat, rtf = r["control_cycle"], r["latency"], r["rtf"]
+    b = [
+        {"id": "control_cycle_median", "text": "control cycle compute, median", "measured": cc["median_ns"],
+         "limit": 2000, "unit": "ns", "rule": "<", "pass": cc["median_ns"] < 2000},
+        {"id": "allocations_per_cycle", "text": "heap allocations per cycle", "measured": cc["allocations"],
+         "limit": 0, "unit": "", "rule": "=",
+         "pass": cc["allocations"] == 0 and r["allocation_test"] == "passed"},
+        {"id": "wakeup_p99_ratio", "text": "cpmd wake-up latency p99 / cyclictest p99",
+         "measured": lat["ratio"]["p99"], "limit": 1.2, "unit": "x", "rule": "<=",
+         "pass": lat["ratio"]["p99"] is not None and lat["ratio"]["p99"] <= 1.2 and lat["ratio_bound"]["p99"] != ">="},
+        {"id": "plant_rtf", "text": "simulator real-time factor, plant alone", "measured": rtf["plant"],
+         "limit": 100, "unit": "x", "rule": ">", "pass": rtf["plant"] > 100},
+    ]
+    return b
+
+
+def build(a):
+    d = a.dir
+    load = lambda name: json.load(open(os.path.join(d, name)))  # noqa: E731
+    perf, sp, gb = load("perf.json"), load("scipy.json"), load("gbench.json")
+    cpmd = cpmd_latency(load("cpmd_stats.json"), a.interval_us)
+    ct = cyclictest_latency(load("cyclictest.json"), bool(a.realtime_allowed), a.interval_us, a.seconds)
+
+    def ratio_of(k):
+        """cpmd / cyclictest and what kind of figure it is: '=' (maxima), '<=' or '>='
+        where one side is a bound; None where both are '>= one period'."""
+        bc, bt = cpmd["bounds"].get(k, "="), ct["bounds"].get(k, "=")
+        if not ct[k + "_us"] or (bc == ">=" and bt == ">="):
+            return None, None
+        value = cpmd[k + "_us"] / ct[k + "_us"]
+        if bc == ">=":
+            return value, ">="   # cpmd at least a period: the ratio is at least this
+        if bt == ">=":
+            return value, "<="   # cyclictest at least a period: the ratio is at most this
+        return value, "~"         # two bin edges of the same bins
+
+    ratios = {k: ratio_of(k) for k in ("p50", "p99", "p999", "max")}
+    ratio = {k: v for k, (v, _) in ratios.items()}
+    ratio_bound = {k: b for k, (_, b) in ratios.items()}
+    kim = perf["kim"]
+    lm, trf = sp["methods"]["lm"], sp["methods"]["trf"]
+    cpp_solve_s = kim["solve"]["median_ns"] * 1e-9
+    r = {
+        "schema": 1,
+        "quick": bool(a.quick),
+        "machine": machine(a.realtime_allowed),
+        "driver": perf["driver"],
+        "control_cycle": perf["control_cycle"],
+        "controller_step": perf["controller_step"],
+        "plant_step": perf["plant_step"],
+        "rtf": perf["rtf"],
+        "allocation_test": a.allocation_test,
+        "machine_use": machine_use(os.path.join(d, "cpu_marks.txt")),
+        "latency": {
+            "seconds": a.seconds, "priority": a.priority, "interval_us": a.interval_us,
+            "order": "sequential: cpmd first, then cyclictest, same priority, period and memory locking",
+            "histogram": "1 us bins below 200 us, 50 us bins to 2 ms, one bin above; percentiles over slots, "
+                         "as bin upper edges (<=), or >= one period among the slots a period or more late",
+            "cpmd": cpmd, "cyclictest": ct, "ratio": ratio, "ratio_bound": ratio_bound},
+        "bus": perf["bus"],
+        "calibration": {
+            "problem": "Kim's 32-point ball-bar, 9 unknowns, analytic Jacobian, the same tolerances",
+            "poses": kim["poses"], "repeat": kim["repeat"],
+            "cpp_solve_s": cpp_solve_s, "cpp_solve_iterations": kim["solve"]["iterations"],
+            "cpp_fit_s": kim["fit"]["median_ns"] * 1e-9,
+            "scipy_lm_s": lm["median_s"], "scipy_lm_nfev": lm["nfev"],
+            "scipy_trf_s": trf["median_s"], "scipy_trf_nfev": trf["nfev"],
+            "ratio_scipy_lm_to_cpp": lm["median_s"] / cpp_solve_s,
+            "ratio_scipy_trf_to_cpp": trf["median_s"] / cpp_solve_s,
+            "solution_max_diff_sigma": max(lm["max_abs_diff_sigma"], trf["max_abs_diff_sigma"]),
+            "cost_cpp_m2": kim["solve"]["cost"], "cost_scipy_lm_m2": lm["cost"],
+            "residual_check_max_m": sp["residual_check_max_m"],
+            "scipy_import_s": sp["import_s"], "scipy_version": sp["scipy_version"]},
+        "diagnose": {
+            "motion_1khz": gbench(gb, "BM_DiagnoseMotion1kHz"),
+            "ballbar_32_file": gbench(gb, "BM_DiagnoseBallbar32File"),
+            "ballbar_192": gbench(gb, "BM_DiagnoseBallbar192")},
+    }
+    r["budgets"] = budgets(r)
+    return r
+
+
+def table(r):
+    rows = []
+
+    def row(group, what, value, ref="", verdict=""):
+        rows.append((group, what, value, ref, verdict))
+
+    def ok(b):
+        return "PASS" if b["pass"] else "FAIL"
+
+    B = {b["id"]: b for b in r["budgets"]}
+    cc, cs, ps = r["control_cycle"], r["controller_step"], r["plant_step"]
+    per = cc["period_s"] * 1e3
+    row("control cycle", "compute median (cpmd's cycle, I/O replayed)",
+        f"{cc['median_ns']} ns = {100 * cc['median_share']:.3f} % of {per:g} ms", "< 2000 ns",
+        ok(B["control_cycle_median"]))
+    row("control cycle", "compute p99 / p99.9 / max",
+        f"{cc['p99_ns']} / {cc['p999_ns']} / {cc['max_ns']} ns ({100 * cc['p99_share']:.3f} % at p99)")
+    row("control cycle", "heap allocations",
+        f"{cc['allocations']} in {cc['samples']} cycles; NoAllocation test {r['allocation_test']}", "0",
+        ok(B["allocations_per_cycle"]))
+    ph = cc["phase_mean_ns"]
+    row("control cycle", "phases, mean ns",
+        ", ".join(f"{k.replace('inverse_kinematics', 'IK')} {ph[k]:.0f}" for k in
+                  ("estimate", "trajectory", "inverse_kinematics", "controller", "safety", "publish")))
+    row("control cycle", "controller step alone median / p99", f"{cs['median_ns']} / {cs['p99_ns']} ns")
+    row("control cycle", "timer overhead in each figure", f"{r['driver']['timer_overhead_ns']} ns")
+    row("simulator", "plant step median / p99",
+        f"{ps['median_ns']} / {ps['p99_ns']} ns = {100 * ps['median_share']:.2f} % of {per:g} ms")
+    rtf = r["rtf"]
+    row("simulator", "real-time factor, plant alone", f"{rtf['plant']:.1f}", "> 100", ok(B["plant_rtf"]))
+    row("simulator", f"plant RTF at 1 / 2 / 4 / {ps['substeps']} RK4 sub-steps (shipped: {ps['substeps']})",
+        " / ".join(f"{x['rtf']:.0f}" for x in ps["substeps_sweep"]),
+        "one-period error vs 40 sub-steps: " + " / ".join(f"{x['max_step_error_m']:.1e}" for x in ps["substeps_sweep"]) + " m")
+    row("simulator", "real-time factor, closed loop (sim)", f"{rtf['closed_loop']:.1f}")
+    row("simulator", "real-time factor, cpmd loop on its sim backend", f"{rtf['daemon_loop_sim']:.1f}")
+    L = r["latency"]
+    c, t, q = L["cpmd"], L["cyclictest"], L["ratio"]
+    sched = lambda x: "SCHED_FIFO " + str(L["priority"]) if x["realtime"] else "normal scheduling"  # noqa: E731
+    row("wake-up latency", f"{L['seconds']:g} s at {L['interval_us']} us each, one after the other",
+        f"cpmd: {sched(c)}, {c['cycles']} cycles", f"cyclictest: {sched(t)}, {t['cycles']} cycles")
+    for k, name in (("p50", "p50"), ("p99", "p99"), ("p999", "p99.9"), ("max", "max")):
+        verdict = ok(B["wakeup_p99_ratio"]) if k == "p99" else ""
+        fig = lambda x: (x["bounds"].get(k, "") + " " if k in x["bounds"] else "") + f"{x[k + '_us']:.0f} us"  # noqa: E731
+        qb = L["ratio_bound"][k]
+        ratio = (f"ratio {'' if qb in ('~', '=') else qb + ' '}{q[k]:.2f}" if q[k] is not None
+                 else "no ratio (both >= a period)")
+        row("wake-up latency", name + (" over slots" if k != "max" else ""), "cpmd " + fig(c),
+            "cyclictest " + fig(t) + ("; budget ratio <= 1.2" if k == "p99" else ""), f"{ratio} {verdict}".strip())
+    row("wake-up latency", "slots late by a period or more", f"cpmd {c['late_slots']} ({c['skipped']} skipped)",
+        f"cyclictest {t['late_slots']} ({t['skipped']} skipped)")
+    row("wake-up latency", "mean / min (us)", f"cpmd {c['mean_us']:.1f} / {c['min_us']:.1f}",
+        f"cyclictest {t['mean_us']:.1f} / {t['min_us']:.1f}")
+    row("wake-up latency", "period jitter bound (max - min)", f"cpmd {c['period_jitter_bound_us']:.1f} us",
+        f"cyclictest {t['period_jitter_bound_us']:.1f} us")
+    row("wake-up latency", "cpmd overruns / skipped slots", f"{c['overruns']} / {c['skipped']}")
+    cyc = c["phases"].get("cycle", {})
+    if cyc:
+        row("wake-up latency", "cpmd whole cycle in the run: mean / p99 / max",
+            f"{cyc['mean_ns'] / 1000:.1f} / {cyc['p99_us']:g} / {cyc['max_us']:.1f} us")
+    bus = r["bus"]
+    s, alt, fb = bus["shipped"], bus["alternative"], bus["fake_bus"]
+    row("CAN bus", f"{bus['drives']} drives, {bus['bitrate'] / 1e6:g} Mbit/s, {bus['rate_hz']:g} Hz: frames per cycle",
+        f"{s['frames_per_cycle']} (SYNC + RPDO1 + TPDO1 per drive)")
+    row("CAN bus", "bits per cycle, worst-case stuffing / no stuffing",
+        f"{s['bits_per_cycle']} / {bus['best_case_bits_per_cycle']} bit + {s['periodic_bits_per_cycle']:.1f} heartbeats",
+        f"budget {s['bits_available']:.0f} bit per cycle")
+    row("CAN bus", "load (average / worst cycle with a blocking frame)",
+        f"{100 * s['load']:.1f} % / {100 * s['worst_cycle_load']:.1f} %", f"refused above {100 * bus['max_bus_load']:.0f} %")
+    row("CAN bus", "highest loop rate (<= 80 % and no cycle over)", f"{s['max_rate_hz']:.0f} Hz",
+        f"at 100 % load: {bus['rate_at_full_load_hz']:.0f} Hz")
+    row("CAN bus", "with the velocity TPDO2 as well", f"{alt['frames_per_cycle']} frames, {100 * alt['load']:.1f} %",
+        f"highest rate {alt['max_rate_hz']:.0f} Hz")
+    row("CAN bus", "counted on the fake bus (master + 3 virtual drives)",
+        f"{fb['frames_per_cycle']:.2f} frames, {fb['bits_per_cycle']:.1f} bit per cycle = {100 * fb['load']:.1f} %")
+    cal = r["calibration"]
+    row("calibration", f"Kim's {cal['poses']}-point ball-bar: C++ LM solve, median",
+        f"{cal['cpp_solve_s'] * 1e6:.1f} us ({cal['cpp_solve_iterations']} iterations)",
+        f"SciPy lm {cal['scipy_lm_s'] * 1e6:.1f} us ({cal['scipy_lm_nfev']} evaluations)",
+        f"SciPy/C++ {cal['ratio_scipy_lm_to_cpp']:.1f}x")
+    row("calibration", "SciPy trf on the same problem", f"{cal['scipy_trf_s'] * 1e6:.1f} us",
+        f"SciPy {cal['scipy_version']}", f"SciPy/C++ {cal['ratio_scipy_trf_to_cpp']:.1f}x")
+    row("calibration", "C++ whole fit (solve + identifiability + frame)", f"{cal['cpp_fit_s'] * 1e6:.1f} us")
+    row("calibration", "solutions: max |C++ - SciPy| / std. error", f"{cal['solution_max_diff_sigma']:.2g}",
+        f"cost C++ {cal['cost_cpp_m2']:.6g}, SciPy {cal['cost_scipy_lm_m2']:.6g} m^2")
+    dg = r["diagnose"]
+    m = dg["motion_1khz"]
+    row("diagnose", f"motion log {m['samples'] / 1000:g} s at 1 kHz, whole dynamic library", f"{m['seconds']:.3f} s")
+    row("diagnose", "ball-bar file, 32 points (Kim's poses), whole kinematic library",
+        f"{dg['ballbar_32_file']['seconds'] * 1e3:.1f} ms")
+    row("diagnose", "ball-bar, 192 points, whole kinematic library", f"{dg['ballbar_192']['seconds'] * 1e3:.1f} ms")
+    return rows
+
+
+def render(r, rows):
+    mc = r["machine"]
+    lines = []
+    if r["quick"]:
+        lines.append("QUICK RUN: small samples and short runs; these are not the figures of docs/performance.md")
+    lines.append(f"{mc['cpu_model']}, {mc['cores']} cores, Linux {mc['kernel']} ({'PREEMPT_RT' if mc['preempt_rt'] else 'not PREEMPT_RT'}), "
+                 f"virtualization: {mc['virtualization']}, SCHED_FIFO {'allowed' if mc['realtime_allowed'] else 'refused'}, {mc['date']}")
+    w = [max(len(x[i]) for x in rows) for i in range(5)]
+    w[0] = max(w[0], len("group"))
+    head = ("group", "figure", "measured", "reference / budget", "verdict")
+    fmt = lambda x: " | ".join(s.ljust(w[i]) for i, s in enumerate(x)).rstrip()  # noqa: E731
+    use = r["machine_use"]
+    lines.append("other processes' share of all cores while measuring: " + ", ".join(
+        f"{k.replace('_', ' ')} {100 * v['other']:.0f} %" for k, v in use.items()) +
+        ("  (a busy machine: figures are not comparable)" if any(v["other"] > 0.1 for v in use.values()) else ""))
+    lines.append(fmt(head))
+    lines.append("-+-".join("-" * n for n in w))
+    for x in rows:
+        lines.append(fmt(x))
+    lines.append("budgets: " + ", ".join(f"{b['text']} {'PASS' if b['pass'] else 'FAIL'}" for b in r["budgets"]))
+    return "\n".join(lines)
+
+
+def markdown(r):
+    esc = lambda x: x.replace("|", "\\|")  # noqa: E731
+    lines = ["| group | figure | measured | reference / budget | verdict |", "|---|---|---|---|---|"]
+    lines += ["| " + " | ".join(esc(c) for c in row) + " |" for row in table(r)]
+    return "\n".join(lines)
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--markdown", metavar="JSON")
+    ap.add_argument("--dir")
+    ap.add_argument("--json")
+    ap.add_argument("--quick", type=int, default=0)
+    ap.add_argument("--seconds", type=float)
+    ap.add_argument("--priority", type=int)
+    ap.add_argument("--interval-us", type=int)
+    ap.add_argument("--realtime-allowed", type=int)
+    ap.add_argument("--allocation-test")
+    a = ap.parse_args()
+    if a.markdown:
+        print(markdown(json.load(open(a.markdown))))
+        return
+    if None in (a.dir, a.json, a.seconds, a.priority, a.interval_us, a.realtime_allowed, a.allocation_test):
+        ap.error("--dir, --json, --seconds, --priority, --interval-us, --realtime-allowed and --allocation-test")
+    r = build(a)
+    rows = table(r)
+    r["table"] = [list(x) for x in rows]
+    text = render(r, rows)
+    print(text)
+    with open(a.json, "w") as f:
+        json.dump(r, f, indent=1)
+        f.write("\n")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,114 @@
+#!/usr/bin/env bash
+# The performance figures of docs/performance.md, measured side by side with
+# their references in one run, printed as a table and written as JSON.
+#
+#   bash bench/run.sh [--quick] [--json FILE] [--seconds S] [--build-dir DIR] [--no-build]
+#
+#   --quick        seconds, not minutes: small samples, 2 s latency runs, the
+#                  5 s motion log (the smoke test; its figures are not the
+#                  real ones)
+#   --json FILE    where to write the JSON (default build/bench/perf.json)
+#   --seconds S    length of each latency run (default 60; 2 with --quick)
+#   --build-dir    the build to use (default build)
+#   --no-build     do not run tools/build.sh first
+#
+# What runs, in this order (nothing in parallel: each figure gets the
+# machine to itself, the two latency runs see the same background):
+#   1. cpm_perf: control cycle, controller and plant steps per call,
+#      real-time factors, CAN bus load, Kim's ball-bar solve (C++), and the
+#      problem exported for SciPy;
+#   2. bench/scipy_ballbar.py with Debian's /usr/bin/python3 and SciPy: the
+#      same problem, the same residual, timed, solutions compared;
+#   3. cpm_bench (Google Benchmark): diagnose on a motion log and on ball-bar files;
+#   4. the zero-allocation test of the daemon's cycle;
+#   5. cpmd on config/sim.yaml for S seconds at its priority, running circles
+#      (daemon/latency-run.sh), THEN cyclictest at the same SCHED_FIFO
+#      priority and period for S seconds, each with memory locked;
+#   6. bench/report.py: the table with the budgets, and the JSON.
+# Exit status: 0 when every figure was measured (a budget that is not met is
+# reported in the table and the JSON, not as a failure of the command).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+root=$PWD
+quick=0 json="" seconds="" build_dir=build do_build=1
+while [ $# -gt 0 ]; do
+  case "$1" in
+    --quick) quick=1 ;;
+    --json) json=$2; shift ;;
+    --seconds) seconds=$2; shift ;;
+    --build-dir) build_dir=$2; shift ;;
+    --no-build) do_build=0 ;;
+    -h|--help) sed -n '2,30p' "$0"; exit 0 ;;
+    *) echo "bench/run.sh: unknown option '$1'" >&2; exit 2 ;;
+  esac
+  shift
+done
+B=$(cd "$build_dir" 2>/dev/null && pwd || echo "$root/$build_dir")
+[ -n "$json" ] || json=$B/bench/perf.json
+case "$json" in /*) ;; *) json=$root/$json ;; esac
+PY=/usr/bin/python3   # Debian's, with python3-scipy (a `python3` earlier on PATH may lack SciPy)
+if [ $quick -eq 1 ]; then cycles=5000 repeat=5 motion_s=5 seconds=${seconds:-2}
+else cycles=100000 repeat=200 motion_s=60 seconds=${seconds:-60}; fi
+
+say() { echo "bench: $*" >&2; }
+if [ $do_build -eq 1 ]; then
+  say "building (tools/build.sh)"
+  bash tools/build.sh >/dev/null
+fi
+for exe in "$B/bin/cpm_perf" "$B/bin/cpm_bench" "$B/bin/cpmd" "$B/bin/cpm" "$B/tests/test_daemon"; do
+  [ -x "$exe" ] || { echo "bench/run.sh: $exe is missing: build first (bash tools/build.sh)" >&2; exit 1; }
+done
+command -v cyclictest >/dev/null || { echo "bench/run.sh: cyclictest missing: bash tools/setup.sh (rt-tests)" >&2; exit 1; }
+"$PY" -c 'import scipy' 2>/dev/null || { echo "bench/run.sh: $PY has no SciPy: bash tools/setup.sh (python3-scipy)" >&2; exit 1; }
+
+out=$(mktemp -d)
+trap 'rm -rf "$out"' EXIT
+mkdir -p "$(dirname "$json")"
+# CPU accounting at each step's boundary: the machine's counters (/proc/stat)
+# and this script's children (times), so that the report can say how much of
+# the machine other processes took while each figure was measured.
+mark() {
+  times >"$out/times.txt"   # in this shell: a $(times) subshell would see no children
+  echo "$1|$(head -1 /proc/stat)|$(tail -1 "$out/times.txt")" >>"$out/cpu_marks.txt"
+}
+mark start
+
+say "1/5 control cycle, plant, real-time factors, bus, Kim's ball-bar in C++ ($cycles cycles)"
+"$B/bin/cpm_perf" --source "$root" --cycles $cycles --repeat $repeat --kim-problem "$out/kim_problem.json" \
+  --json "$out/perf.json"
+
+say "2/5 the same ball-bar problem in SciPy ($repeat solves per method)"
+"$PY" bench/scipy_ballbar.py "$out/kim_problem.json" --repeat $repeat --json "$out/scipy.json"
+
+say "3/5 diagnose (Google Benchmark)"
+"$B/bin/cpm_bench" --benchmark_filter="^BM_DiagnoseMotion1kHz/seconds:$motion_s/|^BM_DiagnoseBallbar" \
+  --benchmark_format=json --benchmark_out="$out/gbench.json" --benchmark_out_format=json >/dev/null
+
+say "4/5 zero heap allocations per cycle (the daemon's test)"
+if "$B/tests/test_daemon" --gtest_filter='NoAllocation.*' >"$out/alloc.log" 2>&1; then alloc=passed; else alloc=failed; fi
+
+# Scheduling: both latency runs ask for the same SCHED_FIFO priority (the
+# loop's, from config/sim.yaml) and period; where SCHED_FIFO is refused both
+# run with normal scheduling, and the table says so.
+prio=$(sed -n 's/^ *priority: *\([0-9]*\).*/\1/p' config/sim.yaml | head -1)
+rate=$(sed -n 's/^ *rate_hz: *\([0-9.]*\).*/\1/p' config/sim.yaml | head -1)
+interval_us=$("$PY" -c "print(round(1e6 / $rate))")
+if chrt -f "$prio" true 2>/dev/null; then rt=1; ct_sched=(-p "$prio"); else rt=0; ct_sched=(--policy=other -p 0); fi
+
+mark compute
+say "5/5 wake-up latency: cpmd for ${seconds} s, then cyclictest for ${seconds} s (priority $prio, $interval_us us)"
+bash daemon/latency-run.sh "$B" "$seconds" "$out/cpmd_stats.json" >"$out/cpmd_run.log" 2>&1 ||
+  { cat "$out/cpmd_run.log" >&2; echo "bench/run.sh: the cpmd latency run failed" >&2; exit 1; }
+mark cpmd_run
+# --default-system: cyclictest leaves power management as it is (it would
+# otherwise hold /dev/cpu_dma_latency at 0, which cpmd does not): both runs
+# see the same C-states. -m: memory locked, as cpmd's lock_memory.
+# -h 2000: 1 us bins to 2 ms, the range of cpmd's histogram.
+cyclictest -q -m -t 1 "${ct_sched[@]}" -i "$interval_us" -D "$seconds" -h 2000 --default-system \
+  --histfile="$out/cyclictest.hist" --json="$out/cyclictest.json" >"$out/cyclictest.log" 2>&1 ||
+  { cat "$out/cyclictest.log" >&2; echo "bench/run.sh: cyclictest failed" >&2; exit 1; }
+mark cyclictest_run
+
+"$PY" bench/report.py --dir "$out" --json "$json" --quick $quick --seconds "$seconds" --priority "$prio" \
+  --interval-us "$interval_us" --realtime-allowed $rt --allocation-test $alloc
+say "JSON: $json"

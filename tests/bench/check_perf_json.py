@@ -1,0 +1,80 @@
+#!/usr/bin/python3
+"""Check that a JSON of bench/run.sh has every field docs/performance.md
+reports, each a finite number (or the stated type). Shape only: no timing."""
+import json
+import math
+import sys
+
+NUM = (int, float)
+NUM_OR_NULL = "number or null"  # a ratio of two '>= one period' bounds has no value
+REQUIRED = {
+    "machine": {"cpu_model": str, "cores": int, "kernel": str, "preempt_rt": bool, "virtualization": str,
+                "realtime_allowed": bool, "date": str},
+    "control_cycle": {"samples": int, "median_ns": NUM, "p99_ns": NUM, "p999_ns": NUM, "max_ns": NUM,
+                      "median_share": NUM, "p99_share": NUM, "allocations": int, "replay_mismatches": int,
+                      "phase_mean_ns": dict},
+    "controller_step": {"median_ns": NUM, "p99_ns": NUM},
+    "plant_step": {"median_ns": NUM, "p99_ns": NUM, "median_share": NUM, "substeps": int, "substeps_sweep": list},
+    "rtf": {"plant": NUM, "closed_loop": NUM, "daemon_loop_sim": NUM},
+    "latency": {"seconds": NUM, "priority": int, "interval_us": int, "cpmd": dict, "cyclictest": dict, "ratio": dict},
+    "bus": {"drives": int, "bitrate": NUM, "rate_hz": NUM, "best_case_bits_per_cycle": int,
+            "rate_at_full_load_hz": NUM, "shipped": dict, "alternative": dict, "fake_bus": dict},
+    "calibration": {"poses": int, "cpp_solve_s": NUM, "cpp_fit_s": NUM, "scipy_lm_s": NUM, "scipy_trf_s": NUM,
+                    "ratio_scipy_lm_to_cpp": NUM, "ratio_scipy_trf_to_cpp": NUM, "solution_max_diff_sigma": NUM,
+                    "residual_check_max_m": NUM},
+    "diagnose": {"motion_1khz": dict, "ballbar_32_file": dict, "ballbar_192": dict},
+}
+LATENCY = {"cycles": int, "min_us": NUM, "mean_us": NUM, "p50_us": NUM, "p99_us": NUM, "p999_us": NUM,
+           "max_us": NUM, "period_jitter_bound_us": NUM, "late_slots": int, "bounds": dict, "realtime": bool}
+BUS = {"frames_per_cycle": int, "bits_per_cycle": int, "load": NUM, "worst_cycle_load": NUM, "max_rate_hz": NUM}
+BUDGETS = {"control_cycle_median", "allocations_per_cycle", "wakeup_p99_ratio", "plant_rtf"}
+
+
+def check(obj, spec, where, errors):
+    for key, kind in spec.items():
+        if key not in obj:
+            errors.append(f"{where}.{key}: missing")
+            continue
+        v = obj[key]
+        if kind is NUM_OR_NULL:
+            ok = v is None or (isinstance(v, NUM) and not isinstance(v, bool) and math.isfinite(v))
+        elif kind is NUM:
+            ok = isinstance(v, NUM) and not isinstance(v, bool) and math.isfinite(v)
+        elif kind is int:
+            ok = isinstance(v, int) and not isinstance(v, bool)
+        else:
+            ok = isinstance(v, kind)
+        if not ok:
+            errors.append(f"{where}.{key}: {v!r} is not {kind if isinstance(kind, str) else getattr(kind, '__name__', 'a number')}")
+
+
+def main():
+    r = json.load(open(sys.argv[1]))
+    errors = []
+    check(r, {k: dict for k in REQUIRED}, "", errors)
+    for section, spec in REQUIRED.items():
+        if isinstance(r.get(section), dict):
+            check(r[section], spec, section, errors)
+    lat = r.get("latency", {})
+    for who in ("cpmd", "cyclictest"):
+        check(lat.get(who, {}), dict(LATENCY, skipped=int), f"latency.{who}", errors)
+    check(lat.get("ratio", {}), {k: NUM_OR_NULL for k in ("p50", "p99", "p999", "max")}, "latency.ratio", errors)
+    for m in ("shipped", "alternative"):
+        check(r.get("bus", {}).get(m, {}), BUS, f"bus.{m}", errors)
+    for d in ("motion_1khz", "ballbar_32_file", "ballbar_192"):
+        check(r.get("diagnose", {}).get(d, {}), {"seconds": NUM, "samples": int}, f"diagnose.{d}", errors)
+    got = {b.get("id") for b in r.get("budgets", [])}
+    if got != BUDGETS:
+        errors.append(f"budgets: {sorted(got)} instead of {sorted(BUDGETS)}")
+    for b in r.get("budgets", []):
+        check(b, {"measured": NUM_OR_NULL, "limit": NUM, "pass": bool}, f"budgets.{b.get('id')}", errors)
+    if not r.get("table"):
+        errors.append("table: missing")
+    if errors:
+        print("\n".join(errors))
+        sys.exit(1)
+    print(f"{sys.argv[1]}: every field present ({len(r['table'])} table rows, {len(got)} budgets)")
+
+
+if __name__ == "__main__":
+    main()
