@@ -185,8 +185,8 @@ def budgets(r):
         {"id": "wakeup_p99_ratio", "text": "cpmd wake-up latency p99 / cyclictest p99",
          "measured": lat["ratio"]["p99"], "limit": 1.2, "unit": "x", "rule": "<=",
          "pass": lat["ratio"]["p99"] is not None and lat["ratio"]["p99"] <= 1.2 and lat["ratio_bound"]["p99"] != ">="},
-        {"id": "plant_rtf", "text": "simulator real-time factor, plant alone", "measured": rtf["plant"],
-         "limit": 100, "unit": "x", "rule": ">", "pass": rtf["plant"] > 100},
+        {"id": "plant_rtf", "text": "simulator real-time factor, plant alone (as shipped)",
+         "measured": rtf["plant_shipped"], "limit": 100, "unit": "x", "rule": ">", "pass": rtf["plant_shipped"] > 100},
     ]
     return b
 
@@ -286,7 +286,10 @@ def table(r):
     row("simulator", "plant step median / p99",
         f"{ps['median_ns']} / {ps['p99_ns']} ns = {100 * ps['median_share']:.2f} % of {per:g} ms")
     rtf = r["rtf"]
-    row("simulator", "real-time factor, plant alone", f"{rtf['plant']:.1f}", "> 100", ok(B["plant_rtf"]))
+    row("simulator", "real-time factor, plant alone, as shipped (config/sim.yaml: its truth model, "
+        f"{ps['substeps']} sub-steps)", f"{rtf['plant_shipped']:.1f}", "> 100", ok(B["plant_rtf"]))
+    row("simulator", "real-time factor, plant alone, the calibrated model with effects above",
+        f"{rtf['plant']:.1f}")
     row("simulator", f"plant RTF at 1 / 2 / 4 / {ps['substeps']} RK4 sub-steps (shipped: {ps['substeps']})",
         " / ".join(f"{x['rtf']:.0f}" for x in ps["substeps_sweep"]),
         "one-period error vs 40 sub-steps: " + " / ".join(f"{x['max_step_error_m']:.1e}" for x in ps["substeps_sweep"]) + " m")

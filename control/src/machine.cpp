@@ -113,7 +113,7 @@ Status Machine::rigid_body(const Vec3& p, const Vec3& p_dot, RigidBodyTerms& out
   out.M.noalias() = 2.0 * c.B * Gam.transpose() * Gam;
   out.M.diagonal().array() += 2.0 * c.A;
   out.Gv.noalias() = 2.0 * c.B * Gam.transpose() * (out.limbs.Gamma_dot * p_dot);
-  const Vec3 lambda(-std::cos(out.limbs.pose.theta[0]), std::sin(out.limbs.pose.theta[1]), 0.0);
+  const Vec3 lambda(-out.limbs.pose.cos_theta[0], out.limbs.pose.sin_theta[1], 0.0);
   out.K.noalias() = c.C * Gam.transpose() * lambda;
   out.K.z() -= c.E;
   return {};
@@ -144,6 +144,14 @@ Status Machine::jacobian(const Vec3& d, const Vec3& p, const kin::KinematicInput
   return {};
 }
 
+Status Machine::inverse_jacobian(const Vec3& d, const Vec3& p, const kin::KinematicInputs& in,
+                                 Mat3& J_inv) const noexcept {
+  if (!constant_jacobian_) return kin::inverse_jacobian(kinematics(), d, p, in, J_inv);
+  if (!all_finite(d) || !all_finite(p)) return Status::failure(Fault::not_finite);
+  J_inv = J_inv_;
+  return {};
+}
+
 Status Machine::task_state(const Vec3& d, const Vec3& d_dot, const kin::KinematicInputs& in,
                            TaskState& out) const noexcept {
   if (!all_finite(d_dot)) return Status::failure(Fault::not_finite);
@@ -163,7 +171,7 @@ Status Machine::kinetic_energy(const Vec3& p, const Vec3& p_dot, double& T) cons
 Status Machine::potential_energy(const Vec3& p, double& V) const noexcept {
   kin::LimbPose pose;
   if (Status s = kin::solve_limbs(limbs(), p, pose); !s) return s;
-  V = -inertia_.C * (std::sin(pose.theta[0]) + std::cos(pose.theta[1])) - inertia_.E * p.z();
+  V = -inertia_.C * (pose.sin_theta[0] + pose.cos_theta[1]) - inertia_.E * p.z();
   return {};
 }
 

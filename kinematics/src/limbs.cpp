@@ -44,7 +44,7 @@ Mat23 selector(int i) {
 
 // One limb at p: the link directions and the quantities derived from them.
 struct LimbSolution {
-  double theta, elbow;
+  double cos_theta, sin_theta, cos_elbow, sin_elbow;
   Vec2 u, u_perp, w;  // first link direction, its d/d alpha, M->B
   double den;         // d(w.w)/d theta / (-2): theta_dot = (w . B_dot) / den
 };
@@ -66,20 +66,48 @@ Status solve_one(const LimbGeometry& g, int i, const Vec3& p, LimbSolution& s) {
   const double sn = g.mode[i] * std::sqrt(std::max(0.0, 1.0 - c * c));
   s.u = Vec2(c * r_hat.x() - sn * r_hat.y(), c * r_hat.y() + sn * r_hat.x());
   s.u_perp = Vec2(-s.u.y(), s.u.x());
-  const double alpha = std::atan2(s.u.y(), s.u.x());
   s.w = r - g.L1 * s.u;
-  s.theta = f.sign * (alpha - f.offset);  // within (-3 pi / 2, 3 pi / 2]: wrap once
-  if (s.theta > std::numbers::pi) s.theta -= 2.0 * std::numbers::pi;
-  if (s.theta <= -std::numbers::pi) s.theta += 2.0 * std::numbers::pi;
-  s.elbow = f.sign * std::atan2(cross2(s.u, s.w), s.u.dot(s.w));
+  // u = (cos alpha, sin alpha), alpha = sign * theta + offset (offset 0 or pi/2).
+  if (f.offset == 0.0) {
+    s.cos_theta = s.u.x();
+    s.sin_theta = f.sign * s.u.y();
+  } else {
+    s.cos_theta = s.u.y();
+    s.sin_theta = -f.sign * s.u.x();
+  }
+  const double wn = s.w.norm();  // = L2 when the limb is assembled
+  s.cos_elbow = s.u.dot(s.w) / wn;
+  s.sin_elbow = f.sign * cross2(s.u, s.w) / wn;
   s.den = g.L1 * f.sign * s.w.dot(s.u_perp);
-  const double straightness = std::min(std::abs(s.elbow), std::numbers::pi - std::abs(s.elbow));
-  if (straightness < g.singularity_margin)
-    return Status::failure(Fault::near_singularity, i, straightness, g.singularity_margin);
+  // Near straight or folded: |sin phi| < sin(margin). |sin phi| >= margin
+  // already means clear of it (asin x >= x); only near it is the angle needed.
+  if (std::abs(s.sin_elbow) < g.singularity_margin) {
+    const double elbow = std::atan2(s.sin_elbow, s.cos_elbow);
+    const double straightness = std::min(std::abs(elbow), std::numbers::pi - std::abs(elbow));
+    if (straightness < g.singularity_margin)
+      return Status::failure(Fault::near_singularity, i, straightness, g.singularity_margin);
+  }
   return {};
 }
 
+void store(const LimbSolution& s, int i, LimbPose& out) {
+  out.cos_theta[i] = s.cos_theta;
+  out.sin_theta[i] = s.sin_theta;
+  out.cos_elbow[i] = s.cos_elbow;
+  out.sin_elbow[i] = s.sin_elbow;
+}
+
 }  // namespace
+
+Vec3 LimbPose::theta() const noexcept {
+  return Vec3(std::atan2(sin_theta[0], cos_theta[0]), std::atan2(sin_theta[1], cos_theta[1]),
+              std::atan2(sin_theta[2], cos_theta[2]));
+}
+
+Vec3 LimbPose::elbow() const noexcept {
+  return Vec3(std::atan2(sin_elbow[0], cos_elbow[0]), std::atan2(sin_elbow[1], cos_elbow[1]),
+              std::atan2(sin_elbow[2], cos_elbow[2]));
+}
 
 LimbGeometry LimbGeometry::elkady() {
   LimbGeometry g;
@@ -100,7 +128,8 @@ std::array<int, 3> default_assembly_modes(const LimbGeometry& base) {
       g.singularity_margin = 0.0;
       LimbSolution s{};
       if (!solve_one(g, i, p_ref, s)) continue;
-      const double err = std::abs(std::remainder(s.theta - theta_ref[i], 2.0 * std::numbers::pi));
+      const double theta = std::atan2(s.sin_theta, s.cos_theta);
+      const double err = std::abs(std::remainder(theta - theta_ref[i], 2.0 * std::numbers::pi));
       if (err < best) {
         best = err;
         modes[i] = m;
@@ -118,8 +147,7 @@ Status solve_limbs(const LimbGeometry& g, const Vec3& p, LimbPose& out) noexcept
   for (int i = 0; i < 3; ++i) {
     LimbSolution s{};
     if (Status st = solve_one(g, i, p, s); !st) return st;
-    out.theta[i] = s.theta;
-    out.elbow[i] = s.elbow;
+    store(s, i, out);
     out.Gamma.row(i) = (selector(i).transpose() * s.w).transpose() / s.den;
   }
   return {};
@@ -131,20 +159,27 @@ Status solve_limb_motion(const LimbGeometry& g, const Vec3& p, const Vec3& p_dot
   for (int i = 0; i < 3; ++i) {
     LimbSolution s{};
     if (Status st = solve_one(g, i, p, s); !st) return st;
-    const Mat23 P = selector(i);
+    // The limb's plane holds machine axes a and b: Gamma's row has w there and
+    // 0 on the third axis (index arithmetic, not 2x3 selector products).
+    const int a = kFrames[i].axis_a, b = kFrames[i].axis_b;
     const double sign = kFrames[i].sign;
-    const Eigen::RowVector3d gamma = (P.transpose() * s.w).transpose() / s.den;
-    const double theta_dot = gamma.dot(p_dot);
+    const double inv_den = 1.0 / s.den;
+    const double ga = s.w.x() * inv_den, gb = s.w.y() * inv_den;
+    const double theta_dot = ga * p_dot[a] + gb * p_dot[b];
     // w = B - A - L1 u(theta): differentiate in time.
-    const Vec2 w_dot = P * p_dot - g.L1 * sign * s.u_perp * theta_dot;
+    const double k = g.L1 * sign * theta_dot;
+    const Vec2 w_dot(p_dot[a] - k * s.u_perp.x(), p_dot[b] - k * s.u_perp.y());
     // den = L1 sign (w . u_perp), and d u_perp / d theta = -sign u.
     const double den_dot = g.L1 * sign * (w_dot.dot(s.u_perp) - sign * s.w.dot(s.u) * theta_dot);
-    out.pose.theta[i] = s.theta;
-    out.pose.elbow[i] = s.elbow;
-    out.pose.Gamma.row(i) = gamma;
+    const double r = den_dot * inv_den;
+    store(s, i, out.pose);
+    out.pose.Gamma.row(i).setZero();
+    out.pose.Gamma(i, a) = ga;
+    out.pose.Gamma(i, b) = gb;
     out.theta_dot[i] = theta_dot;
-    out.Gamma_dot.row(i) =
-        (P.transpose() * w_dot).transpose() / s.den - gamma * (den_dot / s.den);
+    out.Gamma_dot.row(i).setZero();
+    out.Gamma_dot(i, a) = w_dot.x() * inv_den - ga * r;
+    out.Gamma_dot(i, b) = w_dot.y() * inv_den - gb * r;
   }
   return {};
 }

@@ -17,7 +17,7 @@ Status twist_offsets(const KinematicModel& m, const Vec3& p, Vec3& out) noexcept
   LimbGeometry g = m.limbs;
   g.singularity_margin = 0.0;  // the workspace check reports singularity; here we only need phi
   if (Status s = solve_limbs(g, p, pose); !s) return s;
-  for (int i = 0; i < 3; ++i) out[i] = m.effects[i].twist * m.limbs.L2 * std::sin(pose.elbow[i]);
+  for (int i = 0; i < 3; ++i) out[i] = m.effects[i].twist * m.limbs.L2 * pose.sin_elbow[i];
   return {};
 }
 
@@ -157,10 +157,13 @@ Status forward(const KinematicModel& m, const Vec3& d, const KinematicInputs& in
 }
 
 Status inverse(const KinematicModel& m, const Vec3& p, const KinematicInputs& in,
-               Vec3& d) noexcept {
+               Vec3& d, Mat3* J_inv) noexcept {
   if (!all_finite(p) || !std::isfinite(in.t)) return Status::failure(Fault::not_finite);
   Vec3 tw;
   if (Status s = twist_offsets(m, p, tw); !s) return s;
+  // d(plane_i)/dp and d(plane_i)/dd_i at the solution, for J_inv = diag^-1 A.
+  Mat3 A;
+  Vec3 diag;
   for (int i = 0; i < 3; ++i) {
     const LimbPlane& pl = m.planes[i];
     const LimbKinematicEffects& e = m.effects[i];
@@ -172,6 +175,8 @@ Status inverse(const KinematicModel& m, const Vec3& p, const KinematicInputs& in
     if (!needs_newton) {
       // Nothing or only backlash: d~ = d - (b/2) dir inverts directly.
       d[i] = di + 0.5 * e.backlash * (in.dir[i] >= 0 ? 1.0 : -1.0);
+      A.row(i) = pl.normal.transpose();
+      diag[i] = pl.scale;
       continue;
     }
     bool converged = false;
@@ -185,6 +190,8 @@ Status inverse(const KinematicModel& m, const Vec3& p, const KinematicInputs& in
       if (!(std::abs(dg) > 1e-9)) return Status::failure(Fault::no_convergence, i);
       const double step = g / dg;
       di -= step;
+      A.row(i) = u.transpose();
+      diag[i] = -dg;
       if (std::abs(step) < 1e-14) {
         converged = true;
         break;
@@ -194,16 +201,22 @@ Status inverse(const KinematicModel& m, const Vec3& p, const KinematicInputs& in
     d[i] = di;
   }
   if (!all_finite(d)) return Status::failure(Fault::not_finite);
+  if (J_inv) {
+    // The twist makes A depend on p through the elbows: the full differentials.
+    if (m.has_twist()) return inverse_jacobian(m, d, p, in, *J_inv);
+    for (int i = 0; i < 3; ++i)
+      if (!(std::abs(diag[i]) > 1e-12)) return Status::failure(Fault::singular_planes, i, diag[i], 1e-12);
+    *J_inv = diag.cwiseInverse().asDiagonal() * A;
+  }
   return {};
 }
 
-Status jacobian(const KinematicModel& m, const Vec3& d, const Vec3& p, const KinematicInputs& in,
-                Mat3& J) noexcept {
+namespace {
+// Differentiate u~_i(d_i)^T p = (d~_i(d_i) + d0_i) c_i + n_i + alpha_i L2 sin phi_i(p):
+// A dp = diag(c_i d~_i' - u~_i'^T p) dd, with A = U~ - T.
+Status plane_differentials(const KinematicModel& m, const Vec3& d, const Vec3& p, const KinematicInputs& in,
+                           Mat3& A, Vec3& diag) noexcept {
   if (!all_finite(d) || !all_finite(p)) return Status::failure(Fault::not_finite);
-  // Differentiate u~_i(d_i)^T p = (d~_i(d_i) + d0_i) c_i + n_i + alpha_i L2 sin phi_i(p):
-  // (U~ - T) dp = diag(c_i d~_i' - u~_i'^T p) dd.
-  Mat3 A;
-  Vec3 diag;
   for (int i = 0; i < 3; ++i) {
     const LimbPlane& pl = m.planes[i];
     const LimbKinematicEffects& e = m.effects[i];
@@ -221,11 +234,31 @@ Status jacobian(const KinematicModel& m, const Vec3& d, const Vec3& p, const Kin
     if (Status s = solve_limbs(g, p, pose); !s) return s;
     if (Status s = elbow_gradient(g, p, grad); !s) return s;
     for (int i = 0; i < 3; ++i)
-      A.row(i) -= m.effects[i].twist * m.limbs.L2 * std::cos(pose.elbow[i]) * grad.row(i);
+      A.row(i) -= m.effects[i].twist * m.limbs.L2 * pose.cos_elbow[i] * grad.row(i);
   }
   const double det = A.determinant();
   if (!(std::abs(det) > 1e-6)) return Status::failure(Fault::singular_planes, -1, det, 1e-6);
+  return {};
+}
+}  // namespace
+
+Status jacobian(const KinematicModel& m, const Vec3& d, const Vec3& p, const KinematicInputs& in,
+                Mat3& J) noexcept {
+  Mat3 A;
+  Vec3 diag;
+  if (Status s = plane_differentials(m, d, p, in, A, diag); !s) return s;
   J = A.inverse() * diag.asDiagonal();
+  return {};
+}
+
+Status inverse_jacobian(const KinematicModel& m, const Vec3& d, const Vec3& p, const KinematicInputs& in,
+                        Mat3& J_inv) noexcept {
+  Mat3 A;
+  Vec3 diag;
+  if (Status s = plane_differentials(m, d, p, in, A, diag); !s) return s;
+  for (int i = 0; i < 3; ++i)
+    if (!(std::abs(diag[i]) > 1e-12)) return Status::failure(Fault::singular_planes, i, diag[i], 1e-12);
+  J_inv = diag.cwiseInverse().asDiagonal() * A;
   return {};
 }
 

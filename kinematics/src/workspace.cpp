@@ -35,9 +35,8 @@ Status check_pose(const KinematicModel& m, const Strokes& s, const Vec3& p,
   if (margins) {
     margins->stroke_low = d - s.min;
     margins->stroke_high = s.max - d;
-    for (int i = 0; i < 3; ++i)
-      margins->elbow[i] =
-          std::min(std::abs(pose.elbow[i]), std::numbers::pi - std::abs(pose.elbow[i]));
+    const Vec3 elbow = pose.elbow();
+    for (int i = 0; i < 3; ++i) margins->elbow[i] = std::min(std::abs(elbow[i]), std::numbers::pi - std::abs(elbow[i]));
   }
   return {};
 }

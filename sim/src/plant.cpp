@@ -39,14 +39,18 @@ Status Plant::acceleration(const Vec3& p, const Vec3& p_dot, const Vec3& force_c
                            Vec3& p_dd) const noexcept {
   const Machine& m = *truth_;
   const kin::KinematicInputs& in = kin_in_;
-  Mat3 J, J_inv;
+  Mat3 J_inv;
   Vec3 d = Vec3::Zero();
   // Without kinematic effects J is constant and d matters only to
-  // position-dependent dynamic effects: skip what is not needed.
-  if (!m.has_constant_jacobian() || m.has_additive_effects())
-    if (Status s = kin::inverse(m.kinematics(), p, in, d); !s) return s;
-  if (Status s = m.jacobian(d, p, in, J); !s) return s;
-  J_inv = m.has_constant_jacobian() ? m.constant_jacobian_inverse() : Mat3(J.inverse());
+  // position-dependent dynamic effects: skip what is not needed. With them,
+  // the inverse kinematics gives dd/dp on the way.
+  if (!m.has_constant_jacobian()) {
+    if (Status s = kin::inverse(m.kinematics(), p, in, d, &J_inv); !s) return s;
+  } else {
+    J_inv = m.constant_jacobian_inverse();
+    if (m.has_additive_effects())
+      if (Status s = kin::inverse(m.kinematics(), p, in, d); !s) return s;
+  }
   ctl::RigidBodyTerms t;
   if (Status s = m.rigid_body(p, p_dot, t); !s) return s;
   const Vec3 d_dot = J_inv * p_dot;
@@ -90,11 +94,11 @@ Status Plant::step(const Vec3& force_command, double dt) noexcept {
 }
 
 Status Plant::actuator_state(Vec3& d, Vec3& d_dot) const noexcept {
-  Mat3 J;
-  if (Status s = kin::inverse(truth_->kinematics(), p_, kin_in_, d); !s) return s;
-  if (Status s = truth_->jacobian(d, p_, kin_in_, J); !s) return s;
-  d_dot = truth_->has_constant_jacobian() ? Vec3(truth_->constant_jacobian_inverse() * p_dot_)
-                                          : Vec3(J.partialPivLu().solve(p_dot_));
+  Mat3 J_inv = truth_->constant_jacobian_inverse();
+  if (Status s = kin::inverse(truth_->kinematics(), p_, kin_in_, d, truth_->has_constant_jacobian() ? nullptr : &J_inv);
+      !s)
+    return s;
+  d_dot.noalias() = J_inv * p_dot_;
   return {};
 }
 

@@ -15,7 +15,7 @@ REQUIRED = {
                       "phase_mean_ns": dict},
     "controller_step": {"median_ns": NUM, "p99_ns": NUM},
     "plant_step": {"median_ns": NUM, "p99_ns": NUM, "median_share": NUM, "substeps": int, "substeps_sweep": list},
-    "rtf": {"plant": NUM, "closed_loop": NUM, "daemon_loop_sim": NUM},
+    "rtf": {"plant": NUM, "plant_shipped": NUM, "closed_loop": NUM, "daemon_loop_sim": NUM},
     "latency": {"seconds": NUM, "priority": int, "interval_us": int, "cpmd": dict, "cyclictest": dict, "ratio": dict},
     "bus": {"drives": int, "bitrate": NUM, "rate_hz": NUM, "best_case_bits_per_cycle": int,
             "rate_at_full_load_hz": NUM, "shipped": dict, "alternative": dict, "fake_bus": dict},

@@ -19,9 +19,9 @@ TEST(Limbs, DefaultAssemblyModesGiveMachineMdReferenceAngles) {
   LimbPose pose;
   ASSERT_TRUE(solve_limbs(g, Vec3(0.600, 0.425, 0.300), pose));
   // machine.md gives the angles to 0.01 degree.
-  EXPECT_NEAR(pose.theta[0], 89.41 * kDeg, 0.006 * kDeg);
-  EXPECT_NEAR(pose.theta[1], 19.17 * kDeg, 0.006 * kDeg);
-  EXPECT_NEAR(pose.theta[2], 2.89 * kDeg, 0.006 * kDeg);
+  EXPECT_NEAR(pose.theta()[0], 89.41 * kDeg, 0.006 * kDeg);
+  EXPECT_NEAR(pose.theta()[1], 19.17 * kDeg, 0.006 * kDeg);
+  EXPECT_NEAR(pose.theta()[2], 2.89 * kDeg, 0.006 * kDeg);
 }
 
 TEST(Limbs, LinksHaveTheirLengths) {
@@ -32,7 +32,7 @@ TEST(Limbs, LinksHaveTheirLengths) {
     const Vec3 p = test::random_platform_point(rng);
     LimbPose pose;
     ASSERT_TRUE(solve_limbs(g, p, pose));
-    const double t1 = pose.theta[0], t2 = pose.theta[1], t3 = pose.theta[2];
+    const double t1 = pose.theta()[0], t2 = pose.theta()[1], t3 = pose.theta()[2];
     const Eigen::Vector2d M1(g.L1 * std::cos(t1), g.L1 * std::sin(t1));
     const Eigen::Vector2d B1(p.y() - g.L, p.z());
     const Eigen::Vector2d M2(g.L1 * std::sin(t2), g.L1 * std::cos(t2));
@@ -68,7 +68,7 @@ TEST(Limbs, GammaMatchesElkadyEquation1) {
     const Vec3 p = test::random_platform_point(rng);
     LimbPose pose;
     ASSERT_TRUE(solve_limbs(g, p, pose));
-    EXPECT_LT((pose.Gamma - elkady_gamma(g, p, pose.theta)).norm(), 1e-10 * pose.Gamma.norm());
+    EXPECT_LT((pose.Gamma - elkady_gamma(g, p, pose.theta())).norm(), 1e-10 * pose.Gamma.norm());
   }
 }
 
@@ -84,7 +84,7 @@ TEST(Limbs, GammaIsTheDerivativeOfTheLimbAngles) {
     for (int j = 0; j < 3; ++j) {
       ASSERT_TRUE(solve_limbs(g, p + h * Vec3::Unit(j), plus));
       ASSERT_TRUE(solve_limbs(g, p - h * Vec3::Unit(j), minus));
-      fd.col(j) = (plus.theta - minus.theta) / (2 * h);
+      fd.col(j) = (plus.theta() - minus.theta()) / (2 * h);
     }
     EXPECT_LT((pose.Gamma - fd).cwiseAbs().maxCoeff(), 1e-6 * (1.0 + pose.Gamma.cwiseAbs().maxCoeff()));
   }
@@ -121,7 +121,7 @@ TEST(Limbs, ElbowGradientMatchesFiniteDifferences) {
       LimbPose plus, minus;
       ASSERT_TRUE(solve_limbs(g, p + h * Vec3::Unit(j), plus));
       ASSERT_TRUE(solve_limbs(g, p - h * Vec3::Unit(j), minus));
-      fd.col(j) = (plus.elbow - minus.elbow) / (2 * h);
+      fd.col(j) = (plus.elbow() - minus.elbow()) / (2 * h);
     }
     EXPECT_LT((grad - fd).cwiseAbs().maxCoeff(), 1e-6 * (1.0 + fd.cwiseAbs().maxCoeff()));
   }
@@ -137,7 +137,7 @@ TEST(Limbs, ModesStayContinuousAlongAMotion) {
   for (int k = 1; k <= 1000; ++k) {
     LimbPose cur;
     ASSERT_TRUE(solve_limbs(g, a + (b - a) * (k / 1000.0), cur));
-    EXPECT_LT((cur.theta - prev.theta).cwiseAbs().maxCoeff(), 2.0 * kDeg);
+    EXPECT_LT((cur.theta() - prev.theta()).cwiseAbs().maxCoeff(), 2.0 * kDeg);
     prev = cur;
   }
 }

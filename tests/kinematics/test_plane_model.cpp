@@ -84,6 +84,33 @@ TEST_P(RandomModels, JacobianIsTheDerivativeOfForwardKinematics) {
   }
 }
 
+TEST_P(RandomModels, InverseJacobianIsTheDerivativeOfInverseKinematics) {
+  const bool effects = GetParam();
+  std::mt19937_64 rng(effects ? 16 : 15);
+  const double h = 1e-7;
+  for (int k = 0; k < 100; ++k) {
+    const KinematicModel m = test::random_calibrated_kinematics(rng, effects);
+    const Vec3 p = test::random_platform_point(rng);
+    KinematicInputs in;
+    in.t = 50.0;
+    Vec3 d, dp, dm;
+    Mat3 J, J_inv, fd;
+    ASSERT_TRUE(inverse(m, p, in, d));
+    ASSERT_TRUE(inverse_jacobian(m, d, p, in, J_inv));
+    for (int j = 0; j < 3; ++j) {
+      ASSERT_TRUE(inverse(m, p + h * Vec3::Unit(j), in, dp));
+      ASSERT_TRUE(inverse(m, p - h * Vec3::Unit(j), in, dm));
+      fd.col(j) = (dp - dm) / (2 * h);
+    }
+    EXPECT_LT((J_inv - fd).cwiseAbs().maxCoeff(), 1e-7) << "model " << k;
+    Mat3 J_inv_newton;  // the by-product of the inverse kinematics' Newton solve
+    ASSERT_TRUE(inverse(m, p, in, dp, &J_inv_newton));
+    EXPECT_LT((J_inv_newton - J_inv).cwiseAbs().maxCoeff(), 1e-12) << "model " << k;
+    ASSERT_TRUE(jacobian(m, d, p, in, J));
+    EXPECT_LT((J * J_inv - Mat3::Identity()).cwiseAbs().maxCoeff(), 1e-12) << "model " << k;
+  }
+}
+
 INSTANTIATE_TEST_SUITE_P(WithAndWithoutEffects, RandomModels, ::testing::Bool());
 
 TEST(KinematicEffects, EachMatchesItsEquation) {
@@ -125,7 +152,7 @@ TEST(KinematicEffects, LimbTwistShiftsThePlaneBySineOfElbow) {
   LimbPose pose;
   ASSERT_TRUE(solve_limbs(m.limbs, p, pose));
   // u^T p = (d + d0) + n + alpha L2 sin(phi) with u = e_x, c = 1.
-  EXPECT_NEAR(d[0], d_nom[0] - 1e-3 * m.limbs.L2 * std::sin(pose.elbow[0]), 1e-15);
+  EXPECT_NEAR(d[0], d_nom[0] - 1e-3 * m.limbs.L2 * std::sin(pose.elbow()[0]), 1e-15);
   EXPECT_DOUBLE_EQ(d[1], d_nom[1]);
 }
 

@@ -110,6 +110,9 @@ class Machine {
   // kinematic effects, else kin::jacobian.
   Status jacobian(const Vec3& d, const Vec3& p, const kin::KinematicInputs& in,
                   Mat3& J) const noexcept;
+  // J^-1 = dd/dp, the same way (kin::inverse_jacobian: no inversion).
+  Status inverse_jacobian(const Vec3& d, const Vec3& p, const kin::KinematicInputs& in,
+                          Mat3& J_inv) const noexcept;
   // Platform state from encoder position and velocity through the calibrated kinematics.
   Status task_state(const Vec3& d, const Vec3& d_dot, const kin::KinematicInputs& in,
                     TaskState& out) const noexcept;

@@ -38,13 +38,18 @@ struct LimbGeometry {
   static LimbGeometry elkady();  // Table 1 of Elkady with the default modes
 };
 
-// Everything the dynamics needs of the limbs at one pose. theta are the
-// first-joint angles (t11, t21, t31), elbow the signed elbow angles phi_i
-// (from A->M to M->B, with theta's orientation), Gamma = d theta / d p.
+// Everything the dynamics needs of the limbs at one pose: the cosine and
+// sine of the first-joint angles theta (t11, t21, t31) and of the signed
+// elbow angles phi_i (from A->M to M->B, with theta's orientation), and
+// Gamma = d theta / d p. The dynamics needs only cosines and sines, which
+// the links' directions give without trigonometry; the angles themselves
+// (atan2) are computed on demand, for reports and tests.
 struct LimbPose {
-  Vec3 theta = Vec3::Zero();
-  Vec3 elbow = Vec3::Zero();
+  Vec3 cos_theta = Vec3::Ones(), sin_theta = Vec3::Zero();
+  Vec3 cos_elbow = Vec3::Ones(), sin_elbow = Vec3::Zero();
   Mat3 Gamma = Mat3::Zero();
+  [[nodiscard]] Vec3 theta() const noexcept;  // rad, in (-pi, pi]
+  [[nodiscard]] Vec3 elbow() const noexcept;  // rad, in (-pi, pi]
 };
 
 // The same with the time derivative of Gamma along a velocity p_dot.

@@ -82,12 +82,19 @@ Status forward(const KinematicModel& m, const Vec3& d, const KinematicInputs& in
                Vec3& p) noexcept;
 // Inverse kinematics (Kim eq. 7 with the effects): platform point -> encoder
 // readings. Each limb is a scalar equation in d_i, solved by Newton's method.
+// With J_inv, also dd/dp at the result (as inverse_jacobian gives it): the
+// Newton solve has its ingredients at hand.
 Status inverse(const KinematicModel& m, const Vec3& p, const KinematicInputs& in,
-               Vec3& d) noexcept;
+               Vec3& d, Mat3* J_inv = nullptr) noexcept;
 // J = dp/dd at the pose (d, p), p = forward(d). Maps actuator velocities to
 // platform velocities; J^T maps platform forces to actuator forces.
 Status jacobian(const KinematicModel& m, const Vec3& d, const Vec3& p, const KinematicInputs& in,
                 Mat3& J) noexcept;
+// J^-1 = dd/dp at the pose: what the plane equations give directly (no
+// inversion), for a simulator that needs actuator rates and forces from the
+// platform's.
+Status inverse_jacobian(const KinematicModel& m, const Vec3& d, const Vec3& p, const KinematicInputs& in,
+                        Mat3& J_inv) noexcept;
 
 // Effective displacement d~_i and its derivative with respect to d_i.
 double effective_displacement(const LimbKinematicEffects& e, double d, int dir, double t,
