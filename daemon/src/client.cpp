@@ -28,12 +28,28 @@ std::string fault_text(std::int32_t mask) {
   return s;
 }
 
+namespace {
+// A client records a 1 kHz stream: ask the kernel for a socket buffer that
+// holds a few seconds of it (capped by net.core.rmem_max; 4 MB is about 3 s
+// of state messages), unless the URL already says how big.
+std::string with_receive_buffer(const std::string& url) {
+  if (url.rfind("udpm://", 0) != 0 || url.find("recv_buf_size=") != std::string::npos) return url;
+  return url + (url.find('?') == std::string::npos ? "?" : "&") + "recv_buf_size=4194304";
+}
+}  // namespace
+
 Client::Client(const LcmConfig& cfg) : cfg_(cfg) {
-  lcm_ = std::make_unique<lcm::LCM>(cfg_.url);
+  lcm_ = std::make_unique<lcm::LCM>(with_receive_buffer(cfg_.url));
   if (!lcm_->good()) throw Error("lcm: cannot open '" + cfg_.url + "'");
-  lcm_->subscribe(cfg_.ack_channel, &Client::on_ack, this);
-  lcm_->subscribe(cfg_.state_channel, &Client::on_state_msg, this);
-  lcm_->subscribe(cfg_.stats_channel, &Client::on_stats_msg, this);
+  // LCM queues at most 30 messages per subscription between its receive
+  // thread and handle(), then drops silently: 30 ms of the state stream at
+  // 1 kHz. A client descheduled for longer (a loaded machine, a recorder
+  // writing to disk) would lose state. 10 s of queue costs a few MB at most
+  // and only while the client is behind.
+  constexpr int kQueuedMessages = 10000;
+  lcm_->subscribe(cfg_.ack_channel, &Client::on_ack, this)->setQueueCapacity(kQueuedMessages);
+  lcm_->subscribe(cfg_.state_channel, &Client::on_state_msg, this)->setQueueCapacity(kQueuedMessages);
+  lcm_->subscribe(cfg_.stats_channel, &Client::on_stats_msg, this)->setQueueCapacity(kQueuedMessages);
   std::random_device rd;
   next_id_ = (static_cast<std::int64_t>(rd() & 0x7fffffu) << 32) ^ (static_cast<std::int64_t>(::getpid()) << 8);
   nonce_ = static_cast<std::int64_t>(((std::uint64_t{rd()} << 32) ^ rd()) & 0x7FFFFFFFFFFFFFFFull) | 1;
