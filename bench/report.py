@@ -1,12 +1,14 @@
 #!/usr/bin/python3
 """The table and JSON of bench/run.sh, from the raw outputs of one run.
 
-    report.py --dir RAW --json OUT --quick 0|1 --seconds S --priority P --interval-us I
+    report.py --dir RAW --json OUT --quick 0|1 --seconds S --segments K --priority P --interval-us I
               --realtime-allowed 0|1 --allocation-test passed|failed
     report.py --markdown OUT.json      the table of a finished run in Markdown (docs/performance.md)
 
 RAW holds perf.json (cpm_perf), scipy.json (scipy_ballbar.py), gbench.json
-(cpm_bench), cpmd_stats.json (cpmd --stats-json) and cyclictest.json.
+(cpm_bench), and for each of the K latency segments cpmd_stats_<k>.json
+(cpmd --stats-json) and cyclictest_<k>.json, each S/K seconds long; the
+segments of one program are merged into one histogram.
 Standard library only. Units: ns and µs for times of the cycle, s for tools,
 bit and Hz for the bus; shares are of the loop period.
 """
@@ -74,6 +76,30 @@ def latency_figures(hist, late, period_us, max_us, min_us, mean_us, cycles):
             "period_jitter_bound_us": max_us - min_us}
 
 
+def merge_series(series):
+    """One of cpmd's timing series over several runs: counts and histograms add."""
+    ran = [s for s in series if s["count"]]
+    count = sum(s["count"] for s in ran)
+    hist = {}
+    for s in ran:
+        for k, n in s["histogram_us"].items():
+            hist[k] = hist.get(k, 0) + n
+    return {"count": count, "min_ns": min((s["min_ns"] for s in ran), default=0),
+            "max_ns": max((s["max_ns"] for s in ran), default=0),
+            "mean_ns": sum(s["mean_ns"] * s["count"] for s in ran) / count if count else 0.0, "histogram_us": hist}
+
+
+def merge_cpmd_stats(docs):
+    """cpmd's --stats-json of several runs as if of one."""
+    out = dict(docs[0])
+    for k in ("cycles", "overruns", "skipped"):
+        out[k] = sum(d[k] for d in docs)
+    for k in ("realtime", "memory_locked"):
+        out[k] = all(d[k] for d in docs)
+    out["series"] = {name: merge_series([d["series"][name] for d in docs]) for name in docs[0]["series"]}
+    return out
+
+
 def cpmd_latency(stats, period_us):
     s = stats["series"]["wakeup_latency"]
     hist = {}
@@ -94,25 +120,34 @@ def cpmd_latency(stats, period_us):
     return f
 
 
-def cyclictest_latency(doc, realtime, period_us, seconds):
-    """cyclictest's 1 µs histogram in the daemon's bins. After a stall cyclictest,
-    like cpmd, takes one sample (the whole lateness) and moves on to the first
-    slot still ahead: the slots it skipped are the run's slots it has no sample
-    for (seconds / period - cycles; its start-up may shift this by a slot or two)."""
-    t = doc["thread"]["0"]
+def cyclictest_latency(docs, realtime, period_us, seconds_each):
+    """cyclictest's 1 µs histograms of several runs, each `seconds_each` long,
+    in the daemon's bins. After a stall cyclictest, like cpmd, takes one sample
+    (the whole lateness) and moves on to the first slot still ahead: the slots
+    it skipped are the run's slots it has no sample for (seconds / period -
+    cycles; its start-up may shift this by a slot or two per run)."""
     hist = {}
-    counted = 0
-    for k, n in t["histogram"].items():
-        b = bin_floor_us(int(k))
-        hist[b] = hist.get(b, 0) + n
-        counted += n
-    overflow = t["cycles"] - counted          # above the -h range (2 ms)
-    if overflow > 0:
-        hist[TOP_US] = hist.get(TOP_US, 0) + overflow
-    skipped = max(0, round(seconds * 1e6 / period_us) - t["cycles"])
-    f = latency_figures(hist, skipped, period_us, float(t["max"]), float(t["min"]), float(t["avg"]), t["cycles"])
+    cycles = skipped = 0
+    mins, maxs, weighted_mean = [], [], 0.0
+    for doc in docs:
+        t = doc["thread"]["0"]
+        n_cycles = int(t["cycles"])
+        counted = 0
+        for k, n in t["histogram"].items():
+            b = bin_floor_us(int(k))
+            hist[b] = hist.get(b, 0) + n
+            counted += n
+        overflow = n_cycles - counted          # above the -h range (2 ms)
+        if overflow > 0:
+            hist[TOP_US] = hist.get(TOP_US, 0) + overflow
+        skipped += max(0, round(seconds_each * 1e6 / period_us) - n_cycles)
+        cycles += n_cycles
+        mins.append(float(t["min"]))
+        maxs.append(float(t["max"]))
+        weighted_mean += float(t["avg"]) * n_cycles
+    f = latency_figures(hist, skipped, period_us, max(maxs), min(mins), weighted_mean / max(cycles, 1), cycles)
     f.update({"realtime": realtime, "memory_locked": True, "skipped": skipped,
-              "version": doc.get("rt_test_version:", "")})
+              "version": docs[0].get("rt_test_version:", "")})
     return f
 
 
@@ -195,8 +230,10 @@ def build(a):
     d = a.dir
     load = lambda name: json.load(open(os.path.join(d, name)))  # noqa: E731
     perf, sp, gb = load("perf.json"), load("scipy.json"), load("gbench.json")
-    cpmd = cpmd_latency(load("cpmd_stats.json"), a.interval_us)
-    ct = cyclictest_latency(load("cyclictest.json"), bool(a.realtime_allowed), a.interval_us, a.seconds)
+    segments = range(1, a.segments + 1)
+    cpmd = cpmd_latency(merge_cpmd_stats([load(f"cpmd_stats_{k}.json") for k in segments]), a.interval_us)
+    ct = cyclictest_latency([load(f"cyclictest_{k}.json") for k in segments], bool(a.realtime_allowed),
+                            a.interval_us, a.seconds / a.segments)
 
     def ratio_of(k):
         """cpmd / cyclictest and what kind of figure it is: '=' (maxima), '<=' or '>='
@@ -230,7 +267,10 @@ def build(a):
         "machine_use": machine_use(os.path.join(d, "cpu_marks.txt")),
         "latency": {
             "seconds": a.seconds, "priority": a.priority, "interval_us": a.interval_us,
-            "order": "sequential: cpmd first, then cyclictest, same priority, period and memory locking",
+            "segments": a.segments,
+            "order": f"interleaved: {a.segments} segments of {a.seconds / a.segments:g} s each, cpmd and cyclictest "
+                     "taking turns (ABBA: the one that went second goes first next), never at once; "
+                     "same priority, period and memory locking",
             "histogram": "1 us bins below 200 us, 50 us bins to 2 ms, one bin above; percentiles over slots, "
                          "as bin upper edges (<=), or >= one period among the slots a period or more late",
             "cpmd": cpmd, "cyclictest": ct, "ratio": ratio, "ratio_bound": ratio_bound},
@@ -298,7 +338,9 @@ def table(r):
     L = r["latency"]
     c, t, q = L["cpmd"], L["cyclictest"], L["ratio"]
     sched = lambda x: "SCHED_FIFO " + str(L["priority"]) if x["realtime"] else "normal scheduling"  # noqa: E731
-    row("wake-up latency", f"{L['seconds']:g} s at {L['interval_us']} us each, one after the other",
+    segs = L.get("segments", 1)
+    how = "one after the other" if segs == 1 else f"interleaved in {segs} turns of {L['seconds'] / segs:g} s"
+    row("wake-up latency", f"{L['seconds']:g} s at {L['interval_us']} us each, {how}",
         f"cpmd: {sched(c)}, {c['cycles']} cycles", f"cyclictest: {sched(t)}, {t['cycles']} cycles")
     for k, name in (("p50", "p50"), ("p99", "p99"), ("p999", "p99.9"), ("max", "max")):
         verdict = ok(B["wakeup_p99_ratio"]) if k == "p99" else ""
@@ -390,6 +432,7 @@ def main():
     ap.add_argument("--json")
     ap.add_argument("--quick", type=int, default=0)
     ap.add_argument("--seconds", type=float)
+    ap.add_argument("--segments", type=int, default=1)
     ap.add_argument("--priority", type=int)
     ap.add_argument("--interval-us", type=int)
     ap.add_argument("--realtime-allowed", type=int)

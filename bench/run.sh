@@ -2,18 +2,21 @@
 # The performance figures of docs/performance.md, measured side by side with
 # their references in one run, printed as a table and written as JSON.
 #
-#   bash bench/run.sh [--quick] [--json FILE] [--seconds S] [--build-dir DIR] [--no-build]
+#   bash bench/run.sh [--quick] [--json FILE] [--seconds S] [--segments K] [--build-dir DIR] [--no-build]
 #
-#   --quick        seconds, not minutes: small samples, 2 s latency runs, the
+#   --quick        seconds, not minutes: small samples, 2 s latency runs (2 turns), the
 #                  5 s motion log (the smoke test; its figures are not the
 #                  real ones)
 #   --json FILE    where to write the JSON (default build/bench/perf.json)
 #   --seconds S    length of each latency run (default 60; 2 with --quick)
+#   --segments K   cut each latency run into K turns of S/K seconds, cpmd and
+#                  cyclictest taking turns (default 6; 2 with --quick)
 #   --build-dir    the build to use (default build)
 #   --no-build     do not run tools/build.sh first
 #
 # What runs, in this order (nothing in parallel: each figure gets the
-# machine to itself, the two latency runs see the same background):
+# machine to itself, the two latency runs see the same background, as far as
+# taking turns makes it the same):
 #   1. cpm_perf: control cycle, controller and plant steps per call,
 #      real-time factors, CAN bus load, Kim's ball-bar solve (C++), and the
 #      problem exported for SciPy;
@@ -21,21 +24,25 @@
 #      same problem, the same residual, timed, solutions compared;
 #   3. cpm_bench (Google Benchmark): diagnose on a motion log and on ball-bar files;
 #   4. the zero-allocation test of the daemon's cycle;
-#   5. cpmd on config/sim.yaml for S seconds at its priority, running circles
-#      (daemon/latency-run.sh), THEN cyclictest at the same SCHED_FIFO
-#      priority and period for S seconds, each with memory locked;
+#   5. cpmd on config/sim.yaml at its priority, running circles
+#      (daemon/latency-run.sh), and cyclictest at the same SCHED_FIFO priority
+#      and period, each with memory locked, taking turns in K segments of S/K
+#      seconds (ABBA order: cpmd, cyclictest, cyclictest, cpmd, ...). A VM's
+#      stalls come and go over minutes; one program's 60 s followed by the
+#      other's compared two different backgrounds;
 #   6. bench/report.py: the table with the budgets, and the JSON.
 # Exit status: 0 when every figure was measured (a budget that is not met is
 # reported in the table and the JSON, not as a failure of the command).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 root=$PWD
-quick=0 json="" seconds="" build_dir=build do_build=1
+quick=0 json="" seconds="" segments="" build_dir=build do_build=1
 while [ $# -gt 0 ]; do
   case "$1" in
     --quick) quick=1 ;;
     --json) json=$2; shift ;;
     --seconds) seconds=$2; shift ;;
+    --segments) segments=$2; shift ;;
     --build-dir) build_dir=$2; shift ;;
     --no-build) do_build=0 ;;
     -h|--help) sed -n '2,30p' "$0"; exit 0 ;;
@@ -47,8 +54,14 @@ B=$(cd "$build_dir" 2>/dev/null && pwd || echo "$root/$build_dir")
 [ -n "$json" ] || json=$B/bench/perf.json
 case "$json" in /*) ;; *) json=$root/$json ;; esac
 PY=/usr/bin/python3   # Debian's, with python3-scipy (a `python3` earlier on PATH may lack SciPy)
-if [ $quick -eq 1 ]; then cycles=5000 repeat=5 motion_s=5 seconds=${seconds:-2}
-else cycles=100000 repeat=200 motion_s=60 seconds=${seconds:-60}; fi
+if [ $quick -eq 1 ]; then cycles=5000 repeat=5 motion_s=5 seconds=${seconds:-2} segments=${segments:-2}
+else cycles=100000 repeat=200 motion_s=60 seconds=${seconds:-60} segments=${segments:-6}; fi
+for v in "seconds:$seconds" "segments:$segments"; do
+  case "${v#*:}" in ''|*[!0-9]*|0) echo "bench/run.sh: --${v%%:*} wants a whole number >= 1, not '${v#*:}'" >&2; exit 2 ;; esac
+done
+# Whole seconds per turn (cyclictest -D and the daemon's run take whole seconds).
+segment_s=$(( seconds / segments > 0 ? seconds / segments : 1 ))
+seconds=$(( segment_s * segments ))
 
 say() { echo "bench: $*" >&2; }
 if [ $do_build -eq 1 ]; then
@@ -96,19 +109,25 @@ interval_us=$("$PY" -c "print(round(1e6 / $rate))")
 if chrt -f "$prio" true 2>/dev/null; then rt=1; ct_sched=(-p "$prio"); else rt=0; ct_sched=(--policy=other -p 0); fi
 
 mark compute
-say "5/5 wake-up latency: cpmd for ${seconds} s, then cyclictest for ${seconds} s (priority $prio, $interval_us us)"
-bash daemon/latency-run.sh "$B" "$seconds" "$out/cpmd_stats.json" >"$out/cpmd_run.log" 2>&1 ||
-  { cat "$out/cpmd_run.log" >&2; echo "bench/run.sh: the cpmd latency run failed" >&2; exit 1; }
-mark cpmd_run
+say "5/5 wake-up latency: cpmd and cyclictest, ${seconds} s each in $segments turns of ${segment_s} s (priority $prio, $interval_us us)"
+run_cpmd() {
+  bash daemon/latency-run.sh "$B" "$segment_s" "$out/cpmd_stats_$1.json" >"$out/cpmd_run_$1.log" 2>&1 ||
+    { cat "$out/cpmd_run_$1.log" >&2; echo "bench/run.sh: the cpmd latency run ($1 of $segments) failed" >&2; exit 1; }
+}
 # --default-system: cyclictest leaves power management as it is (it would
 # otherwise hold /dev/cpu_dma_latency at 0, which cpmd does not): both runs
 # see the same C-states. -m: memory locked, as cpmd's lock_memory.
 # -h 2000: 1 us bins to 2 ms, the range of cpmd's histogram.
-cyclictest -q -m -t 1 "${ct_sched[@]}" -i "$interval_us" -D "$seconds" -h 2000 --default-system \
-  --histfile="$out/cyclictest.hist" --json="$out/cyclictest.json" >"$out/cyclictest.log" 2>&1 ||
-  { cat "$out/cyclictest.log" >&2; echo "bench/run.sh: cyclictest failed" >&2; exit 1; }
-mark cyclictest_run
+run_cyclictest() {
+  cyclictest -q -m -t 1 "${ct_sched[@]}" -i "$interval_us" -D "$segment_s" -h 2000 --default-system \
+    --json="$out/cyclictest_$1.json" >"$out/cyclictest_$1.log" 2>&1 ||
+    { cat "$out/cyclictest_$1.log" >&2; echo "bench/run.sh: cyclictest ($1 of $segments) failed" >&2; exit 1; }
+}
+for k in $(seq 1 "$segments"); do
+  if [ $((k % 2)) -eq 1 ]; then run_cpmd "$k"; run_cyclictest "$k"; else run_cyclictest "$k"; run_cpmd "$k"; fi
+done
+mark latency_runs
 
-"$PY" bench/report.py --dir "$out" --json "$json" --quick $quick --seconds "$seconds" --priority "$prio" \
+"$PY" bench/report.py --dir "$out" --json "$json" --quick $quick --seconds "$seconds" --segments "$segments" --priority "$prio" \
   --interval-us "$interval_us" --realtime-allowed $rt --allocation-test $alloc
 say "JSON: $json"

@@ -16,7 +16,8 @@ REQUIRED = {
     "controller_step": {"median_ns": NUM, "p99_ns": NUM},
     "plant_step": {"median_ns": NUM, "p99_ns": NUM, "median_share": NUM, "substeps": int, "substeps_sweep": list},
     "rtf": {"plant": NUM, "plant_shipped": NUM, "closed_loop": NUM, "daemon_loop_sim": NUM},
-    "latency": {"seconds": NUM, "priority": int, "interval_us": int, "cpmd": dict, "cyclictest": dict, "ratio": dict},
+    "latency": {"seconds": NUM, "segments": int, "priority": int, "interval_us": int, "cpmd": dict, "cyclictest": dict,
+                "ratio": dict},
     "bus": {"drives": int, "bitrate": NUM, "rate_hz": NUM, "best_case_bits_per_cycle": int,
             "rate_at_full_load_hz": NUM, "shipped": dict, "alternative": dict, "fake_bus": dict},
     "calibration": {"poses": int, "cpp_solve_s": NUM, "cpp_fit_s": NUM, "scipy_lm_s": NUM, "scipy_trf_s": NUM,
@@ -58,6 +59,14 @@ def main():
     lat = r.get("latency", {})
     for who in ("cpmd", "cyclictest"):
         check(lat.get(who, {}), dict(LATENCY, skipped=int), f"latency.{who}", errors)
+    # Every turn merged: the slots run or skipped cover the whole run, not one turn of it.
+    if isinstance(lat.get("seconds"), NUM) and isinstance(lat.get("interval_us"), int) and lat["interval_us"] > 0:
+        slots = lat["seconds"] * 1e6 / lat["interval_us"]
+        for who in ("cpmd", "cyclictest"):
+            w = lat.get(who, {})
+            if isinstance(w.get("cycles"), int) and isinstance(w.get("skipped"), int) and \
+                    w["cycles"] + w["skipped"] < 0.75 * slots:
+                errors.append(f"latency.{who}: {w['cycles']} cycles + {w['skipped']} skipped of {slots:.0f} slots")
     check(lat.get("ratio", {}), {k: NUM_OR_NULL for k in ("p50", "p99", "p999", "max")}, "latency.ratio", errors)
     for m in ("shipped", "alternative"):
         check(r.get("bus", {}).get(m, {}), BUS, f"bus.{m}", errors)

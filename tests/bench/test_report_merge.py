@@ -1,0 +1,75 @@
+#!/usr/bin/python3
+"""bench/report.py merges the latency turns of each program into one run:
+checked against runs built by hand whose merged percentiles are known."""
+import os
+import sys
+import unittest
+
+sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "..", "bench"))
+import report  # noqa: E402
+
+PERIOD_US = 1000
+
+
+def cpmd_doc(hist_us, skipped, overruns, mean_ns):
+    """A cpmd --stats-json with one wake-up series (histogram keys as cpmd writes them: strings)."""
+    count = sum(hist_us.values())
+    lat = {"count": count, "min_ns": min(hist_us) * 1000, "max_ns": max(hist_us) * 1000 + 500, "mean_ns": mean_ns,
+           "histogram_us": {str(k): n for k, n in hist_us.items()}}
+    idle = {"count": 0, "min_ns": 0, "max_ns": 0, "mean_ns": 0.0, "histogram_us": {}}
+    return {"rate_hz": 1000, "cycles": count, "overruns": overruns, "skipped": skipped, "realtime": True,
+            "memory_locked": True, "series": {"wakeup_latency": lat, "publish": idle}}
+
+
+def cyclictest_doc(hist_us, avg, above_range=0, max_us=None):
+    """cyclictest --json with -h 2000: samples of 2 ms or more are counted in cycles, not in the histogram."""
+    return {"rt_test_version:": "2.40", "thread": {"0": {
+        "histogram": {str(k): n for k, n in hist_us.items()}, "cycles": str(sum(hist_us.values()) + above_range),
+        "min": str(min(hist_us)), "max": str(max_us or max(hist_us)), "avg": str(avg)}}}
+
+
+class MergeTurns(unittest.TestCase):
+    def test_cpmd_turns_add_up_to_one_run(self):
+        # Turn 1: 990 wake-ups at 50 us, 10 at 700 us. Turn 2: 980 at 60 us, 20 at 1500 us, 5 slots skipped.
+        a = cpmd_doc({50: 990, 700: 10}, skipped=0, overruns=1, mean_ns=56000.0)
+        b = cpmd_doc({60: 980, 1500: 20}, skipped=5, overruns=3, mean_ns=88000.0)
+        m = report.merge_cpmd_stats([a, b])
+        self.assertEqual(m["cycles"], 2000)
+        self.assertEqual(m["skipped"], 5)
+        self.assertEqual(m["overruns"], 4)
+        s = m["series"]["wakeup_latency"]
+        self.assertEqual(s["count"], 2000)
+        self.assertEqual(s["min_ns"], 50000)
+        self.assertEqual(s["max_ns"], 1500500)
+        self.assertAlmostEqual(s["mean_ns"], (56000.0 * 1000 + 88000.0 * 1000) / 2000)
+        self.assertEqual(m["series"]["publish"]["count"], 0)
+        f = report.cpmd_latency(m, PERIOD_US)
+        # 2005 slots: 990 at 50 us, 980 at 60, 10 in the 700-750 bin, 20 at 1500, 5 skipped.
+        # p50, rank 1003: the 60 us bin (<= 61 us). p99, rank 1985: 1970 + 10 = 1980 < 1985, so among the
+        # slots a period or more late: '>= 1000'.
+        self.assertEqual((f["p50_us"], f["bounds"]["p50"]), (61, "<="))
+        self.assertEqual((f["p99_us"], f["bounds"]["p99"]), (PERIOD_US, ">="))
+        self.assertEqual(f["late_slots"], 25)
+
+    def test_one_turn_is_the_run_itself(self):
+        a = cpmd_doc({40: 500, 90: 10}, skipped=2, overruns=0, mean_ns=41000.0)
+        self.assertEqual(report.cpmd_latency(report.merge_cpmd_stats([a]), PERIOD_US), report.cpmd_latency(a, PERIOD_US))
+
+    def test_cyclictest_turns_count_their_own_skipped_slots(self):
+        # Two 1 s turns: 1000 slots each; 998 and 995 samples, so 2 and 5 slots skipped.
+        a = cyclictest_doc({55: 990, 300: 8}, avg=57.0)
+        b = cyclictest_doc({65: 990}, avg=80.0, above_range=5, max_us=2500)
+        f = report.cyclictest_latency([a, b], True, PERIOD_US, 1.0)
+        self.assertEqual(f["cycles"], 1993)
+        self.assertEqual(f["skipped"], 7)
+        self.assertEqual(f["min_us"], 55.0)
+        self.assertEqual(f["max_us"], 2500.0)
+        self.assertAlmostEqual(f["mean_us"], (57.0 * 998 + 80.0 * 995) / 1993)
+        # 2000 slots: p99 rank 1980 = 990 + 990 = 1980 -> the 65 us bin.
+        self.assertEqual((f["p99_us"], f["bounds"]["p99"]), (66, "<="))
+        # The 5 samples above -h's 2 ms range and the 7 skipped slots are late by a period or more.
+        self.assertEqual(f["late_slots"], 12)
+
+
+if __name__ == "__main__":
+    unittest.main()
