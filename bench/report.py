@@ -6,9 +6,10 @@
     report.py --markdown OUT.json      the table of a finished run in Markdown (docs/performance.md)
 
 RAW holds perf.json (cpm_perf), scipy.json (scipy_ballbar.py), gbench.json
-(cpm_bench), and for each of the K latency segments cpmd_stats_<k>.json
-(cpmd --stats-json) and cyclictest_<k>.json, each S/K seconds long; the
-segments of one program are merged into one histogram.
+(cpm_bench), and for each of the K latency turns: cpmd_stats_<k>.json (cpmd
+--stats-json) with cyclictest_<k>.json, run at the same time on two CPUs
+(cpus_<k>.txt says which), and cyclictest_idle_<k>.json, run alone; the turns
+of each are merged into one histogram.
 Standard library only. Units: ns and µs for times of the cycle, s for tools,
 bit and Hz for the bus; shares are of the loop period.
 """
@@ -23,31 +24,25 @@ import subprocess
 # The daemon's histogram (daemon/src/loop.cpp, msgs/lcm/loop_stats_t.lcm):
 # 1 µs bins below 200 µs, 50 µs bins to 2 ms, one bin for everything above.
 FINE_LIMIT_US, COARSE_WIDTH_US, TOP_US = 200, 50, 2000
+# The wake-up latency of both programs is compared in 1 µs bins to 2 ms:
+# cyclictest -h 2000 and cpmd's histogram_1us.
 
 
-def bin_floor_us(us):
-    """Lower edge (µs) of the daemon's bin holding a latency of `us` (integer µs)."""
-    if us < FINE_LIMIT_US:
-        return us
-    if us < TOP_US:
-        return FINE_LIMIT_US + COARSE_WIDTH_US * ((us - FINE_LIMIT_US) // COARSE_WIDTH_US)
-    return TOP_US
-
-
-def bin_ceiling_us(floor, max_us):
-    if floor < FINE_LIMIT_US:
+def bin_ceiling_us(floor, max_us, fine_limit_us=FINE_LIMIT_US):
+    if floor < fine_limit_us:
         return floor + 1
     if floor < TOP_US:
         return floor + COARSE_WIDTH_US
     return max_us
 
 
-def percentiles(hist, max_us, late=0, period_us=None, qs=(0.5, 0.99, 0.999)):
-    """Nearest-rank percentiles over the slots of a run: `hist` {bin floor µs: count}
-    in the daemon's bins, plus `late` slots known only to be late by a period or
-    more (the slots skipped after a stall). Each is (value, bound): the upper edge of its bin
-    with '<=' (never above the measured maximum), or, among the slots late by a
-    period or more, whose order the histogram cannot give, the period with '>='."""
+def percentiles(hist, max_us, late=0, period_us=None, qs=(0.5, 0.99, 0.999), fine_limit_us=FINE_LIMIT_US):
+    """Nearest-rank percentiles over the slots of a run: `hist` {bin floor µs: count},
+    1 µs bins below `fine_limit_us` (the daemon's bins above), plus `late` slots known
+    only to be late by a period or more (the slots skipped after a stall). Each is
+    (value, bound): the upper edge of its bin with '<=' (never above the measured
+    maximum), or, among the slots late by a period or more, whose order the histogram
+    cannot give, the period with '>='."""
     total = sum(hist.values()) + late
     out = {}
     for q in qs:
@@ -59,13 +54,14 @@ def percentiles(hist, max_us, late=0, period_us=None, qs=(0.5, 0.99, 0.999)):
                 break
             seen += hist[floor]
             if seen >= rank:
-                out[q] = (min(bin_ceiling_us(floor, max_us), max_us), "<=")
+                out[q] = (min(bin_ceiling_us(floor, max_us, fine_limit_us), max_us), "<=")
                 break
     return out
 
 
 def latency_figures(hist, late, period_us, max_us, min_us, mean_us, cycles):
-    p = percentiles(hist, max_us, late, period_us)
+    """`hist`: {µs: count} in 1 µs bins to 2 ms, everything above in the bin at 2 ms."""
+    p = percentiles(hist, max_us, late, period_us, fine_limit_us=TOP_US)
     late_slots = late + sum(n for floor, n in hist.items() if floor >= period_us)
     return {"cycles": cycles, "min_us": min_us, "mean_us": mean_us, "p50_us": p[0.5][0], "p99_us": p[0.99][0],
             "p999_us": p[0.999][0], "max_us": max_us,
@@ -80,13 +76,18 @@ def merge_series(series):
     """One of cpmd's timing series over several runs: counts and histograms add."""
     ran = [s for s in series if s["count"]]
     count = sum(s["count"] for s in ran)
-    hist = {}
-    for s in ran:
-        for k, n in s["histogram_us"].items():
-            hist[k] = hist.get(k, 0) + n
-    return {"count": count, "min_ns": min((s["min_ns"] for s in ran), default=0),
-            "max_ns": max((s["max_ns"] for s in ran), default=0),
-            "mean_ns": sum(s["mean_ns"] * s["count"] for s in ran) / count if count else 0.0, "histogram_us": hist}
+    out = {"count": count, "min_ns": min((s["min_ns"] for s in ran), default=0),
+           "max_ns": max((s["max_ns"] for s in ran), default=0),
+           "mean_ns": sum(s["mean_ns"] * s["count"] for s in ran) / count if count else 0.0}
+    for name in ("histogram_us", "histogram_1us"):
+        if not all(name in s for s in series):
+            continue
+        hist = {}
+        for s in ran:
+            for k, n in s[name].items():
+                hist[k] = hist.get(k, 0) + n
+        out[name] = hist
+    return out
 
 
 def merge_cpmd_stats(docs):
@@ -102,8 +103,10 @@ def merge_cpmd_stats(docs):
 
 def cpmd_latency(stats, period_us):
     s = stats["series"]["wakeup_latency"]
+    if "histogram_1us" not in s:
+        raise SystemExit("report.py: cpmd's --stats-json has no histogram_1us (a cpmd older than this report)")
     hist = {}
-    for k, n in s["histogram_us"].items():
+    for k, n in s["histogram_1us"].items():
         hist[int(k)] = hist.get(int(k), 0) + n
     f = latency_figures(hist, stats["skipped"], period_us, s["max_ns"] / 1000.0, s["min_ns"] / 1000.0,
                         s["mean_ns"] / 1000.0, s["count"])
@@ -120,12 +123,23 @@ def cpmd_latency(stats, period_us):
     return f
 
 
+def cyclictest_seconds(doc, default):
+    """The -D of a cyclictest run, from the command line its JSON records."""
+    words = doc.get("cmdline:", "").split()
+    if "-D" in words[:-1]:
+        try:
+            return float(words[words.index("-D") + 1])
+        except ValueError:
+            pass
+    return default
+
+
 def cyclictest_latency(docs, realtime, period_us, seconds_each):
-    """cyclictest's 1 µs histograms of several runs, each `seconds_each` long,
-    in the daemon's bins. After a stall cyclictest, like cpmd, takes one sample
-    (the whole lateness) and moves on to the first slot still ahead: the slots
-    it skipped are the run's slots it has no sample for (seconds / period -
-    cycles; its start-up may shift this by a slot or two per run)."""
+    """cyclictest's 1 µs histograms (-h 2000) of several runs, each `seconds_each`
+    long unless its command line says otherwise. After a stall cyclictest, like
+    cpmd, takes one sample (the whole lateness) and moves on to the first slot
+    still ahead: the slots it skipped are the run's slots it has no sample for
+    (seconds / period - cycles; its start-up may shift this by a slot or two per run)."""
     hist = {}
     cycles = skipped = 0
     mins, maxs, weighted_mean = [], [], 0.0
@@ -134,21 +148,36 @@ def cyclictest_latency(docs, realtime, period_us, seconds_each):
         n_cycles = int(t["cycles"])
         counted = 0
         for k, n in t["histogram"].items():
-            b = bin_floor_us(int(k))
+            b = min(int(k), TOP_US)
             hist[b] = hist.get(b, 0) + n
             counted += n
         overflow = n_cycles - counted          # above the -h range (2 ms)
         if overflow > 0:
             hist[TOP_US] = hist.get(TOP_US, 0) + overflow
-        skipped += max(0, round(seconds_each * 1e6 / period_us) - n_cycles)
+        skipped += max(0, round(cyclictest_seconds(doc, seconds_each) * 1e6 / period_us) - n_cycles)
         cycles += n_cycles
         mins.append(float(t["min"]))
         maxs.append(float(t["max"]))
         weighted_mean += float(t["avg"]) * n_cycles
     f = latency_figures(hist, skipped, period_us, max(maxs), min(mins), weighted_mean / max(cycles, 1), cycles)
     f.update({"realtime": realtime, "memory_locked": True, "skipped": skipped,
-              "version": docs[0].get("rt_test_version:", "")})
+              "version": docs[0].get("rt_test_version:", ""), "cpus": sorted({int(d["thread"]["0"].get("cpu", -1)) for d in docs})})
     return f
+
+
+def latency_ratio(a, b):
+    """a / b for p50, p99, p99.9 and max, each with what kind of figure it is:
+    '~' (two bin edges of the same bins), '=' (maxima), '>=' or '<=' where one
+    side is only a bound; None where both are '>= one period'."""
+    value, bound = {}, {}
+    for k in ("p50", "p99", "p999", "max"):
+        ba, bb = a["bounds"].get(k, "="), b["bounds"].get(k, "=")
+        if not b[k + "_us"] or (ba == ">=" and bb == ">="):
+            value[k], bound[k] = None, None
+            continue
+        value[k] = a[k + "_us"] / b[k + "_us"]
+        bound[k] = ">=" if ba == ">=" else "<=" if bb == ">=" else "=" if k == "max" else "~"
+    return value, bound
 
 
 def seconds_of(bash_time):
@@ -234,23 +263,17 @@ def build(a):
     cpmd = cpmd_latency(merge_cpmd_stats([load(f"cpmd_stats_{k}.json") for k in segments]), a.interval_us)
     ct = cyclictest_latency([load(f"cyclictest_{k}.json") for k in segments], bool(a.realtime_allowed),
                             a.interval_us, a.seconds / a.segments)
-
-    def ratio_of(k):
-        """cpmd / cyclictest and what kind of figure it is: '=' (maxima), '<=' or '>='
-        where one side is a bound; None where both are '>= one period'."""
-        bc, bt = cpmd["bounds"].get(k, "="), ct["bounds"].get(k, "=")
-        if not ct[k + "_us"] or (bc == ">=" and bt == ">="):
-            return None, None
-        value = cpmd[k + "_us"] / ct[k + "_us"]
-        if bc == ">=":
-            return value, ">="   # cpmd at least a period: the ratio is at least this
-        if bt == ">=":
-            return value, "<="   # cyclictest at least a period: the ratio is at most this
-        return value, "~"         # two bin edges of the same bins
-
-    ratios = {k: ratio_of(k) for k in ("p50", "p99", "p999", "max")}
-    ratio = {k: v for k, (v, _) in ratios.items()}
-    ratio_bound = {k: b for k, (_, b) in ratios.items()}
+    idle = cyclictest_latency([load(f"cyclictest_idle_{k}.json") for k in segments], bool(a.realtime_allowed),
+                              a.interval_us, a.seconds / a.segments)
+    pinning = []
+    for k in segments:
+        path = os.path.join(d, f"cpus_{k}.txt")
+        if os.path.exists(path):
+            pinning.append(dict(x.split("=", 1) for x in open(path).read().split()))
+    cpmd["cpus"] = sorted({p["cpmd_cpu"] for p in pinning})
+    ratio, ratio_bound = latency_ratio(cpmd, ct)
+    ratio_idle, ratio_idle_bound = latency_ratio(cpmd, idle)
+    load_effect, load_effect_bound = latency_ratio(ct, idle)
     kim = perf["kim"]
     lm, trf = sp["methods"]["lm"], sp["methods"]["trf"]
     cpp_solve_s = kim["solve"]["median_ns"] * 1e-9
@@ -268,12 +291,16 @@ def build(a):
         "latency": {
             "seconds": a.seconds, "priority": a.priority, "interval_us": a.interval_us,
             "segments": a.segments,
-            "order": f"interleaved: {a.segments} segments of {a.seconds / a.segments:g} s each, cpmd and cyclictest "
-                     "taking turns (ABBA: the one that went second goes first next), never at once; "
-                     "same priority, period and memory locking",
-            "histogram": "1 us bins below 200 us, 50 us bins to 2 ms, one bin above; percentiles over slots, "
-                         "as bin upper edges (<=), or >= one period among the slots a period or more late",
-            "cpmd": cpmd, "cyclictest": ct, "ratio": ratio, "ratio_bound": ratio_bound},
+            "order": f"{a.segments} turns of {a.seconds / a.segments:g} s, each two runs in ABBA order: cpmd and "
+                     "cyclictest at once, each pinned to its own CPU, swapped every turn (cyclictest from 0.5 s before "
+                     "cpmd starts to about 0.4 s after it ends), and cyclictest alone (idle); same priority, period and "
+                     "memory locking",
+            "pinning": pinning,
+            "histogram": "1 us bins to 2 ms, one bin above; percentiles over slots, as bin upper edges (<=), "
+                         "or >= one period among the slots a period or more late",
+            "cpmd": cpmd, "cyclictest": ct, "ratio": ratio, "ratio_bound": ratio_bound,
+            "cyclictest_idle": idle, "ratio_idle": ratio_idle, "ratio_idle_bound": ratio_idle_bound,
+            "load_effect": load_effect, "load_effect_bound": load_effect_bound},
         "bus": perf["bus"],
         "calibration": {
             "problem": "Kim's 32-point ball-bar, 9 unknowns, analytic Jacobian, the same tolerances",
@@ -336,20 +363,27 @@ def table(r):
     row("simulator", "real-time factor, closed loop (sim)", f"{rtf['closed_loop']:.1f}")
     row("simulator", "real-time factor, cpmd loop on its sim backend", f"{rtf['daemon_loop_sim']:.1f}")
     L = r["latency"]
-    c, t, q = L["cpmd"], L["cyclictest"], L["ratio"]
+    c, t, i = L["cpmd"], L["cyclictest"], L["cyclictest_idle"]
     sched = lambda x: "SCHED_FIFO " + str(L["priority"]) if x["realtime"] else "normal scheduling"  # noqa: E731
-    segs = L.get("segments", 1)
-    how = "one after the other" if segs == 1 else f"interleaved in {segs} turns of {L['seconds'] / segs:g} s"
-    row("wake-up latency", f"{L['seconds']:g} s at {L['interval_us']} us each, {how}",
-        f"cpmd: {sched(c)}, {c['cycles']} cycles", f"cyclictest: {sched(t)}, {t['cycles']} cycles")
+    cpus = lambda x: "CPU " + "/".join(str(v) for v in x.get("cpus", [])) if x.get("cpus") else "any CPU"  # noqa: E731
+    segs = L["segments"]
+    row("wake-up latency", f"{L['seconds']:g} s at {L['interval_us']} us, {segs} turns of {L['seconds'] / segs:g} s, "
+        "cpmd and cyclictest at once (CPUs swapped each turn)",
+        f"cpmd: {sched(c)}, {cpus(c)}, {c['cycles']} cycles", f"cyclictest: {sched(t)}, {cpus(t)}, {t['cycles']} cycles")
+
+    def fig(x, k):
+        return (x["bounds"].get(k, "") + " " if k in x["bounds"] else "") + f"{x[k + '_us']:.0f} us"
+
+    def ratio_text(q, qb, k):
+        if q[k] is None:
+            return "no ratio (both >= a period)"
+        return f"ratio {'' if qb[k] in ('~', '=') else qb[k] + ' '}{q[k]:.2f}"
+
     for k, name in (("p50", "p50"), ("p99", "p99"), ("p999", "p99.9"), ("max", "max")):
-        verdict = ok(B["wakeup_p99_ratio"]) if k == "p99" else ""
-        fig = lambda x: (x["bounds"].get(k, "") + " " if k in x["bounds"] else "") + f"{x[k + '_us']:.0f} us"  # noqa: E731
-        qb = L["ratio_bound"][k]
-        ratio = (f"ratio {'' if qb in ('~', '=') else qb + ' '}{q[k]:.2f}" if q[k] is not None
-                 else "no ratio (both >= a period)")
-        row("wake-up latency", name + (" over slots" if k != "max" else ""), "cpmd " + fig(c),
-            "cyclictest " + fig(t) + ("; budget ratio <= 1.2" if k == "p99" else ""), f"{ratio} {verdict}".strip())
+        verdict = " " + ok(B["wakeup_p99_ratio"]) if k == "p99" else ""
+        row("wake-up latency", name + (" over slots" if k != "max" else ""), "cpmd " + fig(c, k),
+            "cyclictest " + fig(t, k) + ("; budget ratio <= 1.2" if k == "p99" else ""),
+            ratio_text(L["ratio"], L["ratio_bound"], k) + verdict)
     row("wake-up latency", "slots late by a period or more", f"cpmd {c['late_slots']} ({c['skipped']} skipped)",
         f"cyclictest {t['late_slots']} ({t['skipped']} skipped)")
     row("wake-up latency", "mean / min (us)", f"cpmd {c['mean_us']:.1f} / {c['min_us']:.1f}",
@@ -361,6 +395,10 @@ def table(r):
     if cyc:
         row("wake-up latency", "cpmd whole cycle in the run: mean / p99 / max",
             f"{cyc['mean_ns'] / 1000:.1f} / {cyc['p99_us']:g} / {cyc['max_us']:.1f} us")
+    row("wake-up latency", f"the idle machine: cyclictest alone, {i['cycles']} cycles, p50 / p99 / p99.9",
+        f"{fig(i, 'p50')} / {fig(i, 'p99')} / {fig(i, 'p999')}; {i['late_slots']} slots late",
+        "cpmd against it: p99 " + ratio_text(L["ratio_idle"], L["ratio_idle_bound"], "p99"),
+        "cyclictest with cpmd running / idle: p99 " + ratio_text(L["load_effect"], L["load_effect_bound"], "p99"))
     bus = r["bus"]
     s, alt, fb = bus["shipped"], bus["alternative"], bus["fake_bus"]
     row("CAN bus", f"{bus['drives']} drives, {bus['bitrate'] / 1e6:g} Mbit/s, {bus['rate_hz']:g} Hz: frames per cycle",

@@ -9,14 +9,13 @@
 #                  real ones)
 #   --json FILE    where to write the JSON (default build/bench/perf.json)
 #   --seconds S    length of each latency run (default 60; 2 with --quick)
-#   --segments K   cut each latency run into K turns of S/K seconds, cpmd and
-#                  cyclictest taking turns (default 6; 2 with --quick)
+#   --segments K   cut the latency runs into K turns of S/K seconds (default 6; 2
+#                  with --quick)
 #   --build-dir    the build to use (default build)
 #   --no-build     do not run tools/build.sh first
 #
-# What runs, in this order (nothing in parallel: each figure gets the
-# machine to itself, the two latency runs see the same background, as far as
-# taking turns makes it the same):
+# What runs, in this order (one step at a time: each figure gets the machine
+# to itself, but for the two programs of the latency comparison):
 #   1. cpm_perf: control cycle, controller and plant steps per call,
 #      real-time factors, CAN bus load, Kim's ball-bar solve (C++), and the
 #      problem exported for SciPy;
@@ -24,12 +23,18 @@
 #      same problem, the same residual, timed, solutions compared;
 #   3. cpm_bench (Google Benchmark): diagnose on a motion log and on ball-bar files;
 #   4. the zero-allocation test of the daemon's cycle;
-#   5. cpmd on config/sim.yaml at its priority, running circles
-#      (daemon/latency-run.sh), and cyclictest at the same SCHED_FIFO priority
-#      and period, each with memory locked, taking turns in K segments of S/K
-#      seconds (ABBA order: cpmd, cyclictest, cyclictest, cpmd, ...). A VM's
-#      stalls come and go over minutes; one program's 60 s followed by the
-#      other's compared two different backgrounds;
+#   5. the wake-up latency, in K turns of S/K seconds, each turn two runs
+#      (ABBA order: the one that went second goes first next):
+#      - together: cpmd on config/sim.yaml at its priority, running circles
+#        (daemon/latency-run.sh), its loop pinned to one CPU, and cyclictest
+#        at the same SCHED_FIFO priority and period, memory locked, pinned to
+#        another CPU, at the same time (from 0.5 s before cpmd starts to
+#        about 0.4 s after it ends); the two swap CPUs every turn. Both see the same
+#        stalls of the machine: the ratio of the two is what cpmd's loop adds
+#        to the kernel's own latency, the budget;
+#      - idle: cyclictest alone, S/K seconds: the machine without cpmd. A VM
+#        stalls more often when it is busier (docs/performance.md): this
+#        shows how much cpmd's run costs any real-time thread here;
 #   6. bench/report.py: the table with the budgets, and the JSON.
 # Exit status: 0 when every figure was measured (a budget that is not met is
 # reported in the table and the JSON, not as a failure of the command).
@@ -45,7 +50,7 @@ while [ $# -gt 0 ]; do
     --segments) segments=$2; shift ;;
     --build-dir) build_dir=$2; shift ;;
     --no-build) do_build=0 ;;
-    -h|--help) sed -n '2,35p' "$0"; exit 0 ;;
+    -h|--help) sed -n '2,38p' "$0"; exit 0 ;;
     *) echo "bench/run.sh: unknown option '$1'" >&2; exit 2 ;;
   esac
   shift
@@ -109,22 +114,41 @@ interval_us=$("$PY" -c "print(round(1e6 / $rate))")
 if chrt -f "$prio" true 2>/dev/null; then rt=1; ct_sched=(-p "$prio"); else rt=0; ct_sched=(--policy=other -p 0); fi
 
 mark compute
-say "5/5 wake-up latency: cpmd and cyclictest, ${seconds} s each in $segments turns of ${segment_s} s (priority $prio, $interval_us us)"
-run_cpmd() {
-  bash daemon/latency-run.sh "$B" "$segment_s" "$out/cpmd_stats_$1.json" >"$out/cpmd_run_$1.log" 2>&1 ||
-    { cat "$out/cpmd_run_$1.log" >&2; echo "bench/run.sh: the cpmd latency run ($1 of $segments) failed" >&2; exit 1; }
-}
+# Two CPUs for the latency runs: the last two (CPU 0 usually takes more of the
+# machine's interrupts, and the turns swap them anyway). On one CPU both run on it.
+ncpu=$(nproc)
+if [ "$ncpu" -ge 2 ]; then cpu_a=$((ncpu - 2)) cpu_b=$((ncpu - 1)); else cpu_a="" cpu_b=""; fi
+# cyclictest starts half a second before cpmd and runs a second longer than
+# cpmd's loop (its -D takes whole seconds): cpmd's start, loop and exit lie
+# inside cyclictest's run; the extra second, mostly without cpmd, can only
+# flatter cyclictest.
+say "5/5 wake-up latency: ${seconds} s in $segments turns of ${segment_s} s: cpmd with cyclictest at once (CPUs ${cpu_a:-any} and ${cpu_b:-any}, swapped each turn), and cyclictest alone (priority $prio, $interval_us us)"
 # --default-system: cyclictest leaves power management as it is (it would
-# otherwise hold /dev/cpu_dma_latency at 0, which cpmd does not): both runs
-# see the same C-states. -m: memory locked, as cpmd's lock_memory.
-# -h 2000: 1 us bins to 2 ms, the range of cpmd's histogram.
-run_cyclictest() {
-  cyclictest -q -m -t 1 "${ct_sched[@]}" -i "$interval_us" -D "$segment_s" -h 2000 --default-system \
-    --json="$out/cyclictest_$1.json" >"$out/cyclictest_$1.log" 2>&1 ||
-    { cat "$out/cyclictest_$1.log" >&2; echo "bench/run.sh: cyclictest ($1 of $segments) failed" >&2; exit 1; }
+# otherwise hold /dev/cpu_dma_latency at 0, which cpmd does not): both
+# programs see the same C-states. -m: memory locked, as cpmd's lock_memory.
+# -h 2000: 1 us bins to 2 ms, the range of cpmd's histogram_1us.
+cyclictest_run() {  # NAME SECONDS [CPU]
+  local aff=()
+  if [ -n "${3:-}" ]; then aff=(-a "$3"); fi
+  cyclictest -q -m -t 1 "${ct_sched[@]}" "${aff[@]}" -i "$interval_us" -D "$2" -h 2000 --default-system \
+    --json="$out/$1.json" >"$out/$1.log" 2>&1 ||
+    { cat "$out/$1.log" >&2; echo "bench/run.sh: cyclictest ($1) failed" >&2; return 1; }
+}
+run_together() {  # K
+  local cp_cpu=$cpu_b ct_cpu=$cpu_a
+  if [ $(($1 % 2)) -eq 0 ]; then cp_cpu=$cpu_a ct_cpu=$cpu_b; fi
+  cyclictest_run "cyclictest_$1" $((segment_s + 1)) "$ct_cpu" &
+  local ct_pid=$!
+  sleep 0.5
+  bash daemon/latency-run.sh "$B" "$segment_s" "$out/cpmd_stats_$1.json" ${cp_cpu:+"$cp_cpu"} >"$out/cpmd_run_$1.log" 2>&1 ||
+    { cat "$out/cpmd_run_$1.log" >&2; echo "bench/run.sh: the cpmd latency run ($1 of $segments) failed" >&2
+      kill "$ct_pid" 2>/dev/null; exit 1; }
+  wait "$ct_pid" || exit 1
+  echo "cpmd_cpu=${cp_cpu:-any} cyclictest_cpu=${ct_cpu:-any}" >"$out/cpus_$1.txt"
 }
 for k in $(seq 1 "$segments"); do
-  if [ $((k % 2)) -eq 1 ]; then run_cpmd "$k"; run_cyclictest "$k"; else run_cyclictest "$k"; run_cpmd "$k"; fi
+  if [ $((k % 2)) -eq 1 ]; then run_together "$k"; cyclictest_run "cyclictest_idle_$k" "$segment_s" || exit 1
+  else cyclictest_run "cyclictest_idle_$k" "$segment_s" || exit 1; run_together "$k"; fi
 done
 mark latency_runs
 

@@ -3,19 +3,22 @@
 # backend, the machine enabled and running circles the whole time, then the
 # wake-up latency and per-phase times as `cpm stats` prints them.
 # Runs in a private network namespace when root (LCM stays inside), else on
-# loopback with ttl=0.   usage: daemon/latency-run.sh [BUILD_DIR] [SECONDS] [STATS_JSON]
+# loopback with ttl=0.   usage: daemon/latency-run.sh [BUILD_DIR] [SECONDS] [STATS_JSON] [CPU]
 # STATS_JSON: where to keep cpmd's --stats-json (bench/run.sh reads it).
+# CPU: pin the loop to this CPU (cpmd --loop-cpu), instead of config/sim.yaml's loop.cpu.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 B=${1:-build}/bin
 T=${2:-60}
 J=${3:-}
+cpu_opt=()
+if [ -n "${4:-}" ]; then cpu_opt=(--loop-cpu "$4"); fi
 if [ "$(id -u)" -eq 0 ] && [ -z "${CPMD_IN_NETNS:-}" ]; then
   exec unshare -n env CPMD_IN_NETNS=1 bash -c 'ip link set lo up; ip route add 224.0.0.0/4 dev lo; exec "$0" "$@"' "$0" "$@"
 fi
 out=$(mktemp -d)
 if [ -n "$J" ]; then trap 'rm -rf "$out"' EXIT; fi
-"$B/cpmd" --config config/sim.yaml --duration "$T" --stats-json "$out/stats.json" 2>"$out/cpmd.log" &
+"$B/cpmd" --config config/sim.yaml "${cpu_opt[@]}" --duration "$T" --stats-json "$out/stats.json" 2>"$out/cpmd.log" &
 pid=$!
 sleep 0.5
 "$B/cpm" enable >/dev/null

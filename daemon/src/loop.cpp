@@ -444,6 +444,7 @@ void ControlLoop::record_schedule(bool overrun, std::int64_t skipped) noexcept {
 
 void ControlLoop::cycle(std::int64_t k, std::int64_t latency_ns) noexcept {
   add_sample(kSeriesLatency, latency_ns);
+  latency_us_[static_cast<std::size_t>(std::clamp<std::int64_t>(latency_ns / 1000, 0, kFineLatencyBins - 1))]++;
   const std::int64_t t0 = now_ns();
   if (mode_ == Mode::init) enter(Mode::disabled);
 

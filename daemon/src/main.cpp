@@ -1,5 +1,5 @@
 // cpmd: the motion controller daemon. See docs/daemon.md.
-//   cpmd --config FILE [--check] [--duration S] [--stats-json FILE]
+//   cpmd --config FILE [--check] [--duration S] [--stats-json FILE] [--loop-cpu N]
 #include <fcntl.h>
 #include <signal.h>
 #include <unistd.h>
@@ -10,6 +10,7 @@
 #include <cstdio>
 #include <cstring>
 #include <fstream>
+#include <optional>
 #include <sstream>
 #include <string>
 #include <thread>
@@ -26,14 +27,17 @@ using namespace cpm::daemon;
 
 void usage() {
   std::fprintf(stderr,
-               "usage: cpmd --config FILE [--check] [--duration S] [--stats-json FILE]\n"
+               "usage: cpmd --config FILE [--check] [--duration S] [--stats-json FILE] [--loop-cpu N]\n"
                "  --config FILE      the daemon's YAML configuration (config/sim.yaml)\n"
                "  --check            validate the configuration and the model files, then exit\n"
                "  --duration S       run S seconds, then shut down (latency runs)\n"
-               "  --stats-json FILE  at exit, write the loop statistics as JSON\n");
+               "  --stats-json FILE  at exit, write the loop statistics as JSON\n"
+               "  --loop-cpu N       pin the real-time loop to CPU N (-1: any), instead of loop.cpu\n");
 }
 
-std::string stats_json(const cpm_msgs::loop_stats_t& s) {
+// `fine`: the wake-up latency in 1 us bins (ControlLoop::fine_latency_histogram),
+// written beside series 0's coarse histogram as "histogram_1us" (bench/report.py).
+std::string stats_json(const cpm_msgs::loop_stats_t& s, const FineLatencyHistogram& fine) {
   static const char* names[kSeries] = {"wakeup_latency", "read", "estimate", "trajectory", "inverse_kinematics",
                                        "controller", "safety", "write", "publish", "cycle"};
   std::ostringstream os;
@@ -50,7 +54,18 @@ std::string stats_json(const cpm_msgs::loop_stats_t& s) {
         os << (first ? "" : ", ") << '"' << histogram_bin_floor(b) / 1000 << "\": " << s.histogram[i][b];
         first = false;
       }
-    os << "}}";
+    os << "}";
+    if (i == kSeriesLatency) {
+      os << ", \"histogram_1us\": {";
+      first = true;
+      for (int b = 0; b < kFineLatencyBins; ++b)
+        if (fine[static_cast<std::size_t>(b)]) {
+          os << (first ? "" : ", ") << '"' << b << "\": " << fine[static_cast<std::size_t>(b)];
+          first = false;
+        }
+      os << "}";
+    }
+    os << "}";
   }
   os << "}}\n";
   return os.str();
@@ -75,9 +90,26 @@ void write_atomically(const std::string& path, const std::string& text) {
   std::fprintf(stderr, "cpmd: cannot write %s: %s\n", path.c_str(), std::strerror(errno));
 }
 
+// --loop-cpu: a CPU this machine has, or -1 (any); the loop.cpu key, for one run.
+int parse_cpu(const std::string& text) {
+  std::size_t used = 0;
+  long cpu = -2;
+  try {
+    cpu = std::stol(text, &used);
+  } catch (const std::exception&) {
+    used = 0;
+  }
+  const long cpus = ::sysconf(_SC_NPROCESSORS_CONF);
+  if (used != text.size() || used == 0 || cpu < -1 || (cpus > 0 && cpu >= cpus))
+    throw Error("--loop-cpu '" + text + "': want -1 (any CPU) or a CPU number from 0 to " +
+                std::to_string(cpus > 0 ? cpus - 1 : 1023));
+  return static_cast<int>(cpu);
+}
+
 int run(int argc, char** argv) {
   std::string config_path, stats_path;
   double duration = -1;
+  std::optional<int> loop_cpu;
   bool check = false;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -89,12 +121,17 @@ int run(int argc, char** argv) {
     else if (a == "--stats-json") stats_path = value();
     else if (a == "--duration") duration = std::stod(value());
     else if (a == "--check") check = true;
+    else if (a == "--loop-cpu") loop_cpu = parse_cpu(value());
     else if (a == "--help" || a == "-h") { usage(); return 0; }
     else { usage(); throw Error("unknown option '" + a + "'"); }
   }
   if (config_path.empty()) { usage(); return 2; }
 
-  const DaemonConfig cfg = load_config(config_path);
+  const DaemonConfig cfg = [&] {
+    DaemonConfig c = load_config(config_path);
+    if (loop_cpu) c.loop.cpu = *loop_cpu;
+    return c;
+  }();
   ctl::MachineModel model = load_model(cfg.model_file);
   model.force_limit = std::min(model.force_limit, cfg.limits.force);
   auto models = std::make_unique<ModelStore>(std::make_unique<ctl::Machine>(model));
@@ -178,7 +215,7 @@ int run(int argc, char** argv) {
   lcm_thread.join();
   backend->stop();
   const cpm_msgs::loop_stats_t& st = loop->current_stats();
-  if (!stats_path.empty()) write_atomically(stats_path, stats_json(st));
+  if (!stats_path.empty()) write_atomically(stats_path, stats_json(st, loop->fine_latency_histogram()));
   std::fprintf(stderr, "cpmd: stopped after %lld cycles, %lld overruns, worst wake-up latency %.1f us\n",
                static_cast<long long>(st.cycles), static_cast<long long>(st.overruns),
                st.max_ns[kSeriesLatency] * 1e-3);

@@ -17,7 +17,7 @@ REQUIRED = {
     "plant_step": {"median_ns": NUM, "p99_ns": NUM, "median_share": NUM, "substeps": int, "substeps_sweep": list},
     "rtf": {"plant": NUM, "plant_shipped": NUM, "closed_loop": NUM, "daemon_loop_sim": NUM},
     "latency": {"seconds": NUM, "segments": int, "priority": int, "interval_us": int, "cpmd": dict, "cyclictest": dict,
-                "ratio": dict},
+                "cyclictest_idle": dict, "ratio": dict, "ratio_idle": dict, "load_effect": dict, "pinning": list},
     "bus": {"drives": int, "bitrate": NUM, "rate_hz": NUM, "best_case_bits_per_cycle": int,
             "rate_at_full_load_hz": NUM, "shipped": dict, "alternative": dict, "fake_bus": dict},
     "calibration": {"poses": int, "cpp_solve_s": NUM, "cpp_fit_s": NUM, "scipy_lm_s": NUM, "scipy_trf_s": NUM,
@@ -57,17 +57,25 @@ def main():
         if isinstance(r.get(section), dict):
             check(r[section], spec, section, errors)
     lat = r.get("latency", {})
-    for who in ("cpmd", "cyclictest"):
+    for who in ("cpmd", "cyclictest", "cyclictest_idle"):
         check(lat.get(who, {}), dict(LATENCY, skipped=int), f"latency.{who}", errors)
+    # The together runs: cpmd and cyclictest each on its own CPU in every turn (on a machine of two or more).
+    if isinstance(r.get("machine", {}).get("cores"), int) and r["machine"]["cores"] >= 2:
+        for k, p in enumerate(lat.get("pinning", []), 1):
+            if not isinstance(p, dict) or p.get("cpmd_cpu") in (None, "any") or p.get("cpmd_cpu") == p.get("cyclictest_cpu"):
+                errors.append(f"latency.pinning[{k}]: {p!r}: cpmd and cyclictest not on two CPUs")
+        if len(lat.get("pinning", [])) != lat.get("segments"):
+            errors.append(f"latency.pinning: {len(lat.get('pinning', []))} turns of {lat.get('segments')}")
     # Every turn merged: the slots run or skipped cover the whole run, not one turn of it.
     if isinstance(lat.get("seconds"), NUM) and isinstance(lat.get("interval_us"), int) and lat["interval_us"] > 0:
         slots = lat["seconds"] * 1e6 / lat["interval_us"]
-        for who in ("cpmd", "cyclictest"):
+        for who in ("cpmd", "cyclictest", "cyclictest_idle"):
             w = lat.get(who, {})
             if isinstance(w.get("cycles"), int) and isinstance(w.get("skipped"), int) and \
                     w["cycles"] + w["skipped"] < 0.75 * slots:
                 errors.append(f"latency.{who}: {w['cycles']} cycles + {w['skipped']} skipped of {slots:.0f} slots")
-    check(lat.get("ratio", {}), {k: NUM_OR_NULL for k in ("p50", "p99", "p999", "max")}, "latency.ratio", errors)
+    for name in ("ratio", "ratio_idle", "load_effect"):
+        check(lat.get(name, {}), {k: NUM_OR_NULL for k in ("p50", "p99", "p999", "max")}, f"latency.{name}", errors)
     for m in ("shipped", "alternative"):
         check(r.get("bus", {}).get(m, {}), BUS, f"bus.{m}", errors)
     for d in ("motion_1khz", "ballbar_32_file", "ballbar_192"):

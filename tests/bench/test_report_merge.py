@@ -11,19 +11,30 @@ import report  # noqa: E402
 PERIOD_US = 1000
 
 
+def coarse_floor_us(us):
+    """loop_stats_t's bins: 1 us below 200 us, 50 us to 2 ms, one above."""
+    return us if us < 200 else 200 + 50 * ((us - 200) // 50) if us < 2000 else 2000
+
+
 def cpmd_doc(hist_us, skipped, overruns, mean_ns):
-    """A cpmd --stats-json with one wake-up series (histogram keys as cpmd writes them: strings)."""
+    """A cpmd --stats-json with one wake-up series, in loop_stats_t's bins and in 1 us
+    bins (histogram keys as cpmd writes them: strings)."""
     count = sum(hist_us.values())
+    coarse = {}
+    for k, n in hist_us.items():
+        coarse[coarse_floor_us(k)] = coarse.get(coarse_floor_us(k), 0) + n
     lat = {"count": count, "min_ns": min(hist_us) * 1000, "max_ns": max(hist_us) * 1000 + 500, "mean_ns": mean_ns,
-           "histogram_us": {str(k): n for k, n in hist_us.items()}}
+           "histogram_us": {str(k): n for k, n in coarse.items()},
+           "histogram_1us": {str(min(k, 2000)): n for k, n in hist_us.items()}}
     idle = {"count": 0, "min_ns": 0, "max_ns": 0, "mean_ns": 0.0, "histogram_us": {}}
     return {"rate_hz": 1000, "cycles": count, "overruns": overruns, "skipped": skipped, "realtime": True,
             "memory_locked": True, "series": {"wakeup_latency": lat, "publish": idle}}
 
 
-def cyclictest_doc(hist_us, avg, above_range=0, max_us=None):
+def cyclictest_doc(hist_us, avg, above_range=0, max_us=None, seconds=None):
     """cyclictest --json with -h 2000: samples of 2 ms or more are counted in cycles, not in the histogram."""
-    return {"rt_test_version:": "2.40", "thread": {"0": {
+    cmdline = {"cmdline:": f"cyclictest -q -m -t 1 -p 80 -i 1000 -D {seconds} -h 2000"} if seconds else {}
+    return {**cmdline, "rt_test_version:": "2.40", "thread": {"0": {
         "histogram": {str(k): n for k, n in hist_us.items()}, "cycles": str(sum(hist_us.values()) + above_range),
         "min": str(min(hist_us)), "max": str(max_us or max(hist_us)), "avg": str(avg)}}}
 
@@ -44,7 +55,7 @@ class MergeTurns(unittest.TestCase):
         self.assertAlmostEqual(s["mean_ns"], (56000.0 * 1000 + 88000.0 * 1000) / 2000)
         self.assertEqual(m["series"]["publish"]["count"], 0)
         f = report.cpmd_latency(m, PERIOD_US)
-        # 2005 slots: 990 at 50 us, 980 at 60, 10 in the 700-750 bin, 20 at 1500, 5 skipped.
+        # 2005 slots: 990 at 50 us, 980 at 60, 10 at 700, 20 at 1500, 5 skipped.
         # p50, rank 1003: the 60 us bin (<= 61 us). p99, rank 1985: 1970 + 10 = 1980 < 1985, so among the
         # slots a period or more late: '>= 1000'.
         self.assertEqual((f["p50_us"], f["bounds"]["p50"]), (61, "<="))
@@ -69,6 +80,47 @@ class MergeTurns(unittest.TestCase):
         self.assertEqual((f["p99_us"], f["bounds"]["p99"]), (66, "<="))
         # The 5 samples above -h's 2 ms range and the 7 skipped slots are late by a period or more.
         self.assertEqual(f["late_slots"], 12)
+
+
+class FineBins(unittest.TestCase):
+    def test_p99_at_one_microsecond_not_fifty(self):
+        # 1000 slots each. cpmd: 985 at 60 us, 15 at 251 us; cyclictest: 985 at 60 us, 15 at 230 us.
+        # In loop_stats_t's bins the two p99 would be 300 and 250 us (ratio 1.2); in 1 us bins the upper
+        # edges 252 and 231, each capped at its run's measured maximum (251.5 and 230 us).
+        c = report.cpmd_latency(cpmd_doc({60: 985, 251: 15}, skipped=0, overruns=0, mean_ns=62000.0), PERIOD_US)
+        t = report.cyclictest_latency([cyclictest_doc({60: 985, 230: 15}, avg=62.0)], True, PERIOD_US, 1.0)
+        self.assertEqual((c["p99_us"], t["p99_us"]), (251.5, 230.0))
+        ratio, bound = report.latency_ratio(c, t)
+        self.assertAlmostEqual(ratio["p99"], 251.5 / 230.0)
+        self.assertEqual(bound["p99"], "~")
+        self.assertEqual(bound["max"], "=")
+
+    def test_cpmd_above_two_ms_counts_as_late(self):
+        c = report.cpmd_latency(cpmd_doc({60: 990, 2500: 10}, skipped=30, overruns=10, mean_ns=90000.0), PERIOD_US)
+        self.assertEqual(c["late_slots"], 40)
+        self.assertEqual((c["p99_us"], c["bounds"]["p99"]), (PERIOD_US, ">="))
+
+    def test_ratio_bounds_when_one_side_is_a_period_or_more(self):
+        c = report.cpmd_latency(cpmd_doc({60: 985, 400: 15}, skipped=0, overruns=0, mean_ns=62000.0), PERIOD_US)
+        t = report.cyclictest_latency([cyclictest_doc({60: 980}, avg=62.0, above_range=20, max_us=3000)],
+                                      True, PERIOD_US, 1.0)
+        ratio, bound = report.latency_ratio(c, t)
+        self.assertEqual(t["bounds"]["p99"], ">=")
+        self.assertEqual(bound["p99"], "<=")   # cpmd 400.5 us, cyclictest a period or more: at most 0.4005
+        self.assertAlmostEqual(ratio["p99"], 400.5 / PERIOD_US)
+        both_late = report.cpmd_latency(cpmd_doc({60: 980, 1200: 20}, skipped=0, overruns=0, mean_ns=0.0), PERIOD_US)
+        ratio, bound = report.latency_ratio(both_late, t)
+        self.assertIsNone(ratio["p99"])
+
+
+class RunLength(unittest.TestCase):
+    def test_skipped_slots_from_cyclictests_own_duration(self):
+        # A run of 3 s (a together run is a second longer than cpmd's): 2990 samples, 10 skipped,
+        # whatever the turn length passed in.
+        doc = cyclictest_doc({70: 2990}, avg=70.0, seconds=3)
+        self.assertEqual(report.cyclictest_seconds(doc, 1.0), 3.0)
+        self.assertEqual(report.cyclictest_latency([doc], True, PERIOD_US, 1.0)["skipped"], 10)
+        self.assertEqual(report.cyclictest_seconds(cyclictest_doc({70: 5}, avg=70.0), 1.5), 1.5)
 
 
 if __name__ == "__main__":

@@ -257,6 +257,47 @@ TEST(StateMachine, ConsecutiveOverrunsAreAFault) {
   EXPECT_EQ(h.state().overruns, 5);
 }
 
+// The wake-up latency is kept twice: in loop_stats_t's bins (1 us to 200 us,
+// then 50 us) and in 1 us bins to 2 ms (for the comparison with cyclictest).
+// Both must hold every sample, in the right bin.
+TEST(LoopStatistics, WakeUpLatencyInBothHistograms) {
+  LoopHarness h;
+  const auto& fine0 = h.loop->fine_latency_histogram();
+  const std::int64_t before = h.loop->current_stats().count[kSeriesLatency];
+  std::int64_t fine_before = 0;
+  for (auto n : fine0) fine_before += n;
+  ASSERT_EQ(fine_before, before);
+  // ns: within the fine range, on both sides of the coarse limit, exactly on
+  // bin edges, just below 2 ms, and far above it (one bin for all).
+  const std::int64_t planted[] = {0, 999, 1000, 66'400, 199'999, 200'000, 249'999, 250'000, 251'700,
+                                  1'999'999, 2'000'000, 40'000'000};
+  auto fine_count = [&](int us) { return h.loop->fine_latency_histogram()[static_cast<std::size_t>(us)]; };
+  auto coarse_count = [&](std::int64_t ns) { return h.loop->current_stats().histogram[kSeriesLatency][histogram_bin(ns)]; };
+  for (std::int64_t ns : planted) {
+    const int fine_bin = static_cast<int>(std::min<std::int64_t>(ns / 1000, kFineLatencyBins - 1));
+    const auto f0 = fine_count(fine_bin);
+    const auto c0 = coarse_count(ns);
+    h.loop->cycle(h.k++, ns);
+    h.drain_snapshots();
+    EXPECT_EQ(fine_count(fine_bin), f0 + 1) << ns << " ns";
+    EXPECT_EQ(coarse_count(ns), c0 + 1) << ns << " ns";
+  }
+  // Every coarse bin holds exactly the fine bins it spans.
+  const auto& st = h.loop->current_stats();
+  const auto& fine = h.loop->fine_latency_histogram();
+  for (int b = 0; b < kBins; ++b) {
+    const std::int64_t lo = histogram_bin_floor(b) / 1000;
+    const std::int64_t hi = b + 1 < kBins ? histogram_bin_floor(b + 1) / 1000 : kFineLatencyBins;
+    std::int64_t sum = 0;
+    for (std::int64_t us = lo; us < hi; ++us) sum += fine[static_cast<std::size_t>(us)];
+    EXPECT_EQ(sum, st.histogram[kSeriesLatency][b]) << "coarse bin " << b << " [" << lo << ", " << hi << ") us";
+  }
+  EXPECT_EQ(fine[199], 1);   // 199.999 us
+  EXPECT_EQ(fine[251], 1);   // 251.7 us: coarse bin [250, 300)
+  EXPECT_EQ(fine[kFineLatencyBins - 1], 2);  // 2 ms and 40 ms
+  EXPECT_EQ(st.count[kSeriesLatency], before + static_cast<std::int64_t>(std::size(planted)));
+}
+
 TEST(StateMachine, FollowingErrorIsAFault) {
   // The true machine carries 3 kg the model does not know: holding against
   // gravity with the wrong model leaves a steady error the limit catches.

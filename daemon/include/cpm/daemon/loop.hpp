@@ -114,6 +114,12 @@ inline constexpr int kSeriesLatency = 0, kSeriesCycle = 9, kSeries = 10, kBins =
 int histogram_bin(std::int64_t ns) noexcept;
 // Lower edge of bin k (ns).
 std::int64_t histogram_bin_floor(int k) noexcept;
+// The wake-up latency at cyclictest's resolution (cyclictest -h 2000): bin k
+// < 2000 holds [k, k+1) us, the last bin everything from 2 ms. loop_stats_t's
+// 50 us bins above 200 us are too coarse to hold a p99 against cyclictest's
+// to within 20 %, so cpmd --stats-json writes this one for that series.
+inline constexpr int kFineLatencyBins = 2001;
+using FineLatencyHistogram = std::array<std::int32_t, kFineLatencyBins>;
 
 class ControlLoop {
  public:
@@ -154,6 +160,7 @@ class ControlLoop {
   // Last state as the loop wrote it (test thread only, when no loop thread runs).
   [[nodiscard]] const cpm_msgs::state_t& last_state() const noexcept { return state_; }
   [[nodiscard]] const cpm_msgs::loop_stats_t& current_stats() const noexcept { return stats_; }
+  [[nodiscard]] const FineLatencyHistogram& fine_latency_histogram() const noexcept { return latency_us_; }
   [[nodiscard]] double period() const noexcept { return dt_; }
 
  private:
@@ -236,6 +243,7 @@ class ControlLoop {
   bool estimate_ok_ = false;
   cpm_msgs::state_t state_{};
   cpm_msgs::loop_stats_t stats_{};
+  FineLatencyHistogram latency_us_{};  // series 0 again, in 1 us bins
   std::int64_t dropped_ = 0;
   std::atomic<std::int64_t> cycles_done_{0};
 };
