@@ -2,7 +2,7 @@
 # The performance figures of docs/performance.md, measured side by side with
 # their references in one run, printed as a table and written as JSON.
 #
-#   bash bench/run.sh [--quick] [--json FILE] [--seconds S] [--segments K] [--build-dir DIR] [--no-build]
+#   bash bench/run.sh [--quick] [--json FILE] [--seconds S] [--segments K] [--raw DIR] [--build-dir DIR] [--no-build]
 #
 #   --quick        seconds, not minutes: small samples, 2 s latency runs (2 turns), the
 #                  5 s motion log (the smoke test; its figures are not the
@@ -11,6 +11,7 @@
 #   --seconds S    length of each latency run (default 60; 2 with --quick)
 #   --segments K   cut the latency runs into K turns of S/K seconds (default 6; 2
 #                  with --quick)
+#   --raw DIR      keep the raw outputs (every turn's histograms, logs) in DIR
 #   --build-dir    the build to use (default build)
 #   --no-build     do not run tools/build.sh first
 #
@@ -35,22 +36,28 @@
 #      - idle: cyclictest alone, S/K seconds: the machine without cpmd. A VM
 #        stalls more often when it is busier (docs/performance.md): this
 #        shows how much cpmd's run costs any real-time thread here;
+#      - control: two cyclictests at once, one on each CPU, S/K seconds: the
+#        spread this machine puts on a p99 ratio of two identical programs.
+#        A ratio above the budget but within that spread is UNDECIDED, not
+#        FAIL: the run cannot tell it from noise.
+#      (Order: together, idle, control; the next turn control, idle, together.)
 #   6. bench/report.py: the table with the budgets, and the JSON.
 # Exit status: 0 when every figure was measured (a budget that is not met is
 # reported in the table and the JSON, not as a failure of the command).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 root=$PWD
-quick=0 json="" seconds="" segments="" build_dir=build do_build=1
+quick=0 json="" seconds="" segments="" raw="" build_dir=build do_build=1
 while [ $# -gt 0 ]; do
   case "$1" in
     --quick) quick=1 ;;
     --json) json=$2; shift ;;
     --seconds) seconds=$2; shift ;;
     --segments) segments=$2; shift ;;
+    --raw) raw=$2; shift ;;
     --build-dir) build_dir=$2; shift ;;
     --no-build) do_build=0 ;;
-    -h|--help) sed -n '2,38p' "$0"; exit 0 ;;
+    -h|--help) sed -n '2,46p' "$0"; exit 0 ;;
     *) echo "bench/run.sh: unknown option '$1'" >&2; exit 2 ;;
   esac
   shift
@@ -80,7 +87,12 @@ command -v cyclictest >/dev/null || { echo "bench/run.sh: cyclictest missing: ba
 "$PY" -c 'import scipy' 2>/dev/null || { echo "bench/run.sh: $PY has no SciPy: bash tools/setup.sh (python3-scipy)" >&2; exit 1; }
 
 out=$(mktemp -d)
-trap 'rm -rf "$out"' EXIT
+if [ -n "$raw" ]; then
+  mkdir -p "$raw" || { echo "bench/run.sh: cannot make --raw $raw" >&2; exit 2; }
+  trap 'cp -r "$out"/. "$raw"/; rm -rf "$out"' EXIT
+else
+  trap 'rm -rf "$out"' EXIT
+fi
 mkdir -p "$(dirname "$json")"
 # CPU accounting at each step's boundary: the machine's counters (/proc/stat)
 # and this script's children (times), so that the report can say how much of
@@ -146,9 +158,18 @@ run_together() {  # K
   wait "$ct_pid" || exit 1
   echo "cpmd_cpu=${cp_cpu:-any} cyclictest_cpu=${ct_cpu:-any}" >"$out/cpus_$1.txt"
 }
+run_control() {  # K: cyclictest against itself, the same CPUs as run_together's
+  cyclictest_run "control_a_$1" "$segment_s" "$cpu_a" &
+  local a_pid=$!
+  cyclictest_run "control_b_$1" "$segment_s" "$cpu_b" || exit 1
+  wait "$a_pid" || exit 1
+}
 for k in $(seq 1 "$segments"); do
-  if [ $((k % 2)) -eq 1 ]; then run_together "$k"; cyclictest_run "cyclictest_idle_$k" "$segment_s" || exit 1
-  else cyclictest_run "cyclictest_idle_$k" "$segment_s" || exit 1; run_together "$k"; fi
+  if [ $((k % 2)) -eq 1 ]; then
+    run_together "$k"; cyclictest_run "cyclictest_idle_$k" "$segment_s" || exit 1; run_control "$k"
+  else
+    run_control "$k"; cyclictest_run "cyclictest_idle_$k" "$segment_s" || exit 1; run_together "$k"
+  fi
 done
 mark latency_runs
 

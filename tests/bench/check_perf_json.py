@@ -59,6 +59,10 @@ def main():
     lat = r.get("latency", {})
     for who in ("cpmd", "cyclictest", "cyclictest_idle"):
         check(lat.get(who, {}), dict(LATENCY, skipped=int), f"latency.{who}", errors)
+    ctl = lat.get("control", {})
+    check(ctl, {"a": dict, "b": dict, "ratio": dict, "spread": NUM_OR_NULL}, "latency.control", errors)
+    for who in ("a", "b"):
+        check(ctl.get(who, {}), dict(LATENCY, skipped=int), f"latency.control.{who}", errors)
     # The together runs: cpmd and cyclictest each on its own CPU in every turn (on a machine of two or more).
     if isinstance(r.get("machine", {}).get("cores"), int) and r["machine"]["cores"] >= 2:
         for k, p in enumerate(lat.get("pinning", []), 1):
@@ -84,7 +88,9 @@ def main():
     if got != BUDGETS:
         errors.append(f"budgets: {sorted(got)} instead of {sorted(BUDGETS)}")
     for b in r.get("budgets", []):
-        check(b, {"measured": NUM_OR_NULL, "limit": NUM, "pass": bool}, f"budgets.{b.get('id')}", errors)
+        check(b, {"measured": NUM_OR_NULL, "limit": NUM, "pass": bool, "verdict": str}, f"budgets.{b.get('id')}", errors)
+        if b.get("verdict") not in ("PASS", "FAIL", "UNDECIDED") or (b.get("verdict") == "PASS") != b.get("pass"):
+            errors.append(f"budgets.{b.get('id')}: verdict {b.get('verdict')!r} with pass {b.get('pass')!r}")
     if not r.get("table"):
         errors.append("table: missing")
     if errors:

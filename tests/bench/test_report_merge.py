@@ -123,5 +123,36 @@ class RunLength(unittest.TestCase):
         self.assertEqual(report.cyclictest_seconds(cyclictest_doc({70: 5}, avg=70.0), 1.5), 1.5)
 
 
+def verdict(ratio, bound, control_ratio, control_bound="~"):
+    lat = {"ratio": {"p99": ratio}, "ratio_bound": {"p99": bound},
+           "control": {"spread": report.spread_of(control_ratio, control_bound)}}
+    return report.wakeup_verdict(lat)
+
+
+class Verdict(unittest.TestCase):
+    """The latency budget against the spread of two identical cyclictests in the same run."""
+
+    def test_within_the_budget_passes_whatever_the_noise(self):
+        self.assertEqual(verdict(1.15, "~", 2.5), "PASS")
+        self.assertEqual(verdict(0.4, "<=", None, None), "PASS")   # cyclictest >= a period, cpmd well below
+
+    def test_beyond_the_budget_and_the_noise_fails(self):
+        self.assertEqual(verdict(1.40, "~", 1.05), "FAIL")
+        self.assertEqual(verdict(1.40, "~", 1 / 1.05), "FAIL")     # the spread is symmetric
+        self.assertEqual(verdict(2.5, ">=", 1.1), "FAIL")          # cpmd >= a period: at least 2.5
+
+    def test_beyond_the_budget_within_the_noise_is_undecided(self):
+        self.assertEqual(verdict(1.40, "~", 2.47), "UNDECIDED")
+        self.assertEqual(verdict(1.40, "~", 1 / 1.5), "UNDECIDED")
+        self.assertEqual(verdict(1.40, "~", None, None), "UNDECIDED")  # two cyclictests both >= a period
+        self.assertEqual(verdict(None, None, 1.0), "UNDECIDED")        # cpmd and cyclictest both >= a period
+        self.assertEqual(verdict(1.3, "<=", 1.0), "UNDECIDED")         # only an upper bound above the budget
+
+    def test_spread(self):
+        self.assertAlmostEqual(report.spread_of(0.8, "~"), 1.25)
+        self.assertAlmostEqual(report.spread_of(1.25, "~"), 1.25)
+        self.assertIsNone(report.spread_of(0.5, "<="))
+
+
 if __name__ == "__main__":
     unittest.main()
