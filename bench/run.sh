@@ -33,9 +33,8 @@
 #        about 0.4 s after it ends); the two swap CPUs every turn. Both see the same
 #        stalls of the machine: the ratio of the two is what cpmd's loop adds
 #        to the kernel's own latency, the budget;
-#      - idle: cyclictest alone, S/K seconds: the machine without cpmd. A VM
-#        stalls more often when it is busier (docs/performance.md): this
-#        shows how much cpmd's run costs any real-time thread here;
+#      - idle: cyclictest alone, S/K seconds: the machine without cpmd, and
+#        how cyclictest fares with cpmd running against without;
 #      - control: two cyclictests at once, one on each CPU, S/K seconds: the
 #        spread this machine puts on a p99 ratio of two identical programs.
 #        A ratio above the budget but within that spread is UNDECIDED, not
@@ -57,7 +56,7 @@ while [ $# -gt 0 ]; do
     --raw) raw=$2; shift ;;
     --build-dir) build_dir=$2; shift ;;
     --no-build) do_build=0 ;;
-    -h|--help) sed -n '2,46p' "$0"; exit 0 ;;
+    -h|--help) sed -n '2,45p' "$0"; exit 0 ;;
     *) echo "bench/run.sh: unknown option '$1'" >&2; exit 2 ;;
   esac
   shift
