@@ -181,6 +181,19 @@ def latency_ratio(a, b):
     return value, bound
 
 
+def per_turn(first, second):
+    """Turn by turn, the p99 of two programs run at the same time (lists of latency
+    figures, one per turn): in how many turns the first's was above the second's,
+    and the geometric mean of the per-turn ratios. A bursty background moves the
+    p99 of a whole run; the turns say whether one program is worse in most of them.
+    A p99 known only as '>= a period' counts as the period."""
+    ratios = [a["p99_us"] / b["p99_us"] for a, b in zip(first, second) if a["p99_us"] and b["p99_us"]]
+    if not ratios:
+        return {"turns": 0, "above": 0, "geomean": None}
+    return {"turns": len(ratios), "above": sum(q > 1 for q in ratios),
+            "geomean": math.exp(sum(math.log(q) for q in ratios) / len(ratios))}
+
+
 def seconds_of(bash_time):
     """'1m2.500s' (bash's `times`) in seconds."""
     m, rest = bash_time.split("m")
@@ -285,9 +298,13 @@ def build(a):
     load = lambda name: json.load(open(os.path.join(d, name)))  # noqa: E731
     perf, sp, gb = load("perf.json"), load("scipy.json"), load("gbench.json")
     segments = range(1, a.segments + 1)
-    cpmd = cpmd_latency(merge_cpmd_stats([load(f"cpmd_stats_{k}.json") for k in segments]), a.interval_us)
-    ct = cyclictest_latency([load(f"cyclictest_{k}.json") for k in segments], bool(a.realtime_allowed),
-                            a.interval_us, a.seconds / a.segments)
+    rt_ok, each = bool(a.realtime_allowed), a.seconds / a.segments
+    cpmd_docs = [load(f"cpmd_stats_{k}.json") for k in segments]
+    ct_docs = [load(f"cyclictest_{k}.json") for k in segments]
+    cpmd = cpmd_latency(merge_cpmd_stats(cpmd_docs), a.interval_us)
+    ct = cyclictest_latency(ct_docs, rt_ok, a.interval_us, each)
+    turns = per_turn([cpmd_latency(x, a.interval_us) for x in cpmd_docs],
+                     [cyclictest_latency([x], rt_ok, a.interval_us, each) for x in ct_docs])
     idle = cyclictest_latency([load(f"cyclictest_idle_{k}.json") for k in segments], bool(a.realtime_allowed),
                               a.interval_us, a.seconds / a.segments)
     pinning = []
@@ -299,13 +316,15 @@ def build(a):
     ratio, ratio_bound = latency_ratio(cpmd, ct)
     ratio_idle, ratio_idle_bound = latency_ratio(cpmd, idle)
     load_effect, load_effect_bound = latency_ratio(ct, idle)
-    ctl_a = cyclictest_latency([load(f"control_a_{k}.json") for k in segments], bool(a.realtime_allowed),
-                               a.interval_us, a.seconds / a.segments)
-    ctl_b = cyclictest_latency([load(f"control_b_{k}.json") for k in segments], bool(a.realtime_allowed),
-                               a.interval_us, a.seconds / a.segments)
+    a_docs = [load(f"control_a_{k}.json") for k in segments]
+    b_docs = [load(f"control_b_{k}.json") for k in segments]
+    ctl_a = cyclictest_latency(a_docs, rt_ok, a.interval_us, each)
+    ctl_b = cyclictest_latency(b_docs, rt_ok, a.interval_us, each)
     ctl_ratio, ctl_bound = latency_ratio(ctl_a, ctl_b)
     control = {"a": ctl_a, "b": ctl_b, "ratio": ctl_ratio, "ratio_bound": ctl_bound,
-               "spread": spread_of(ctl_ratio["p99"], ctl_bound["p99"])}
+               "spread": spread_of(ctl_ratio["p99"], ctl_bound["p99"]),
+               "per_turn": per_turn([cyclictest_latency([x], rt_ok, a.interval_us, each) for x in a_docs],
+                                    [cyclictest_latency([x], rt_ok, a.interval_us, each) for x in b_docs])}
     kim = perf["kim"]
     lm, trf = sp["methods"]["lm"], sp["methods"]["trf"]
     cpp_solve_s = kim["solve"]["median_ns"] * 1e-9
@@ -333,7 +352,7 @@ def build(a):
             "cpmd": cpmd, "cyclictest": ct, "ratio": ratio, "ratio_bound": ratio_bound,
             "cyclictest_idle": idle, "ratio_idle": ratio_idle, "ratio_idle_bound": ratio_idle_bound,
             "load_effect": load_effect, "load_effect_bound": load_effect_bound,
-            "control": control},
+            "per_turn": turns, "control": control},
         "bus": perf["bus"],
         "calibration": {
             "problem": "Kim's 32-point ball-bar, 9 unknowns, analytic Jacobian, the same tolerances",
@@ -435,6 +454,11 @@ def table(r):
         "cpmd against it: p99 " + ratio_text(L["ratio_idle"], L["ratio_idle_bound"], "p99"),
         "cyclictest with cpmd running / idle: p99 " + ratio_text(L["load_effect"], L["load_effect_bound"], "p99"))
     C = L["control"]
+    g = lambda x: "-" if x["geomean"] is None else f"{x['geomean']:.2f}"  # noqa: E731
+    row("wake-up latency", "turn by turn: p99 above the other's in / geometric mean of the p99 ratios",
+        f"cpmd above cyclictest in {L['per_turn']['above']} of {L['per_turn']['turns']} turns / {g(L['per_turn'])}",
+        f"control: first cyclictest above the second in {C['per_turn']['above']} of {C['per_turn']['turns']} / "
+        f"{g(C['per_turn'])}")
     spread = "unbounded" if C["spread"] is None else f"{C['spread']:.2f}"
     row("wake-up latency", "control: two cyclictests at once, p99 / slots late",
         f"{fig(C['a'], 'p99')} / {C['a']['late_slots']}", f"{fig(C['b'], 'p99')} / {C['b']['late_slots']}",

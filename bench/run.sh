@@ -35,8 +35,9 @@
 #        to the kernel's own latency, the budget;
 #      - idle: cyclictest alone, S/K seconds: the machine without cpmd, and
 #        how cyclictest fares with cpmd running against without;
-#      - control: two cyclictests at once, one on each CPU, S/K seconds: the
-#        spread this machine puts on a p99 ratio of two identical programs.
+#      - control: two cyclictests at once, one on each CPU and swapped each
+#        turn as cpmd and cyclictest are, S/K seconds: the spread this
+#        machine puts on a p99 ratio of two identical programs.
 #        A ratio above the budget but within that spread is UNDECIDED, not
 #        FAIL: the run cannot tell it from noise.
 #      (Order: together, idle, control; the next turn control, idle, together.)
@@ -56,7 +57,7 @@ while [ $# -gt 0 ]; do
     --raw) raw=$2; shift ;;
     --build-dir) build_dir=$2; shift ;;
     --no-build) do_build=0 ;;
-    -h|--help) sed -n '2,45p' "$0"; exit 0 ;;
+    -h|--help) sed -n '2,46p' "$0"; exit 0 ;;
     *) echo "bench/run.sh: unknown option '$1'" >&2; exit 2 ;;
   esac
   shift
@@ -157,10 +158,12 @@ run_together() {  # K
   wait "$ct_pid" || exit 1
   echo "cpmd_cpu=${cp_cpu:-any} cyclictest_cpu=${ct_cpu:-any}" >"$out/cpus_$1.txt"
 }
-run_control() {  # K: cyclictest against itself, the same CPUs as run_together's
-  cyclictest_run "control_a_$1" "$segment_s" "$cpu_a" &
+run_control() {  # K: cyclictest against itself on run_together's CPUs, swapped as cpmd and cyclictest are
+  local a_cpu=$cpu_b b_cpu=$cpu_a
+  if [ $(($1 % 2)) -eq 0 ]; then a_cpu=$cpu_a b_cpu=$cpu_b; fi
+  cyclictest_run "control_a_$1" "$segment_s" "$a_cpu" &
   local a_pid=$!
-  cyclictest_run "control_b_$1" "$segment_s" "$cpu_b" || exit 1
+  cyclictest_run "control_b_$1" "$segment_s" "$b_cpu" || exit 1
   wait "$a_pid" || exit 1
 }
 for k in $(seq 1 "$segments"); do

@@ -60,7 +60,9 @@ def main():
     for who in ("cpmd", "cyclictest", "cyclictest_idle"):
         check(lat.get(who, {}), dict(LATENCY, skipped=int), f"latency.{who}", errors)
     ctl = lat.get("control", {})
-    check(ctl, {"a": dict, "b": dict, "ratio": dict, "spread": NUM_OR_NULL}, "latency.control", errors)
+    check(ctl, {"a": dict, "b": dict, "ratio": dict, "spread": NUM_OR_NULL, "per_turn": dict}, "latency.control", errors)
+    for where, t in (("latency.per_turn", lat.get("per_turn", {})), ("latency.control.per_turn", ctl.get("per_turn", {}))):
+        check(t, {"turns": int, "above": int, "geomean": NUM_OR_NULL}, where, errors)
     for who in ("a", "b"):
         check(ctl.get(who, {}), dict(LATENCY, skipped=int), f"latency.control.{who}", errors)
     # The together runs: cpmd and cyclictest each on its own CPU in every turn (on a machine of two or more).

@@ -154,5 +154,14 @@ class Verdict(unittest.TestCase):
         self.assertIsNone(report.spread_of(0.5, "<="))
 
 
+class PerTurn(unittest.TestCase):
+    def test_counts_and_geometric_mean(self):
+        fig = lambda p99: {"p99_us": p99}  # noqa: E731
+        t = report.per_turn([fig(200), fig(100), fig(1000)], [fig(100), fig(200), fig(250)])
+        self.assertEqual((t["turns"], t["above"]), (3, 2))
+        self.assertAlmostEqual(t["geomean"], (2.0 * 0.5 * 4.0) ** (1 / 3))
+        self.assertIsNone(report.per_turn([], [])["geomean"])
+
+
 if __name__ == "__main__":
     unittest.main()
