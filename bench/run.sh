@@ -24,7 +24,7 @@
 #      same problem, the same residual, timed, solutions compared;
 #   3. cpm_bench (Google Benchmark): diagnose on a motion log and on ball-bar files;
 #   4. the zero-allocation test of the daemon's cycle;
-#   5. the wake-up latency, in K turns of S/K seconds, each turn two runs
+#   5. the wake-up latency, in K turns of S/K seconds, each turn three runs
 #      (ABBA order: the one that went second goes first next):
 #      - together: cpmd on config/sim.yaml at its priority, running circles
 #        (daemon/latency-run.sh), its loop pinned to one CPU, and cyclictest
