@@ -275,6 +275,11 @@ def wakeup_verdict(lat, limit=1.2):
     return "UNDECIDED"
 
 
+def verdict_of(b):
+    """A budget's verdict; JSONs from before the three-valued verdict have only `pass`."""
+    return b.get("verdict", "PASS" if b["pass"] else "FAIL")
+
+
 def budgets(r):
     cc, lat, rtf = r["control_cycle"], r["latency"], r["rtf"]
     wake = wakeup_verdict(lat)
@@ -298,15 +303,19 @@ def build(a):
     load = lambda name: json.load(open(os.path.join(d, name)))  # noqa: E731
     perf, sp, gb = load("perf.json"), load("scipy.json"), load("gbench.json")
     segments = range(1, a.segments + 1)
-    rt_ok, each = bool(a.realtime_allowed), a.seconds / a.segments
+
+    def ct_of(docs):   # cyclictest's figures over these runs (turns)
+        return cyclictest_latency(docs, bool(a.realtime_allowed), a.interval_us, a.seconds / a.segments)
+
+    def each_turn(docs):
+        return [ct_of([x]) for x in docs]
+
     cpmd_docs = [load(f"cpmd_stats_{k}.json") for k in segments]
     ct_docs = [load(f"cyclictest_{k}.json") for k in segments]
     cpmd = cpmd_latency(merge_cpmd_stats(cpmd_docs), a.interval_us)
-    ct = cyclictest_latency(ct_docs, rt_ok, a.interval_us, each)
-    turns = per_turn([cpmd_latency(x, a.interval_us) for x in cpmd_docs],
-                     [cyclictest_latency([x], rt_ok, a.interval_us, each) for x in ct_docs])
-    idle = cyclictest_latency([load(f"cyclictest_idle_{k}.json") for k in segments], bool(a.realtime_allowed),
-                              a.interval_us, a.seconds / a.segments)
+    ct = ct_of(ct_docs)
+    turns = per_turn([cpmd_latency(x, a.interval_us) for x in cpmd_docs], each_turn(ct_docs))
+    idle = ct_of([load(f"cyclictest_idle_{k}.json") for k in segments])
     pinning = []
     for k in segments:
         path = os.path.join(d, f"cpus_{k}.txt")
@@ -318,13 +327,11 @@ def build(a):
     load_effect, load_effect_bound = latency_ratio(ct, idle)
     a_docs = [load(f"control_a_{k}.json") for k in segments]
     b_docs = [load(f"control_b_{k}.json") for k in segments]
-    ctl_a = cyclictest_latency(a_docs, rt_ok, a.interval_us, each)
-    ctl_b = cyclictest_latency(b_docs, rt_ok, a.interval_us, each)
+    ctl_a, ctl_b = ct_of(a_docs), ct_of(b_docs)
     ctl_ratio, ctl_bound = latency_ratio(ctl_a, ctl_b)
     control = {"a": ctl_a, "b": ctl_b, "ratio": ctl_ratio, "ratio_bound": ctl_bound,
                "spread": spread_of(ctl_ratio["p99"], ctl_bound["p99"]),
-               "per_turn": per_turn([cyclictest_latency([x], rt_ok, a.interval_us, each) for x in a_docs],
-                                    [cyclictest_latency([x], rt_ok, a.interval_us, each) for x in b_docs])}
+               "per_turn": per_turn(each_turn(a_docs), each_turn(b_docs))}
     kim = perf["kim"]
     lm, trf = sp["methods"]["lm"], sp["methods"]["trf"]
     cpp_solve_s = kim["solve"]["median_ns"] * 1e-9
@@ -342,10 +349,10 @@ def build(a):
         "latency": {
             "seconds": a.seconds, "priority": a.priority, "interval_us": a.interval_us,
             "segments": a.segments,
-            "order": f"{a.segments} turns of {a.seconds / a.segments:g} s, each two runs in ABBA order: cpmd and "
+            "order": f"{a.segments} turns of {a.seconds / a.segments:g} s, each three runs in ABBA order: cpmd and "
                      "cyclictest at once, each pinned to its own CPU, swapped every turn (cyclictest from 0.5 s before "
-                     "cpmd starts to about 0.4 s after it ends), and cyclictest alone (idle); same priority, period and "
-                     "memory locking",
+                     "cpmd starts to about 0.4 s after it ends); cyclictest alone (idle); two cyclictests at once "
+                     "(control, swapped likewise); same priority, period and memory locking",
             "pinning": pinning,
             "histogram": "1 us bins to 2 ms, one bin above; percentiles over slots, as bin upper edges (<=), "
                          "or >= one period among the slots a period or more late",
@@ -374,7 +381,7 @@ def build(a):
     }
     r["budgets"] = budgets(r)
     for b in r["budgets"]:
-        b.setdefault("verdict", "PASS" if b["pass"] else "FAIL")
+        b["verdict"] = verdict_of(b)
     return r
 
 
@@ -384,8 +391,7 @@ def table(r):
     def row(group, what, value, ref="", verdict=""):
         rows.append((group, what, value, ref, verdict))
 
-    def ok(b):
-        return b.get("verdict", "PASS" if b["pass"] else "FAIL")
+    ok = verdict_of
 
     B = {b["id"]: b for b in r["budgets"]}
     cc, cs, ps = r["control_cycle"], r["controller_step"], r["plant_step"]
@@ -516,8 +522,7 @@ def render(r, rows):
     lines.append("-+-".join("-" * n for n in w))
     for x in rows:
         lines.append(fmt(x))
-    lines.append("budgets: " + ", ".join(f"{b['text']} {b.get('verdict', 'PASS' if b['pass'] else 'FAIL')}"
-                                         for b in r["budgets"]))
+    lines.append("budgets: " + ", ".join(f"{b['text']} {verdict_of(b)}" for b in r["budgets"]))
     return "\n".join(lines)
 
 
