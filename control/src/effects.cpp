@@ -50,6 +50,10 @@ constexpr DynamicEffectInfo kInfo[kDynamicEffectTypes] = {
        {"dE", "N", -kInf, kInf, false}}},
      "the link masses of the model differ from the real ones",
      "force residual in the directions of the rigid-body regressor (accelerations, limb angles, weight)"},
+    {DynamicEffectType::actuation_delay, "actuation_delay", false, 1,
+     {{{"tau", "s", 0.0, 0.05, false}}},
+     "dead time between command and force: a synchronous PDO acts at the next SYNC, the current loop lags",
+     "force residual proportional to the rate of change of the commanded force (looks like viscous friction)"},
 };
 
 inline double sgn_eps(double v) noexcept { return std::tanh(v / kSignEpsilon); }
@@ -108,7 +112,8 @@ double effect_force(const DynamicEffect& e, double d, double v) noexcept {
     case DynamicEffectType::spring: return p[0] * (d - p[1]);
     case DynamicEffectType::force_gain:
     case DynamicEffectType::payload_mass:
-    case DynamicEffectType::inertia_error: return 0.0;
+    case DynamicEffectType::inertia_error:
+    case DynamicEffectType::actuation_delay: return 0.0;
   }
   return 0.0;
 }
@@ -132,7 +137,8 @@ double effect_force_gradient(const DynamicEffect& e, int j, double d, double v) 
     case DynamicEffectType::spring: return j == 0 ? d - p[1] : -p[0];
     case DynamicEffectType::force_gain:
     case DynamicEffectType::payload_mass:
-    case DynamicEffectType::inertia_error: return 0.0;
+    case DynamicEffectType::inertia_error:
+    case DynamicEffectType::actuation_delay: return 0.0;
   }
   return 0.0;
 }

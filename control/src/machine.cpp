@@ -87,6 +87,7 @@ Machine::Machine(MachineModel model) : model_(std::move(model)) {
         inertia_.C += e.param[2];
         inertia_.E += e.param[3];
         break;
+      case DynamicEffectType::actuation_delay: actuation_delay_ += e.param[0]; break;
       default: additive_effects_ = true; break;
     }
   }

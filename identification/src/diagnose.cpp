@@ -538,6 +538,8 @@ CandidateResult evaluate_dynamic_candidate(const MotionProblem& P, const Engine&
       }
       break;
     }
+    case DynamicEffectType::actuation_delay:
+      throw Error("actuation_delay is estimated with the force-to-motion alignment, not as a candidate");
   }
   return c;
 }
@@ -570,6 +572,7 @@ Diagnosis diagnose_motion(const io::MotionData& data, const ctl::Machine& model,
   std::vector<std::pair<std::string, int>> todo;
   for (int t = 0; t < ctl::kDynamicEffectTypes; ++t) {
     const auto& in = ctl::info(static_cast<DynamicEffectType>(t));
+    if (in.type == DynamicEffectType::actuation_delay) continue;  // estimated with the alignment
     if (!opt.effects.empty() && std::find(opt.effects.begin(), opt.effects.end(), in.name) == opt.effects.end())
       continue;
     if (in.per_axis)

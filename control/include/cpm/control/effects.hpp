@@ -29,8 +29,10 @@ enum class DynamicEffectType : std::uint8_t {
   force_gain,         // k (1): the drive applies (1 + k) F_commanded
   payload_mass,       // dm (kg), all axes:    dm (q_dd - g)
   inertia_error,      // dA (kg), dB (kg m^2), dC (N m), dE (N), all axes
+  actuation_delay,    // tau (s), all axes: the drive applies the command of t_k over
+                      // [t_k + tau, t_k+1 + tau) (dead time: a synchronous PDO acts at the next SYNC)
 };
-inline constexpr int kDynamicEffectTypes = 8;
+inline constexpr int kDynamicEffectTypes = 9;
 
 // sgn_eps(v) = tanh(v / eps), the smooth sign of effects.md.
 inline constexpr double kSignEpsilon = 1e-3;  // m/s

@@ -91,6 +91,8 @@ class Machine {
   [[nodiscard]] const InertiaConstants& inertia() const noexcept { return inertia_; }
   // Per actuator, the factor (1 + k) by which the drive scales its command.
   [[nodiscard]] const Vec3& drive_gain() const noexcept { return drive_gain_; }
+  // Dead time between a command and the force it makes (s): actuation_delay effects summed.
+  [[nodiscard]] double actuation_delay() const noexcept { return actuation_delay_; }
   [[nodiscard]] double force_limit() const noexcept { return model_.force_limit; }
   [[nodiscard]] bool has_additive_effects() const noexcept { return additive_effects_; }
   // Without kinematic effects the planes make J = dp/dd constant: prepared
@@ -125,6 +127,7 @@ class Machine {
   MachineModel model_;
   InertiaConstants inertia_;
   Vec3 drive_gain_ = Vec3::Ones();
+  double actuation_delay_ = 0.0;
   bool additive_effects_ = false;
   bool constant_jacobian_ = false;
   Mat3 J_ = Mat3::Identity(), J_inv_ = Mat3::Identity();
