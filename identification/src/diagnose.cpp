@@ -7,6 +7,7 @@
 #include <sstream>
 
 #include "internal.hpp"
+#include "cpm/identification/align.hpp"
 #include "cpm/identification/stats.hpp"
 #include "cpm/identification/structure.hpp"
 #include "cpm/kinematics/kinematic_effects.hpp"
@@ -544,13 +545,128 @@ CandidateResult evaluate_dynamic_candidate(const MotionProblem& P, const Engine&
   return c;
 }
 
+namespace {
+// The alignment as a candidate of its own: actuation_delay with tau = the
+// delay the model is missing, scored against the model as given at the
+// alignment it may take without it (within T/2 of its own delay). Named
+// first when significant and beyond T/2: every other effect was fitted on
+// the aligned residual, so the delay is the premise of the rest of the verdict.
+void name_missing_delay(Diagnosis& D, const Engine& E, const DiagnoseOptions& opt) {
+  const Alignment& A = D.alignment;
+  CandidateResult c;
+  c.effect = "actuation_delay";
+  c.axis = -1;
+  c.refits_base = true;
+  c.n_params = 1;
+  c.trials = A.trials;
+  c.n_eff = A.n_eff;
+  c.params.push_back({"tau", "s", A.missing(), A.std_error, false});
+  const double n = A.n_eff;
+  c.rss = A.rss_at_tau;
+  c.rms_after = Engine::rms(E.base_fit().residual);
+  c.explained_beyond_base = A.rss_at_reference > 0.0 ? std::clamp(1.0 - A.rss_at_tau / A.rss_at_reference, 0.0, 1.0) : 0.0;
+  c.explained = c.explained_beyond_base;
+  const NestedTest t = E.nested(A.rss_at_reference, A.rss_at_tau, 1, E.base_rank() + 1, n);
+  c.f_stat = t.f_stat;
+  c.p_value = t.p_value;
+  c.delta_bic = t.delta_bic;
+  c.p_adjusted = std::min(1.0, c.p_value * c.trials * static_cast<double>(D.candidates.size() + 1));
+  // Beyond T/2 by more than 3 standard errors: a sampling convention cannot explain it.
+  const bool beyond = A.beyond_sampling() && (A.std_error < 0.0 || A.missing() - 0.5 * A.period > 3.0 * A.std_error);
+  c.significant = beyond && c.p_adjusted < opt.alpha && c.delta_bic < 0.0;
+  c.identifiable = true;
+  if (!A.beyond_sampling())
+    c.note = "within half a period of the model's alignment: how the data were sampled (" + A.convention() + ")";
+  c.score = c.significant ? -1e300 : 0.0;
+  if (!c.significant) {
+    D.candidates.push_back(std::move(c));
+    return;
+  }
+  // First in the ranking and in the verdict.
+  D.candidates.insert(D.candidates.begin(), std::move(c));
+  std::vector<int> found;
+  if (D.verdict >= 0) found.push_back(D.verdict + 1);
+  for (int j : D.also) found.push_back(j + 1);
+  D.verdict = 0;
+  D.also = found;
+  std::ostringstream os;
+  os.precision(3);
+  os << "missing: actuation_delay — tau = " << A.missing() * 1e3 << " ms (" << A.missing() / A.period
+     << " sample periods; the force acts " << A.tau * 1e3 << " ms after t_k, the model says " << A.model_tau * 1e3
+     << " ms)";
+  if (found.empty()) {
+    os << "; nothing else is missing";
+    D.verdict_text = os.str();
+  } else {
+    D.verdict_text = os.str() + ". With it, " + D.verdict_text;
+  }
+}
+}  // namespace
+
+namespace {
+// The alignment with the effects found so far fitted jointly (their columns
+// join the base): an effect left out would pull the delay towards itself.
+Alignment align_with(const MotionProblem& Pa, const ctl::MachineModel& model,
+                     const std::vector<std::pair<std::string, int>>& effects, const DiagnoseOptions& opt) {
+  LinearProblem L = alignment_linear_problem(Pa);
+  if (!effects.empty()) {
+    const Engine E1(L);
+    for (const auto& [name, axis] : effects) {
+      if (name == "inertia_error" || name == "actuation_delay") continue;  // inside the base / the alignment
+      const CandidateResult c = evaluate_dynamic_candidate(Pa, E1, model, name, axis, opt);
+      if (c.columns.cols() == 0) continue;
+      const Eigen::Index nb = L.B.cols();
+      L.B.conservativeResize(Eigen::NoChange, nb + c.columns.cols());
+      L.B.rightCols(c.columns.cols()) = c.columns;
+      for (Eigen::Index j = 0; j < c.columns.cols(); ++j) {
+        L.base_names.push_back(c.label());
+        L.base_units.push_back("");
+        L.base_values.push_back(0.0);
+        L.nuisance.push_back(0);
+      }
+    }
+  }
+  return estimate_alignment(Pa, Engine(std::move(L)));
+}
+
+Diagnosis diagnose_aligned(const io::MotionData& data, const ctl::Machine& model, const DiagnoseOptions& opt,
+                           const Alignment& alignment);
+}  // namespace
+
 Diagnosis diagnose_motion(const io::MotionData& data, const ctl::Machine& model,
                           const DiagnoseOptions& opt) {
   for (const auto& e : opt.effects) check_effect_for_kind(e, "motion");
+  // Stage "align" (align.hpp): when the logged force acts, first with the
+  // base alone, then again with the effects the diagnosis found; when that
+  // moves it beyond its noise the diagnosis is redone there.
+  const MotionProblem Pa = alignment_problem(data, model, opt.motion);
+  Alignment A = align_with(Pa, model.model(), {}, opt);
+  Diagnosis D = diagnose_aligned(data, model, opt, A);
+  // A large effect left out pulls the alignment (a 4 N Stribeck spike moved
+  // it to the end of the range); the effects found at a wrong alignment are
+  // partly wrong too: iterate until the alignment settles within its noise.
+  for (int pass = 0; pass < 3; ++pass) {
+    std::vector<std::pair<std::string, int>> found;
+    for (int j : D.found())
+      found.emplace_back(D.candidates[static_cast<std::size_t>(j)].effect, D.candidates[static_cast<std::size_t>(j)].axis);
+    if (found.empty()) break;
+    const Alignment A2 = align_with(Pa, model.model(), found, opt);
+    if (std::fabs(A2.tau - A.tau) <= std::max(0.05 * A.period, 2.0 * std::max(0.0, A2.std_error))) break;
+    A = A2;
+    D = diagnose_aligned(data, model, opt, A);
+  }
+  return D;
+}
+
+namespace {
+Diagnosis diagnose_aligned(const io::MotionData& data, const ctl::Machine& model, const DiagnoseOptions& opt,
+                           const Alignment& alignment) {
   Diagnosis D;
   D.data_file = data.info.path;
   D.samples = static_cast<int>(data.t.size());
   D.motion = prepare_motion(data, model, opt.motion);
+  D.alignment = alignment;
+  D.motion.set_delay(alignment.tau);
   const MotionProblem& P = D.motion;
   D.warnings = P.warnings;
   for (const auto& w : data.info.warnings) D.warnings.push_back(w);
@@ -626,8 +742,10 @@ Diagnosis diagnose_motion(const io::MotionData& data, const ctl::Machine& model,
     D.notes.push_back("these data cannot determine the base parameter(s) " + names +
                       "; they are kept at the model's values");
   }
+  name_missing_delay(D, E, opt);
   if (opt.structure_search) D.structure = find_motion_structure(P, D.residual_final, D.axis_noise);
   return D;
 }
+}  // namespace
 
 }  // namespace cpm::ident

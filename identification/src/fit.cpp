@@ -1,5 +1,7 @@
 #include "cpm/identification/fit.hpp"
 
+#include "cpm/identification/align.hpp"
+
 #include "cpm/kinematics/kinematic_effects.hpp"
 
 #include <algorithm>
@@ -30,8 +32,9 @@ ctl::MachineModel without(const ctl::MachineModel& m, const FitRequest& r) {
   ctl::MachineModel out = m;
   out.effects.clear();
   const auto t = ctl::dynamic_effect_from_name(r.effect);
+  const bool delay = t && *t == ctl::DynamicEffectType::actuation_delay;
   for (const auto& e : m.effects)
-    if (!(t && e.type == *t && e.axis == r.axis && ctl::info(*t).per_axis)) out.effects.add(e);
+    if (!(t && e.type == *t && ((e.axis == r.axis && ctl::info(*t).per_axis) || delay))) out.effects.add(e);
   return out;
 }
 
@@ -58,7 +61,9 @@ FitRequest parse_fit_request(const std::string& spec) {
 
 double motion_rms(const io::MotionData& data, const ctl::MachineModel& model, const MotionOptions& o) {
   const ctl::Machine m(model);
-  const MotionProblem P = prepare_motion(data, m, o);
+  MotionProblem P = prepare_motion(data, m, o);
+  // The model as given may take the alignment within half a period of its own delay (align.hpp).
+  P.set_delay(align_motion(data, m, o).reference);
   return Engine::rms(P.residual);
 }
 
@@ -77,20 +82,40 @@ FitResult fit_motion(const io::MotionData& data, const ctl::MachineModel& model,
       R.notes.push_back(r.effect + (r.axis >= 0 ? "[axis " + std::to_string(r.axis + 1) + "]" : "") +
                         " was in the model: refitted from scratch");
   }
+  // actuation_delay is the alignment (align.hpp); the others are fitted on the aligned log.
+  std::vector<FitRequest> additive;
+  bool fit_delay = false;
+  for (const auto& r : requests) {
+    if (r.effect == "actuation_delay") fit_delay = true;
+    else additive.push_back(r);
+  }
   const ctl::Machine mw(work);
-  const MotionProblem P = prepare_motion(data, mw, opt.motion);
+  MotionProblem P = prepare_motion(data, mw, opt.motion);
+  const Alignment A = align_motion(data, mw, opt.motion);
+  P.set_delay(fit_delay ? A.tau : A.reference);
+  if (fit_delay) {
+    const double tau = std::clamp(A.missing(), 0.0, 0.05);
+    if (A.missing() < 0.5 * A.period)
+      R.notes.push_back("the force acts within half a period of the model's alignment (" + A.convention() +
+                        "): actuation_delay " + std::to_string(tau * 1e3) + " ms is how the data were sampled");
+    ctl::add_effect(work, "actuation_delay", -1, {tau});
+    CandidateResult c;
+    c.effect = "actuation_delay";
+    c.params.push_back({"tau", "s", tau, A.std_error, tau != A.missing()});
+    R.delay = c;
+  }
   LinearProblem L = motion_linear_problem(P);
   // Back-fitting: each effect on what the others leave, twice round.
-  std::vector<CandidateResult> got(requests.size());
-  std::vector<Eigen::VectorXd> contrib(requests.size(), Eigen::VectorXd::Zero(L.y.size()));
+  std::vector<CandidateResult> got(additive.size());
+  std::vector<Eigen::VectorXd> contrib(additive.size(), Eigen::VectorXd::Zero(L.y.size()));
   const Eigen::VectorXd y0 = L.y;
-  for (int pass = 0; pass < (requests.size() > 1 ? 2 : 1); ++pass)
-    for (std::size_t k = 0; k < requests.size(); ++k) {
+  for (int pass = 0; pass < (additive.size() > 1 ? 2 : 1); ++pass)
+    for (std::size_t k = 0; k < additive.size(); ++k) {
       L.y = y0;
-      for (std::size_t j = 0; j < requests.size(); ++j)
+      for (std::size_t j = 0; j < additive.size(); ++j)
         if (j != k) L.y -= contrib[j];
       const Engine E(L);
-      CandidateResult c = evaluate_dynamic_candidate(P, E, work, requests[k].effect, requests[k].axis, opt);
+      CandidateResult c = evaluate_dynamic_candidate(P, E, work, additive[k].effect, additive[k].axis, opt);
       if (!c.identifiable && c.effect != "inertia_error")
         throw Error("cannot fit " + c.label() + " on " + (data.info.path.empty() ? "these data" : data.info.path) +
                     ": " + (c.note.empty() ? "the data do not determine it" : c.note));
@@ -142,6 +167,10 @@ FitResult fit_motion(const io::MotionData& data, const ctl::MachineModel& model,
   const ctl::Machine check(out);  // throws when the fitted constants are not a machine
   R.model = out;
   R.effects = got;
+  if (R.delay) {
+    R.effects.insert(R.effects.begin(), *R.delay);
+    R.fitted.push_back({"effects.actuation_delay.tau", "s", 0.0, R.delay->params[0].value, R.delay->params[0].std_error});
+  }
   R.on_fit.before = motion_rms(data, model, opt.motion);
   R.on_fit.after = motion_rms(data, out, opt.motion);
   if (holdout) {

@@ -86,6 +86,27 @@ Eigen::VectorXd MotionProblem::force_gain_column(int axis) const {
   return c;
 }
 
+Eigen::VectorXd MotionProblem::force_delayed(double tau) const {
+  const double x = std::clamp(tau / dt, double(kShiftLo), double(kShiftHi)) - kShiftLo;
+  const int n = std::min(static_cast<int>(std::floor(x)), kShiftHi - kShiftLo - 1);
+  const double phi = x - n;
+  return (1.0 - phi) * force_at_shift.col(n) + phi * force_at_shift.col(n + 1);
+}
+
+Eigen::VectorXd MotionProblem::force_delay_slope(double tau) const {
+  // Central over one period around tau: the piecewise-linear interpolation
+  // has a kink at every whole period, where a one-sided slope would jump.
+  return (force_delayed(tau + 0.5 * dt) - force_delayed(tau - 0.5 * dt)) / dt;
+}
+
+void MotionProblem::set_delay(double tau) {
+  delay = tau;
+  const Eigen::VectorXd F = force_delayed(tau);
+  residual = F - model_force;
+  for (int r = 0; r < rows(); ++r)
+    for (int i = 0; i < 3; ++i) f[r][i] = F(3 * r + i) / drive_gain[i];
+}
+
 MotionProblem prepare_motion(const io::MotionData& data, const ctl::Machine& model,
                              const MotionOptions& opt) {
   opt.validate();
@@ -250,7 +271,10 @@ MotionProblem prepare_motion(const io::MotionData& data, const ctl::Machine& mod
     int start = 0;
     while (start < n) {
       const int end = P.segment_end[start];
-      for (int k = start + 2 * m; k + 2 * m < end; k += P.stride) P.sample.push_back(k);
+      // The force is also read shifted by kShiftLo..kShiftHi samples (alignment).
+      const int lo = std::max(2 * m, m + MotionProblem::kShiftHi);
+      const int hi = std::max(2 * m, m - MotionProblem::kShiftLo + 1);
+      for (int k = start + lo; k + hi < end; k += P.stride) P.sample.push_back(k);
       start = end;
     }
   }
@@ -270,6 +294,7 @@ MotionProblem prepare_motion(const io::MotionData& data, const ctl::Machine& mod
   P.f.resize(R);
   P.drive_gain = model.drive_gain();
   P.f_smooth.resize(R);
+  P.force_at_shift.resize(3 * R, MotionProblem::kShiftHi - MotionProblem::kShiftLo + 1);
   P.a_columns.resize(R);
   const int ml = 4 * m;
   const SgKernel s_long = savitzky_golay(ml, opt.order, 0, 0.0);
@@ -291,6 +316,9 @@ MotionProblem prepare_motion(const io::MotionData& data, const ctl::Machine& mod
       else if (a_from_d) P.a[r][i] = d2h.apply(&data.d[k][i], 3) * fs * fs;
       else P.a[r][i] = d1h.apply(&data.v[k][i], 3) * fs;
       P.f[r][i] = P.smooth_force.apply(&data.f[k][i], 3);
+      for (int shift = MotionProblem::kShiftLo; shift <= MotionProblem::kShiftHi; ++shift)
+        P.force_at_shift(3 * r + i, shift - MotionProblem::kShiftLo) =
+            model.drive_gain()[i] * P.smooth_force.apply(&data.f[k - shift][i], 3);
     }
     int seg_start = k;
     while (seg_start > 0 && P.segment_end[seg_start - 1] == P.segment_end[k]) --seg_start;
@@ -439,8 +467,7 @@ MotionProblem prepare_motion(const io::MotionData& data, const ctl::Machine& mod
   Eigen::VectorXd F_model, F_columns;
   rigid(model, P.a, false, F_model);
   rigid(model, P.a_columns, true, F_columns);
-  for (int r = 0; r < R; ++r)
-    for (int i = 0; i < 3; ++i) P.residual(3 * r + i) = P.drive_gain[i] * P.f[r][i] - F_model(3 * r + i);
+  P.model_force = F_model;
   for (std::size_t q = 0; q < pert.size(); ++q) {
     Eigen::VectorXd Fq;
     try {
@@ -454,8 +481,12 @@ MotionProblem prepare_motion(const io::MotionData& data, const ctl::Machine& mod
   for (int e = 0; e < n_eff; ++e) {
     const ctl::DynamicEffect& ef = mm.effects[e];
     if (ef.axis < 0 || ef.type == ctl::DynamicEffectType::force_gain) continue;
-    P.residual -= P.effect_force_column(ef);
+    P.model_force += P.effect_force_column(ef);
   }
+  // The force acts as the model says it does (its own actuation_delay), until
+  // the alignment stage (align.hpp) estimates it from the data.
+  P.delay_model = model.actuation_delay();
+  P.set_delay(std::clamp(P.delay_model, MotionProblem::kShiftLo * P.dt, MotionProblem::kShiftHi * P.dt));
   for (int b = 4; b < n_model_base; ++b) {
     const BaseParameter& bp = P.base_params[b];
     const ctl::DynamicEffect& ef = mm.effects[bp.effect];

@@ -376,6 +376,12 @@ std::string diagnosis_text(const Diagnosis& D) {
     o << "residual of the model as given: RMS " << num(D.baseline_rms) << " N (axes " << num(D.baseline_axis_rms[0], 3)
       << ", " << num(D.baseline_axis_rms[1], 3) << ", " << num(D.baseline_axis_rms[2], 3) << "), max "
       << num(D.baseline_max) << " N; noise floor about " << num(D.noise_floor, 3) << " N\n";
+  if (D.kind == "motion") {
+    o << "force alignment: " << num(D.alignment.tau * 1e3, 3) << " ms";
+    if (D.alignment.std_error >= 0) o << " ± " << num(D.alignment.std_error * 1e3, 2) << " ms";
+    o << " (" << D.alignment.convention() << "; model's actuation_delay " << num(D.alignment.model_tau * 1e3, 3)
+      << " ms)\n";
+  }
     o << "after refitting the base (A, B, C, E, plane tilts): RMS " << num(D.base_refit_rms) << " N\n\n";
   } else {
     o << "data: " << D.data_file << " (kind " << D.kind << ", " << D.samples << " samples, " << D.rows << " readings)\n";
@@ -431,7 +437,11 @@ std::string diagnosis_json(const Diagnosis& D) {
   if (D.kind == "motion")
     o << " \"acceleration\": {\"source\": " << json_string(P.accel_source)
       << ", \"filter_half_width_samples\": " << P.half_width << ", \"force_noise\": " << json_num(P.force_noise.maxCoeff())
-      << "},\n";
+      << "},\n \"alignment\": {\"tau\": " << json_num(D.alignment.tau) << ", \"std_error\": "
+      << (D.alignment.std_error >= 0 ? json_num(D.alignment.std_error) : "null")
+      << ", \"periods\": " << json_num(D.alignment.tau / D.alignment.period) << ", \"period\": " << json_num(D.alignment.period)
+      << ", \"model_tau\": " << json_num(D.alignment.model_tau) << ", \"missing_tau\": " << json_num(D.alignment.missing())
+      << ", \"convention\": " << json_string(D.alignment.convention()) << "},\n";
   o << " \"baseline\": {\"rms\": " << json_num(D.baseline_rms) << ", \"max\": " << json_num(D.baseline_max)
     << ", \"axis_rms\": [" << json_num(D.baseline_axis_rms[0]) << ", " << json_num(D.baseline_axis_rms[1]) << ", "
     << json_num(D.baseline_axis_rms[2]) << "]},\n \"base_refit\": {\"rms\": " << json_num(D.base_refit_rms)
@@ -476,6 +486,20 @@ std::string diagnosis_json(const Diagnosis& D) {
   for (std::size_t j = 0; j < D.also.size(); ++j)
     o << (j ? ", " : "") << "{\"effect\": " << json_string(D.candidates[D.also[j]].effect) << ", \"axis\": "
       << axis(D.candidates[D.also[j]].axis) << "}";
+  // Every effect named, best first, with its parameters (SI units).
+  o << "], \"effects\": [";
+  const std::vector<int> found = D.found();
+  for (std::size_t j = 0; j < found.size(); ++j) {
+    const auto& c = D.candidates[static_cast<std::size_t>(found[j])];
+    o << (j ? ", " : "") << "{\"effect\": " << json_string(c.effect) << ", \"axis\": " << axis(c.axis) << ", \"params\": {";
+    for (std::size_t q = 0; q < c.params.size(); ++q)
+      o << (q ? ", " : "") << json_string(c.params[q].name) << ": " << json_num(c.params[q].value);
+    o << "}, \"std_errors\": {";
+    for (std::size_t q = 0; q < c.params.size(); ++q)
+      o << (q ? ", " : "") << json_string(c.params[q].name) << ": "
+        << (c.params[q].std_error >= 0 ? json_num(c.params[q].std_error) : "null");
+    o << "}}";
+  }
   o << "], \"text\": " << json_string(D.verdict_text) << "},\n \"structure\": [";
   for (std::size_t j = 0; j < D.structure.size(); ++j) {
     const auto& f = D.structure[j];

@@ -22,6 +22,7 @@
 #include <string>
 #include <vector>
 
+#include "cpm/identification/align.hpp"
 #include "cpm/identification/engine.hpp"
 #include "cpm/identification/motion.hpp"
 
@@ -106,12 +107,20 @@ struct Diagnosis {
   int verdict = -1;                 // index in candidates, -1: none missing
   bool ambiguous = false;           // the verdict cannot be told apart from another candidate
   std::vector<int> also;            // further effects by forward selection
+  // Every effect named, best first: the verdict, then `also` (indices in candidates).
+  [[nodiscard]] std::vector<int> found() const {
+    std::vector<int> f;
+    if (verdict >= 0) f.push_back(verdict);
+    f.insert(f.end(), also.begin(), also.end());
+    return f;
+  }
   std::string verdict_text;
   std::vector<StructureFinding> structure;
   std::vector<std::string> notes;
   std::vector<std::string> warnings;
   Eigen::VectorXd residual_final;   // after the verdict's effects (or the base refit)
   MotionProblem motion;             // the processed data (plots, summaries), kind motion
+  Alignment alignment;              // kind motion: when the logged force acts (align.hpp)
   std::shared_ptr<const KinematicProblem> kinematic;  // kinds ballbar and position
 };
 

@@ -27,7 +27,8 @@ struct ErrorFigures {
 
 struct FitResult {
   ctl::MachineModel model;                 // the new model
-  std::vector<CandidateResult> effects;    // one per request, in order
+  std::vector<CandidateResult> effects;    // one per request (actuation_delay first when asked for)
+  std::optional<CandidateResult> delay;    // actuation_delay, when asked for
   bool base_refitted = false;              // A..E changed (written as inertia_error)
   std::vector<ParamEstimate> base_change;  // dA, dB, dC, dE with standard errors
   std::vector<io::FittedParameter> fitted; // for the model file

@@ -94,7 +94,25 @@ struct MotionProblem {
   // signal is the same.
   std::vector<Vec3> a_columns;    // m/s^2
   std::vector<Vec3> platform_force;  // model's M p_dd + G p_dot + K at the row, with a_columns (N)
-  Eigen::VectorXd residual;       // g F - model force (N), 3 rows per kept row
+  Eigen::VectorXd residual;       // g F(aligned by `delay`) - model force (N), 3 rows per kept row
+  Eigen::VectorXd model_force;    // the model's force at the rows: rigid body + its own effects (N)
+
+  // Force-to-motion alignment (shared/spec/effects.md, actuation_delay). Row
+  // k's logged force acts over [t_k + tau, t_k+1 + tau); over one sample
+  // interval that is the mix (1 - phi) F_{k-n} + phi F_{k-n-1}, tau = (n + phi) T,
+  // exact for the interval means the acceleration estimate sees. The filtered
+  // force is kept at every whole shift n in [kShiftLo, kShiftHi]; any tau in
+  // between is their linear interpolation. tau = 0: zero-order hold; -T/2: a
+  // force sampled at t_k; T: a synchronous bus that applies it at the next SYNC.
+  static constexpr int kShiftLo = -2, kShiftHi = 6;
+  Eigen::MatrixXd force_at_shift; // 3R x (kShiftHi - kShiftLo + 1): g times the filtered force delayed n periods
+  double delay = 0.0;             // s: the alignment the residual uses
+  double delay_model = 0.0;       // s: the model's own actuation_delay
+  // g F filtered and delayed by tau (s), 3 rows per kept row; and its derivative in tau (N/s).
+  [[nodiscard]] Eigen::VectorXd force_delayed(double tau) const;
+  [[nodiscard]] Eigen::VectorXd force_delay_slope(double tau) const;
+  // Re-align the residual (and the rows' filtered forces) to tau (s).
+  void set_delay(double tau);
   Eigen::MatrixXd base;           // columns of the base parameters (N per unit)
   std::vector<BaseParameter> base_params;
   Vec3 drive_gain = Vec3::Ones();

@@ -1,0 +1,117 @@
+#include "cpm/identification/align.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+
+#include "cpm/identification/diagnose.hpp"
+
+namespace cpm::ident {
+
+std::string Alignment::convention() const {
+  char b[128];
+  const double x = tau / period;
+  if (std::fabs(x) <= 0.25) return "zero-order hold (the force acts over [t_k, t_k+1))";
+  if (std::fabs(x + 0.5) <= 0.25) return "force sampled at t_k (a continuous force)";
+  std::snprintf(b, sizeof b, "the force acts %.2f periods (%.3g ms) after t_k", x, tau * 1e3);
+  return b;
+}
+
+Alignment estimate_alignment(const MotionProblem& P, const Engine& E) {
+  Alignment A;
+  A.period = P.dt;
+  A.model_tau = P.delay_model;
+  const int ns = MotionProblem::kShiftHi - MotionProblem::kShiftLo + 1;
+  // Residual at each whole shift, off the base span (weighted).
+  Eigen::MatrixXd Y(P.force_at_shift.rows(), ns);
+  for (int q = 0; q < ns; ++q) Y.col(q) = P.force_at_shift.col(q) - P.model_force;
+  const Eigen::MatrixXd e = E.project_off_base(Y);
+  // RSS in the bracket [n, n+1]: |e_n + phi (e_n+1 - e_n)|^2, a parabola in phi.
+  auto rss_at = [&](double tau) {
+    const double x = std::clamp(tau / P.dt, double(MotionProblem::kShiftLo), double(MotionProblem::kShiftHi)) -
+                     MotionProblem::kShiftLo;
+    const int q = std::min(static_cast<int>(std::floor(x)), ns - 2);
+    const double phi = x - q;
+    return ((1.0 - phi) * e.col(q) + phi * e.col(q + 1)).squaredNorm();
+  };
+  double best = 1e300, best_tau = 0.0, curvature = 0.0;
+  for (int q = 0; q + 1 < ns; ++q) {
+    const Eigen::VectorXd d = e.col(q + 1) - e.col(q);
+    const double dd = d.squaredNorm();
+    const double phi = dd > 0.0 ? std::clamp(-e.col(q).dot(d) / dd, 0.0, 1.0) : 0.0;
+    const double r = (e.col(q) + phi * d).squaredNorm();
+    if (r < best) {
+      best = r;
+      best_tau = (MotionProblem::kShiftLo + q + phi) * P.dt;
+      curvature = dd;  // d^2 RSS / d phi^2 = 2 dd
+    }
+  }
+  A.trials = ns - 1;
+  A.tau = best_tau;
+  A.rss_at_tau = best;
+  A.reference = A.model_tau + std::clamp(A.tau - A.model_tau, -0.5 * P.dt, 0.5 * P.dt);
+  A.rss_at_reference = rss_at(A.reference);
+  // Standard error from the parabola's curvature, with the residual's variance
+  // per effective row (rows of a filtered residual are not independent).
+  const double n = static_cast<double>(e.rows());
+  Eigen::VectorXd r_best = e.col(0);
+  {
+    const double xx = A.tau / P.dt - MotionProblem::kShiftLo;
+    const int q = std::min(static_cast<int>(std::floor(xx)), ns - 2);
+    const double phi = xx - q;
+    r_best = (1.0 - phi) * e.col(q) + phi * e.col(q + 1);
+  }
+  A.n_eff = E.effective_rows(r_best);
+  const double k = E.base_rank() + 1;
+  const double s2 = best / std::max(1.0, n - k) * (n / std::max(A.n_eff, 1.0));
+  A.std_error = curvature > 0.0 ? P.dt * std::sqrt(s2 / curvature) : -1.0;
+  return A;
+}
+
+MotionProblem alignment_problem(const io::MotionData& data, const ctl::Machine& model, const MotionOptions& o) {
+  // Eight times the window where the log is long enough for it, shorter ones otherwise.
+  for (double widen : {8.0, 4.0, 2.0}) {
+    MotionOptions ao = o;
+    ao.half_window = std::min(1.0, widen * o.half_window);
+    try {
+      return prepare_motion(data, model, ao);
+    } catch (const Error&) {
+      // too few rows for this window: try a shorter one
+    }
+  }
+  return prepare_motion(data, model, o);
+}
+
+LinearProblem alignment_linear_problem(const MotionProblem& Pa) {
+  LinearProblem L = motion_linear_problem(Pa);
+  // Rows near a reversal of their axis do not vote: there friction changes
+  // within a few milliseconds, the second-order error of any friction column
+  // is largest, and the controller's answer to it is the force's steepest
+  // slope, so a misfit there reads as a delay (a 4 N Stribeck moved it by a
+  // quarter period).
+  constexpr double kReversalSpeed = 0.03;  // m/s
+  for (int r = 0; r < Pa.rows(); ++r)
+    for (int i = 0; i < 3; ++i)
+      if (std::fabs(Pa.v[r][i]) < kReversalSpeed) L.w(3 * r + i) = 0.0;
+  return L;
+}
+
+Alignment align_motion(const io::MotionData& data, const ctl::Machine& model, const MotionOptions& o) {
+  const MotionProblem Pa = alignment_problem(data, model, o);
+  return estimate_alignment(Pa, Engine(alignment_linear_problem(Pa)));
+}
+
+void apply_alignment(MotionProblem& P, double tau) {
+  P.set_delay(tau);
+  const Eigen::Index nb = P.base.cols();
+  P.base.conservativeResize(Eigen::NoChange, nb + 1);
+  P.base.col(nb) = -P.force_delay_slope(tau);
+  BaseParameter bp;
+  bp.name = "alignment.tau";
+  bp.unit = "s";
+  bp.value = tau;
+  bp.nuisance = true;
+  P.base_params.push_back(bp);
+}
+
+}  // namespace cpm::ident
