@@ -431,6 +431,17 @@ std::string diagnosis_json(const Diagnosis& D) {
   std::ostringstream o;
   auto axis = [](int a) { return a >= 0 ? std::to_string(a + 1) : std::string("null"); };
   const MotionProblem& P = D.motion;
+  // "params": {...}, "std_errors": {...} of a candidate (SI units).
+  auto params_json = [&o](const CandidateResult& c) {
+    o << "\"params\": {";
+    for (std::size_t j = 0; j < c.params.size(); ++j)
+      o << (j ? ", " : "") << json_string(c.params[j].name) << ": " << json_num(c.params[j].value);
+    o << "}, \"std_errors\": {";
+    for (std::size_t j = 0; j < c.params.size(); ++j)
+      o << (j ? ", " : "") << json_string(c.params[j].name) << ": "
+        << (c.params[j].std_error >= 0 ? json_num(c.params[j].std_error) : "null");
+    o << "}";
+  };
   o << "{\n \"kind\": " << json_string(D.kind) << ",\n \"samples\": " << D.samples << ",\n \"rows\": " << D.rows
     << ",\n \"units\": " << json_string(D.units) << ",\n \"data_file\": " << json_string(D.data_file) << ",\n \"model_file\": "
     << json_string(D.model_file) << ",\n";
@@ -449,14 +460,9 @@ std::string diagnosis_json(const Diagnosis& D) {
   for (std::size_t k = 0; k < D.candidates.size(); ++k) {
     const auto& c = D.candidates[k];
     o << (k ? ",\n" : "\n") << "  {\"effect\": " << json_string(c.effect) << ", \"axis\": " << axis(c.axis)
-      << ", \"params\": {";
-    for (std::size_t j = 0; j < c.params.size(); ++j)
-      o << (j ? ", " : "") << json_string(c.params[j].name) << ": " << json_num(c.params[j].value);
-    o << "}, \"std_errors\": {";
-    for (std::size_t j = 0; j < c.params.size(); ++j)
-      o << (j ? ", " : "") << json_string(c.params[j].name) << ": "
-        << (c.params[j].std_error >= 0 ? json_num(c.params[j].std_error) : "null");
-    o << "}, \"units\": {";
+      << ", ";
+    params_json(c);
+    o << ", \"units\": {";
     for (std::size_t j = 0; j < c.params.size(); ++j)
       o << (j ? ", " : "") << json_string(c.params[j].name) << ": " << json_string(c.params[j].unit);
     o << "}, \"rms_after\": " << json_num(c.rms_after) << ", \"explained\": " << json_num(c.explained)
@@ -491,14 +497,9 @@ std::string diagnosis_json(const Diagnosis& D) {
   const std::vector<int> found = D.found();
   for (std::size_t j = 0; j < found.size(); ++j) {
     const auto& c = D.candidates[static_cast<std::size_t>(found[j])];
-    o << (j ? ", " : "") << "{\"effect\": " << json_string(c.effect) << ", \"axis\": " << axis(c.axis) << ", \"params\": {";
-    for (std::size_t q = 0; q < c.params.size(); ++q)
-      o << (q ? ", " : "") << json_string(c.params[q].name) << ": " << json_num(c.params[q].value);
-    o << "}, \"std_errors\": {";
-    for (std::size_t q = 0; q < c.params.size(); ++q)
-      o << (q ? ", " : "") << json_string(c.params[q].name) << ": "
-        << (c.params[q].std_error >= 0 ? json_num(c.params[q].std_error) : "null");
-    o << "}}";
+    o << (j ? ", " : "") << "{\"effect\": " << json_string(c.effect) << ", \"axis\": " << axis(c.axis) << ", ";
+    params_json(c);
+    o << "}";
   }
   o << "], \"text\": " << json_string(D.verdict_text) << "},\n \"structure\": [";
   for (std::size_t j = 0; j < D.structure.size(); ++j) {
