@@ -45,6 +45,17 @@ Eigen::MatrixXd hcat(std::initializer_list<Eigen::VectorXd> cols) {
   return X;
 }
 
+// Two-stage least squares with one column: the instrument z (free of the
+// residual's noise) scaled by the first-stage fit of the noisy regressor x on
+// it, off the base. Least squares on the result gives <z, y> / <z, x>: the
+// instrumental-variable estimate, without the attenuation that least squares
+// on z alone has where z is noisier than x.
+Eigen::VectorXd instrumented(const Engine& E, const Eigen::VectorXd& z, const Eigen::VectorXd& x) {
+  const Eigen::VectorXd zp = E.project_off_base(z), xp = E.project_off_base(x);
+  const double zz = zp.squaredNorm();
+  return zz > 0.0 ? Eigen::VectorXd(z * (zp.dot(xp) / zz)) : z;
+}
+
 // What each effect's force depends on, for advice on separating two of them.
 struct Depends { bool direction, speed, position, force; };
 Depends depends(const std::string& e) {
@@ -307,7 +318,7 @@ CandidateResult evaluate_dynamic_candidate(const MotionProblem& P, const Engine&
           set_not_identifiable("no force was commanded on axis " + std::to_string(axis + 1));
           break;
         }
-        X = hcat({P.force_gain_column(axis)});
+        X = hcat({instrumented(E, P.force_gain_column(axis), P.force_gain_column_logged(axis))});
       } else {
         if (vabs < 5e-3) {
           set_not_identifiable("axis " + std::to_string(axis + 1) + " does not move in these data");

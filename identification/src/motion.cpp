@@ -80,9 +80,15 @@ Eigen::VectorXd MotionProblem::effect_force_column(const ctl::DynamicEffect& e) 
   });
 }
 
+Eigen::VectorXd MotionProblem::force_gain_column_logged(int axis) const {
+  Eigen::VectorXd c = Eigen::VectorXd::Zero(3 * rows());
+  for (int r = 0; r < rows(); ++r) c(3 * r + axis) = -drive_gain[axis] * f[r][axis];
+  return c;
+}
+
 Eigen::VectorXd MotionProblem::force_gain_column(int axis) const {
   Eigen::VectorXd c = Eigen::VectorXd::Zero(3 * rows());
-  for (int r = 0; r < rows(); ++r) c(3 * r + axis) = -drive_gain[axis] * f_smooth[r][axis];
+  for (int r = 0; r < rows(); ++r) c(3 * r + axis) = -drive_gain[axis] * f_predicted[r][axis];
   return c;
 }
 
@@ -103,8 +109,14 @@ void MotionProblem::set_delay(double tau) {
   delay = tau;
   const Eigen::VectorXd F = force_delayed(tau);
   residual = F - model_force;
+  // The force acting over the row's interval was commanded at about t_k + T/2 - tau.
+  const double u = 0.5 - tau / dt;
   for (int r = 0; r < rows(); ++r)
-    for (int i = 0; i < 3; ++i) f[r][i] = F(3 * r + i) / drive_gain[i];
+    for (int i = 0; i < 3; ++i) {
+      f[r][i] = F(3 * r + i) / drive_gain[i];
+      if (f_past.rows() == 3 * rows())
+        f_predicted[r][i] = f_past(3 * r + i, 0) + u * (f_past(3 * r + i, 1) + u * f_past(3 * r + i, 2));
+    }
 }
 
 MotionProblem prepare_motion(const io::MotionData& data, const ctl::Machine& model,
@@ -266,13 +278,19 @@ MotionProblem prepare_motion(const io::MotionData& data, const ctl::Machine& mod
     }
   }
 
+  // The force-gain instrument's history (motion.hpp, f_past): a quadratic over
+  // `past_n` samples that end `past_gap` before the earliest force any shift reads.
+  const int past_n = std::max(12, 3 * m);
+  P.past_samples = past_n;
+  P.past_gap = m + MotionProblem::kShiftHi + 1;
+  const int past = past_n;
   // Kept rows: full windows of both passes inside a segment.
   {
     int start = 0;
     while (start < n) {
       const int end = P.segment_end[start];
       // The force is also read shifted by kShiftLo..kShiftHi samples (alignment).
-      const int lo = std::max(2 * m, m + MotionProblem::kShiftHi);
+      const int lo = std::max(2 * m, m + MotionProblem::kShiftHi) + past;
       const int hi = std::max(2 * m, m - MotionProblem::kShiftLo + 1);
       for (int k = start + lo; k + hi < end; k += P.stride) P.sample.push_back(k);
       start = end;
@@ -283,7 +301,7 @@ MotionProblem prepare_motion(const io::MotionData& data, const ctl::Machine& mod
     std::ostringstream os;
     os << name << ": too few samples: " << n << " samples at " << fs << " Hz give " << R
        << " usable rows after the " << 2 * m + 1 << "-sample acceleration filter (need at least "
-       << opt.min_rows << "; about " << (opt.min_rows * P.stride + 4 * m) * P.dt
+       << opt.min_rows << "; about " << (opt.min_rows * P.stride + 4 * m + past) * P.dt
        << " s of motion in one piece)";
     throw Error(os.str());
   }
@@ -293,11 +311,23 @@ MotionProblem prepare_motion(const io::MotionData& data, const ctl::Machine& mod
   P.a.resize(R);
   P.f.resize(R);
   P.drive_gain = model.drive_gain();
-  P.f_smooth.resize(R);
+  P.f_predicted.resize(R);
+  P.f_past.setZero(3 * R, 3);
+  // Least-squares quadratic through samples u = -(gap + n - 1) .. -gap (u: samples from k).
+  Eigen::MatrixXd past_fit;
+  {
+    Eigen::MatrixXd V(past_n, 3);
+    for (int j = 0; j < past_n; ++j) {
+      const double u = -(P.past_gap + past_n - 1) + j;
+      V(j, 0) = 1.0;
+      V(j, 1) = u;
+      V(j, 2) = u * u;
+    }
+    past_fit = (V.transpose() * V).ldlt().solve(V.transpose());  // 3 x n
+  }
   P.force_at_shift.resize(3 * R, MotionProblem::kShiftHi - MotionProblem::kShiftLo + 1);
   P.a_columns.resize(R);
   const int ml = 4 * m;
-  const SgKernel s_long = savitzky_golay(ml, opt.order, 0, 0.0);
   // The columns' acceleration: 4x longer, so its noise shares ~1/64 of the
   // residual's; twice the degree, so that it still follows what the closed
   // loop puts into the motion near its bandwidth (5-10 Hz) when the model is
@@ -324,7 +354,8 @@ MotionProblem prepare_motion(const io::MotionData& data, const ctl::Machine& mod
     while (seg_start > 0 && P.segment_end[seg_start - 1] == P.segment_end[k]) --seg_start;
     const bool fits = k - ml >= seg_start && k + ml < P.segment_end[k];
     for (int i = 0; i < 3; ++i) {
-      P.f_smooth[r][i] = fits ? s_long.apply(&data.f[k][i], 3) : P.f[r][i];
+      for (int j = 0; j < past_n; ++j)
+        P.f_past.row(3 * r + i) += past_fit.col(j).transpose() * data.f[k - P.past_gap - past_n + 1 + j][i];
       if (!fits) P.a_columns[r][i] = P.a[r][i];
       else if (measured) P.a_columns[r][i] = sh_long.apply(&data.a[k][i], 3);
       else if (a_from_d) P.a_columns[r][i] = d2h_long.apply(&data.d[k][i], 3) * fs * fs;

@@ -81,9 +81,20 @@ struct MotionProblem {
   std::vector<double> t;          // time of the state of the row: t_k + dt/2 (s)
   std::vector<Vec3> d, v, a;      // filtered state (m, m/s, m/s^2)
   std::vector<Vec3> f;            // filtered commanded force (N)
-  std::vector<Vec3> f_smooth;      // the force smoothed 4x longer: the force-gain regressor,
-                                   // nearly free of the noise the controller put into F
-                                   // (which the residual also carries: a shared-noise bias)
+  // The force-gain regressor: the commanded force at the row predicted from
+  // the samples before the row's window only (a quadratic over kPastSamples,
+  // extrapolated). A column built from the force of the window itself shares
+  // its noise with the residual: the logged force's when a logger measured
+  // it (errors in variables), the controller's answer to the plant's noise in
+  // closed loop. What came before the window shares neither (causality), so
+  // it is an instrument for the force (two-stage least squares with the
+  // prediction as first stage); the row's own force is the instrumented one.
+  // f_predicted is that prediction at the current alignment, f_past its
+  // quadratic per row (3 coefficients per axis, in samples from the row's sample).
+  std::vector<Vec3> f_predicted;   // N
+  Eigen::MatrixXd f_past;          // 3R x 3
+  int past_samples = 0;            // samples the quadratic is fitted to
+  int past_gap = 0;                // samples between them and the row's sample
   // Acceleration for the regressor columns (base, nuisance): the same
   // estimate over a 4x longer kernel. The residual carries -M times the
   // noise of `a`; a column built on `a` would carry the same noise and bias
@@ -160,8 +171,11 @@ struct MotionProblem {
   [[nodiscard]] Eigen::VectorXd effect_column(const ctl::DynamicEffect& e, int j) const;
   // The effect's force itself, filtered.
   [[nodiscard]] Eigen::VectorXd effect_force_column(const ctl::DynamicEffect& e) const;
-  // Column of a force-gain change on `axis`: -g F (filtered).
+  // Column of a force-gain change on `axis`: -g F, F predicted from before the
+  // row's window (the instrument, f_predicted), and the same with the row's own
+  // filtered force (which shares the residual's noise).
   [[nodiscard]] Eigen::VectorXd force_gain_column(int axis) const;
+  [[nodiscard]] Eigen::VectorXd force_gain_column_logged(int axis) const;
 };
 
 // Build the residual and the base columns. Throws Error naming the file and
