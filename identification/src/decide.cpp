@@ -19,6 +19,21 @@ std::string amount(double v, const std::string& units) {
   return fmt(v, 3) + " " + units;
 }
 
+std::string human_value(const ParamEstimate& p) {
+  // Scale to the unit a person reads this size in; the standard error in the same unit.
+  double k = 1.0;
+  std::string u = p.unit;
+  const double a = std::fabs(p.value);
+  if (p.unit == "m") { k = a < 1e-3 ? 1e6 : 1e3; u = a < 1e-3 ? "µm" : "mm"; }
+  else if (p.unit == "s") { k = 1e3; u = "ms"; }
+  else if (p.unit == "rad" && p.name != "phi") { k = a < 1e-3 ? 1e6 : 1e3; u = a < 1e-3 ? "µrad" : "mrad"; }
+  else if (p.unit == "1") { k = a < 1e-3 ? 1e6 : 1e2; u = a < 1e-3 ? "ppm" : "%"; }
+  else if (p.unit == "N") { k = a < 1.0 ? 1e3 : 1.0; u = a < 1.0 ? "mN" : "N"; }
+  std::string s = fmt(p.value * k, 4);
+  if (p.std_error >= 0.0) s += " ± " + fmt(p.std_error * k, 2);
+  return s + " " + u;
+}
+
 void rank_and_decide(Diagnosis& D, const Engine& E, const DiagnoseOptions& opt, const SeparateAdvice& advice) {
   const int rank = E.base_rank();
   // Look-elsewhere: the family of candidates and the search trials within each.
@@ -119,7 +134,9 @@ void rank_and_decide(Diagnosis& D, const Engine& E, const DiagnoseOptions& opt, 
     }
   }
 
-  // Verdict and forward selection.
+  // Verdict and forward selection: motion logs choose by one statistic from
+  // the model as given (select_motion_effects, select.cpp); the kinematic kinds as below.
+  if (D.kind == "motion") return;
   if (!D.candidates.empty() && D.candidates[0].significant) {
     D.verdict = 0;
     const CandidateResult& v = D.candidates[0];

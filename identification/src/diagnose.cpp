@@ -557,6 +557,48 @@ CandidateResult evaluate_dynamic_candidate(const MotionProblem& P, const Engine&
 }
 
 namespace {
+// The parameters of every effect chosen, fitted on what the other chosen
+// effects leave (their contributions from the joint fit), with the base
+// refitted only when the selection chose to refit it (inertia_error): the
+// numbers then belong to the model the verdict describes.
+void refine_chosen(Diagnosis& D, const Engine& E, const MotionProblem& P, const ctl::MachineModel& model,
+                   const DiagnoseOptions& opt) {
+  const std::vector<int> found = D.found();
+  bool base_in = false;
+  for (int j : found) base_in |= D.candidates[static_cast<std::size_t>(j)].effect == "inertia_error";
+  LinearProblem L = E.problem();
+  if (!base_in) {  // only the nuisance stays in the base
+    LinearProblem N = L;
+    std::vector<int> keep;
+    for (std::size_t b = 0; b < L.nuisance.size(); ++b)
+      if (L.nuisance[b]) keep.push_back(static_cast<int>(b));
+    N.B.resize(L.B.rows(), static_cast<Eigen::Index>(keep.size()));
+    N.base_names.clear();
+    N.base_units.clear();
+    N.base_values.clear();
+    N.nuisance.clear();
+    for (std::size_t q = 0; q < keep.size(); ++q) {
+      N.B.col(static_cast<Eigen::Index>(q)) = L.B.col(keep[q]);
+      N.base_names.push_back(L.base_names[static_cast<std::size_t>(keep[q])]);
+      N.base_units.push_back(L.base_units[static_cast<std::size_t>(keep[q])]);
+      N.base_values.push_back(L.base_values[static_cast<std::size_t>(keep[q])]);
+      N.nuisance.push_back(1);
+    }
+    L = std::move(N);
+  }
+  const Eigen::VectorXd y0 = L.y;
+  for (int j : found) {
+    CandidateResult& c = D.candidates[static_cast<std::size_t>(j)];
+    if (c.effect == "inertia_error" || c.effect == "actuation_delay") continue;
+    L.y = y0;
+    for (int l : found)
+      if (l != j && D.candidates[static_cast<std::size_t>(l)].fitted.size() == L.y.size())
+        L.y -= D.candidates[static_cast<std::size_t>(l)].fitted;
+    const CandidateResult r = evaluate_dynamic_candidate(P, Engine(L), model, c.effect, c.axis, opt);
+    if (r.params.size() == c.params.size()) c.params = r.params;
+  }
+}
+
 // The alignment as a candidate of its own: actuation_delay with tau = the
 // delay the model is missing, scored against the model as given at the
 // alignment it may take without it (within T/2 of its own delay). Named
@@ -602,15 +644,11 @@ void name_missing_delay(Diagnosis& D, const Engine& E, const DiagnoseOptions& op
   D.also = found;
   std::ostringstream os;
   os.precision(3);
-  os << "missing: actuation_delay — tau = " << A.missing() * 1e3 << " ms (" << A.missing() / A.period
-     << " sample periods; the force acts " << A.tau * 1e3 << " ms after t_k, the model says " << A.model_tau * 1e3
-     << " ms)";
-  if (found.empty()) {
-    os << "; nothing else is missing";
-    D.verdict_text = os.str();
-  } else {
-    D.verdict_text = os.str() + ". With it, " + D.verdict_text;
-  }
+  os << "missing: actuation_delay (tau = " << detail::human_value(D.candidates[0].params[0]) << ": the force acts "
+     << A.tau / A.period << " sample periods after t_k, the model says " << A.model_tau / A.period << ")";
+  const std::string rest = D.verdict_text.rfind("missing: ", 0) == 0 ? D.verdict_text.substr(9) : std::string();
+  if (found.empty()) os << ". Nothing else is missing";
+  D.verdict_text = os.str() + (found.empty() ? std::string() : "; " + rest);
 }
 }  // namespace
 
@@ -720,6 +758,10 @@ Diagnosis diagnose_aligned(const io::MotionData& data, const ctl::Machine& model
   detail::rank_and_decide(D, E, opt, [&](const CandidateResult& a, const CandidateResult& b) {
     return separate_advice(a, b, ex);
   });
+  // Stage "selection" (select.cpp), then each effect chosen refitted on what the others leave.
+  detail::select_motion_effects(D, E, opt);
+  refine_chosen(D, E, P, model.model(), opt);
+  detail::verdict_text_motion(D);
   // Coulomb friction on an axis that moved one way only is a constant force:
   // what a tilted plane puts into the weight, what a force-gain error makes
   // of a nearly steady force, what a distant spring pulls. The fit may prefer

@@ -38,6 +38,17 @@ void score_candidate(CandidateResult& c, const Engine& E, double rss_parent, int
 
 // "0.123 N" or "1.23 µm" for a value in the diagnosis' units.
 std::string amount(double v, const std::string& units);
+// A parameter in the unit a person reads it in, with its standard error:
+// "4.01 ± 0.03 µm", "1.00 ± 0.01 ms", "2.5 ± 0.3 %", "150 ± 20 mN".
+std::string human_value(const ParamEstimate& p);
+
+// Motion logs: forward selection by one statistic from the model as given
+// (select.cpp): reorders the candidates, sets verdict, also, significance and
+// the verdict text.
+void select_motion_effects(Diagnosis& D, const Engine& E, const DiagnoseOptions& opt);
+// The verdict text of a motion diagnosis from its found() effects, their
+// parameters and alternatives (after the parameters are refined).
+void verdict_text_motion(Diagnosis& D);
 
 // The measurement that would separate two candidates.
 using SeparateAdvice = std::function<std::string(const CandidateResult&, const CandidateResult&)>;

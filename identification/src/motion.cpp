@@ -115,7 +115,7 @@ void MotionProblem::set_delay(double tau) {
     for (int i = 0; i < 3; ++i) {
       f[r][i] = F(3 * r + i) / drive_gain[i];
       if (f_past.rows() == 3 * rows())
-        f_predicted[r][i] = f_past(3 * r + i, 0) + u * (f_past(3 * r + i, 1) + u * f_past(3 * r + i, 2));
+        f_predicted[r][i] = f_past(3 * r + i, 0) + u * (f_past(3 * r + i, 1) + u * (f_past(3 * r + i, 2) + u * f_past(3 * r + i, 3)));
     }
 }
 
@@ -278,11 +278,14 @@ MotionProblem prepare_motion(const io::MotionData& data, const ctl::Machine& mod
     }
   }
 
-  // The force-gain instrument's history (motion.hpp, f_past): a quadratic over
-  // `past_n` samples that end `past_gap` before the earliest force any shift reads.
-  const int past_n = std::max(12, 3 * m);
+  // The force-gain instrument's samples (motion.hpp, f_past): a cubic through
+  // `past_n` samples on each side of the row's window, ending `past_gap`
+  // before the earliest force any shift reads and starting `future_gap` after
+  // the latest.
+  const int past_n = std::max(8, 2 * m);
   P.past_samples = past_n;
   P.past_gap = m + MotionProblem::kShiftHi + 1;
+  P.future_gap = m - MotionProblem::kShiftLo + 1;
   const int past = past_n;
   // Kept rows: full windows of both passes inside a segment.
   {
@@ -291,7 +294,7 @@ MotionProblem prepare_motion(const io::MotionData& data, const ctl::Machine& mod
       const int end = P.segment_end[start];
       // The force is also read shifted by kShiftLo..kShiftHi samples (alignment).
       const int lo = std::max(2 * m, m + MotionProblem::kShiftHi) + past;
-      const int hi = std::max(2 * m, m - MotionProblem::kShiftLo + 1);
+      const int hi = std::max(2 * m, m - MotionProblem::kShiftLo + 1) + past;
       for (int k = start + lo; k + hi < end; k += P.stride) P.sample.push_back(k);
       start = end;
     }
@@ -301,7 +304,7 @@ MotionProblem prepare_motion(const io::MotionData& data, const ctl::Machine& mod
     std::ostringstream os;
     os << name << ": too few samples: " << n << " samples at " << fs << " Hz give " << R
        << " usable rows after the " << 2 * m + 1 << "-sample acceleration filter (need at least "
-       << opt.min_rows << "; about " << (opt.min_rows * P.stride + 4 * m + past) * P.dt
+       << opt.min_rows << "; about " << (opt.min_rows * P.stride + 4 * m + 2 * past) * P.dt
        << " s of motion in one piece)";
     throw Error(os.str());
   }
@@ -312,18 +315,20 @@ MotionProblem prepare_motion(const io::MotionData& data, const ctl::Machine& mod
   P.f.resize(R);
   P.drive_gain = model.drive_gain();
   P.f_predicted.resize(R);
-  P.f_past.setZero(3 * R, 3);
-  // Least-squares quadratic through samples u = -(gap + n - 1) .. -gap (u: samples from k).
-  Eigen::MatrixXd past_fit;
+  P.f_past.setZero(3 * R, 4);
+  // Least-squares cubic through u = -(gap + n - 1) .. -gap and future_gap .. future_gap + n - 1
+  // (u: samples from the row's sample k).
+  std::vector<int> around;
+  for (int j = 0; j < past_n; ++j) around.push_back(-(P.past_gap + past_n - 1) + j);
+  for (int j = 0; j < past_n; ++j) around.push_back(P.future_gap + j);
+  Eigen::MatrixXd around_fit;
   {
-    Eigen::MatrixXd V(past_n, 3);
-    for (int j = 0; j < past_n; ++j) {
-      const double u = -(P.past_gap + past_n - 1) + j;
-      V(j, 0) = 1.0;
-      V(j, 1) = u;
-      V(j, 2) = u * u;
+    Eigen::MatrixXd V(static_cast<Eigen::Index>(around.size()), 4);
+    for (std::size_t j = 0; j < around.size(); ++j) {
+      const double u = around[j];
+      V.row(static_cast<Eigen::Index>(j)) << 1.0, u, u * u, u * u * u;
     }
-    past_fit = (V.transpose() * V).ldlt().solve(V.transpose());  // 3 x n
+    around_fit = (V.transpose() * V).ldlt().solve(V.transpose());  // 4 x 2n
   }
   P.force_at_shift.resize(3 * R, MotionProblem::kShiftHi - MotionProblem::kShiftLo + 1);
   P.a_columns.resize(R);
@@ -354,8 +359,8 @@ MotionProblem prepare_motion(const io::MotionData& data, const ctl::Machine& mod
     while (seg_start > 0 && P.segment_end[seg_start - 1] == P.segment_end[k]) --seg_start;
     const bool fits = k - ml >= seg_start && k + ml < P.segment_end[k];
     for (int i = 0; i < 3; ++i) {
-      for (int j = 0; j < past_n; ++j)
-        P.f_past.row(3 * r + i) += past_fit.col(j).transpose() * data.f[k - P.past_gap - past_n + 1 + j][i];
+      for (std::size_t j = 0; j < around.size(); ++j)
+        P.f_past.row(3 * r + i) += around_fit.col(static_cast<Eigen::Index>(j)).transpose() * data.f[k + around[j]][i];
       if (!fits) P.a_columns[r][i] = P.a[r][i];
       else if (measured) P.a_columns[r][i] = sh_long.apply(&data.a[k][i], 3);
       else if (a_from_d) P.a_columns[r][i] = d2h_long.apply(&data.d[k][i], 3) * fs * fs;

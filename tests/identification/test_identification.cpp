@@ -200,10 +200,24 @@ TEST_P(PlantedEffect, AtThreeAndTenTimesTheNoiseItIsFirstOnTheRightAxisWithinThr
       SCOPED_TRACE(std::string(pe.name) + " x" + std::to_string(times) + " seed " + std::to_string(sp.seed) +
                    " amplitude " + std::to_string(times * unit) + "\n" + diagnosis_text(D));
       ASSERT_GE(D.verdict, 0);
-      const CandidateResult& c = D.candidates[static_cast<std::size_t>(D.verdict)];
+      EXPECT_EQ(D.verdict, 0);
+      // The planted effect is the verdict, or, where these data cannot tell it
+      // from the verdict (a few grams of payload act as their weight only, what
+      // a drive gain on z also is), named beside it as an alternative; then the
+      // verdict must say it is ambiguous and the planted one is checked below.
+      const CandidateResult* named = &D.candidates[static_cast<std::size_t>(D.verdict)];
+      const std::string planted_label = pe.axis >= 0 ? std::string(pe.name) + "[axis " + std::to_string(pe.axis + 1) + "]"
+                                                     : std::string(pe.name);
+      if (named->label() != planted_label) {
+        const auto& alt = named->alternatives;
+        EXPECT_NE(std::find(alt.begin(), alt.end(), planted_label), alt.end()) << "planted " << planted_label;
+        EXPECT_TRUE(D.ambiguous);
+        for (const auto& x : D.candidates)
+          if (x.label() == planted_label) named = &x;
+      }
+      const CandidateResult& c = *named;
       EXPECT_EQ(c.effect, pe.name);
       EXPECT_EQ(c.axis, pe.axis);
-      EXPECT_EQ(D.verdict, 0);
       if (c.effect == pe.name) {
         for (std::size_t j = 0; j < v.size(); ++j) {
           if (pe.name == std::string("cogging") && j == 2) {

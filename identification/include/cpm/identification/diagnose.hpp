@@ -66,6 +66,9 @@ struct CandidateResult {
   bool significant = false;
   std::string note;         // why not identifiable / held at a bound / ...
   std::vector<Confounder> confounded;
+  // Effects that explained these data as well when this one was chosen (BIC
+  // within 6, signatures alike): the verdict names them as alternatives.
+  std::vector<std::string> alternatives;
   Eigen::MatrixXd columns;  // unweighted columns at the fitted nonlinear parameters
   Eigen::VectorXd fitted;   // unweighted contribution of the candidate (data units)
   Eigen::VectorXd residual_after;
@@ -89,7 +92,7 @@ struct DiagnoseOptions {
   double cogging_lambda_max = 0.1;  // m
   std::vector<std::string> effects; // restrict to these names (empty: the whole dynamic library)
   bool structure_search = true;
-  int max_forward_steps = 3;
+  int max_forward_steps = 6;  // effects chosen at most (motion: forward selection)
 };
 
 struct Diagnosis {

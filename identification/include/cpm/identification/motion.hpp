@@ -81,20 +81,21 @@ struct MotionProblem {
   std::vector<double> t;          // time of the state of the row: t_k + dt/2 (s)
   std::vector<Vec3> d, v, a;      // filtered state (m, m/s, m/s^2)
   std::vector<Vec3> f;            // filtered commanded force (N)
-  // The force-gain regressor: the commanded force at the row predicted from
-  // the samples before the row's window only (a quadratic over kPastSamples,
-  // extrapolated). A column built from the force of the window itself shares
-  // its noise with the residual: the logged force's when a logger measured
-  // it (errors in variables), the controller's answer to the plant's noise in
-  // closed loop. What came before the window shares neither (causality), so
-  // it is an instrument for the force (two-stage least squares with the
-  // prediction as first stage); the row's own force is the instrumented one.
-  // f_predicted is that prediction at the current alignment, f_past its
-  // quadratic per row (3 coefficients per axis, in samples from the row's sample).
+  // The force-gain regressor: the commanded force at the row interpolated
+  // from the samples around the row's window only (a cubic through
+  // past_samples on each side). A column built from the force of the window
+  // itself shares its noise with the residual (errors in variables: with the
+  // logged force measured with noise, a log with nothing missing came out
+  // with a significant gain on z); the samples around it do not. It is the
+  // instrument of two-stage least squares (diagnose.cpp, instrumented): its
+  // first stage scales it to the row's own force. f_predicted is the
+  // interpolation at the current alignment; f_past its cubic per row (4
+  // coefficients per axis, in samples from the row's sample).
   std::vector<Vec3> f_predicted;   // N
-  Eigen::MatrixXd f_past;          // 3R x 3
-  int past_samples = 0;            // samples the quadratic is fitted to
-  int past_gap = 0;                // samples between them and the row's sample
+  Eigen::MatrixXd f_past;          // 3R x 4
+  int past_samples = 0;            // samples on each side
+  int past_gap = 0;                // samples between the earlier ones and the row's sample
+  int future_gap = 0;              // samples between the row's sample and the later ones
   // Acceleration for the regressor columns (base, nuisance): the same
   // estimate over a 4x longer kernel. The residual carries -M times the
   // noise of `a`; a column built on `a` would carry the same noise and bias
