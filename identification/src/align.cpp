@@ -93,6 +93,24 @@ LinearProblem alignment_linear_problem(const MotionProblem& Pa) {
   for (int r = 0; r < Pa.rows(); ++r)
     for (int i = 0; i < 3; ++i)
       if (std::fabs(Pa.v[r][i]) < kReversalSpeed) L.w(3 * r + i) = 0.0;
+  // Friction on every axis is fitted with the alignment whether or not it is
+  // missing: a delay's signature (the force's slope) is the motion's jerk,
+  // which on a sinusoidal axis is minus its velocity times omega^2; 1 N of
+  // Coulomb friction left out moved the estimate by two periods.
+  for (int i = 0; i < 3; ++i)
+    for (auto type : {ctl::DynamicEffectType::viscous_friction, ctl::DynamicEffectType::coulomb_friction}) {
+      ctl::DynamicEffect e;
+      e.type = type;
+      e.axis = static_cast<std::int8_t>(i);
+      e.param = {1.0, 0.0, 0.0, 0.0};
+      const Eigen::Index nb = L.B.cols();
+      L.B.conservativeResize(Eigen::NoChange, nb + 1);
+      L.B.col(nb) = Pa.effect_column(e, 0);
+      L.base_names.push_back(e.label());
+      L.base_units.push_back(ctl::info(type).params[0].unit);
+      L.base_values.push_back(0.0);
+      L.nuisance.push_back(0);
+    }
   return L;
 }
 

@@ -659,9 +659,10 @@ Alignment align_with(const MotionProblem& Pa, const ctl::MachineModel& model,
                      const std::vector<std::pair<std::string, int>>& effects, const DiagnoseOptions& opt) {
   LinearProblem L = alignment_linear_problem(Pa);
   if (!effects.empty()) {
-    const Engine E1(L);
+    const Engine E1(motion_linear_problem(Pa));  // the candidates' own base (their names index it)
     for (const auto& [name, axis] : effects) {
       if (name == "inertia_error" || name == "actuation_delay") continue;  // inside the base / the alignment
+      if (name == "viscous_friction" || name == "coulomb_friction") continue;  // always fitted with it
       const CandidateResult c = evaluate_dynamic_candidate(Pa, E1, model, name, axis, opt);
       if (c.columns.cols() == 0) continue;
       const Eigen::Index nb = L.B.cols();

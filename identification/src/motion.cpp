@@ -251,12 +251,15 @@ MotionProblem prepare_motion(const io::MotionData& data, const ctl::Machine& mod
       P.v_hat_noise[i] = vs_from_d ? P.position_noise[i] * d1_short.noise_gain() * fs
                                    : P.velocity_noise[i] * s_short.noise_gain();
   }
+  // First sample of each sample's segment (a walk back per sample made this quadratic in n).
+  std::vector<int> segment_start(static_cast<std::size_t>(n), 0);
+  for (int k = 1; k < n; ++k)
+    segment_start[k] = P.segment_end[k - 1] == P.segment_end[k] ? segment_start[k - 1] : k;
   P.d_hat.assign(n, Vec3::Zero());
   P.v_hat.assign(n, Vec3::Zero());
   for (int k = 0; k < n; ++k) {
     const int seg_end = P.segment_end[k];
-    int seg_start = k;
-    while (seg_start > 0 && P.segment_end[seg_start - 1] == seg_end) --seg_start;
+    const int seg_start = segment_start[k];
     const int kc = std::clamp(k, seg_start + m, seg_end - 1 - m);
     if (kc < seg_start + m) {  // segment shorter than the kernel: raw values
       P.d_hat[k] = data.d[k];
@@ -355,8 +358,7 @@ MotionProblem prepare_motion(const io::MotionData& data, const ctl::Machine& mod
         P.force_at_shift(3 * r + i, shift - MotionProblem::kShiftLo) =
             model.drive_gain()[i] * P.smooth_force.apply(&data.f[k - shift][i], 3);
     }
-    int seg_start = k;
-    while (seg_start > 0 && P.segment_end[seg_start - 1] == P.segment_end[k]) --seg_start;
+    const int seg_start = segment_start[k];
     const bool fits = k - ml >= seg_start && k + ml < P.segment_end[k];
     for (int i = 0; i < 3; ++i) {
       for (std::size_t j = 0; j < around.size(); ++j)

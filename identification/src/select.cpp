@@ -81,7 +81,9 @@ void select_motion_effects(Diagnosis& D, const Engine& E, const DiagnoseOptions&
       const bool with_base = base_in || t.base;
       const Eigen::MatrixXd X = t.base ? XS : hstack(XS, t.X);
       s.fit = E.fit(X, with_base);
-      const int q = t.base ? E.base_rank_beyond_nuisance() : static_cast<int>(t.X.cols());
+      // Parameters added: the columns, or the effect's parameters where some
+      // were searched (a cogging wavelength, a Stribeck speed) and so were fitted too.
+      const int q = t.base ? E.base_rank_beyond_nuisance() : std::max(static_cast<int>(t.X.cols()), c.n_params);
       const int k_new = k_cur + q;
       if (!s.fit.full_rank || s.fit.rss >= rss_cur) {
         last[static_cast<std::size_t>(t.candidate)] = s;
@@ -125,7 +127,7 @@ void select_motion_effects(Diagnosis& D, const Engine& E, const DiagnoseOptions&
           k_cur += E.base_rank_beyond_nuisance();
         } else {
           XS = hstack(XS, t.X);
-          k_cur += static_cast<int>(t.X.cols());
+          k_cur += std::max(static_cast<int>(t.X.cols()), D.candidates[static_cast<std::size_t>(best)].n_params);
         }
       }
     rss_cur = s.rss;
