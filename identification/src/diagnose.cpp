@@ -763,6 +763,22 @@ Diagnosis diagnose_aligned(const io::MotionData& data, const ctl::Machine& model
   detail::select_motion_effects(D, E, opt);
   refine_chosen(D, E, P, model.model(), opt);
   detail::verdict_text_motion(D);
+  // Stage "outside the library" (outside.cpp): strong structure left leads the
+  // verdict, and the selection is redone with it fitted beside the library.
+  // Rescanned after each reselection (a narrow bump leaves some of itself
+  // beside the bin that describes it), three rounds at most.
+  std::optional<Engine> Es;
+  for (int round = 0; round < 3; ++round) {
+    const std::vector<StructureFinding> more = detail::strong_structure(D, P, opt);
+    if (more.empty()) break;
+    D.outside_library.insert(D.outside_library.end(), more.begin(), more.end());
+    Es.emplace(detail::with_structure(E.problem(), D.outside_library, P));
+    for (auto& c : D.candidates) c.alternatives.clear();
+    detail::select_motion_effects(D, *Es, opt);
+    refine_chosen(D, *Es, P, model.model(), opt);
+    detail::verdict_text_motion(D);
+  }
+  detail::lead_with_outside_library(D);
   // Coulomb friction on an axis that moved one way only is a constant force:
   // what a tilted plane puts into the weight, what a force-gain error makes
   // of a nearly steady force, what a distant spring pulls. The fit may prefer

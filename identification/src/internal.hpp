@@ -49,6 +49,12 @@ void select_motion_effects(Diagnosis& D, const Engine& E, const DiagnoseOptions&
 // The verdict text of a motion diagnosis from its found() effects, their
 // parameters and alternatives (after the parameters are refined).
 void verdict_text_motion(Diagnosis& D);
+// Motion logs, outside the library (outside.cpp): the strong findings of the
+// structure scan in what the chosen effects leave; the problem with their
+// columns as nuisance (to select again beside them); the verdict text led by them.
+std::vector<StructureFinding> strong_structure(const Diagnosis& D, const MotionProblem& P, const DiagnoseOptions& opt);
+LinearProblem with_structure(const LinearProblem& L, const std::vector<StructureFinding>& S, const MotionProblem& P);
+void lead_with_outside_library(Diagnosis& D);
 
 // The measurement that would separate two candidates.
 using SeparateAdvice = std::function<std::string(const CandidateResult&, const CandidateResult&)>;

@@ -482,7 +482,9 @@ std::string diagnosis_json(const Diagnosis& D) {
     o << "]}";
   }
   o << "\n ],\n \"verdict\": {\"missing\": ";
-  if (D.verdict >= 0) {
+  if (!D.outside_library.empty()) {
+    o << "\"outside_library\", \"axis\": " << axis(D.outside_library.front().axis);
+  } else if (D.verdict >= 0) {
     const auto& v = D.candidates[D.verdict];
     o << json_string(v.effect) << ", \"axis\": " << axis(v.axis);
   } else {
@@ -499,15 +501,23 @@ std::string diagnosis_json(const Diagnosis& D) {
     const auto& c = D.candidates[static_cast<std::size_t>(found[j])];
     o << (j ? ", " : "") << "{\"effect\": " << json_string(c.effect) << ", \"axis\": " << axis(c.axis) << ", ";
     params_json(c);
-    o << "}";
+    o << ", \"alternatives\": [";
+    for (std::size_t q = 0; q < c.alternatives.size(); ++q) o << (q ? ", " : "") << json_string(c.alternatives[q]);
+    o << "]}";
   }
+  auto structure_json = [&](const std::vector<StructureFinding>& items) {
+    for (std::size_t j = 0; j < items.size(); ++j) {
+      const auto& f = items[j];
+      o << (j ? ", " : "") << "\n  {\"kind\": " << json_string(f.kind) << ", \"axis\": " << axis(f.axis)
+        << ", \"coordinate\": " << json_string(f.coordinate) << ", \"location\": " << json_num(f.location)
+        << ", \"size\": " << json_num(f.size) << ", \"z\": " << json_num(f.z) << ", \"text\": " << json_string(f.text) << "}";
+    }
+  };
+  // Structure no library effect describes that leads the verdict (verdict.missing = "outside_library").
+  o << "], \"outside_library\": [";
+  structure_json(D.outside_library);
   o << "], \"text\": " << json_string(D.verdict_text) << "},\n \"structure\": [";
-  for (std::size_t j = 0; j < D.structure.size(); ++j) {
-    const auto& f = D.structure[j];
-    o << (j ? ", " : "") << "\n  {\"kind\": " << json_string(f.kind) << ", \"axis\": " << axis(f.axis)
-      << ", \"coordinate\": " << json_string(f.coordinate) << ", \"location\": " << json_num(f.location)
-      << ", \"size\": " << json_num(f.size) << ", \"z\": " << json_num(f.z) << ", \"text\": " << json_string(f.text) << "}";
-  }
+  structure_json(D.structure);
   o << "],\n \"notes\": [";
   for (std::size_t j = 0; j < D.notes.size(); ++j) o << (j ? ", " : "") << json_string(D.notes[j]);
   o << "],\n \"warnings\": [";

@@ -179,7 +179,7 @@ std::vector<StructureFinding> find_motion_structure(const MotionProblem& P,
                        cat("axis ", i + 1, ": the residual changes by ", best_diff, " N across d", i + 1, " = ", best_x * 1e3, " mm")});
       // bump: 20 bins of equal count
       const int B = 20;
-      double bz = 0.0, bmean = 0.0, bx = 0.0;
+      double bz = 0.0, bmean = 0.0, bx = 0.0, blo = 0.0, bhi = 0.0;
       for (int b = 0; b < B; ++b) {
         const int a0 = b * R / B, a1 = (b + 1) * R / B;
         if (a1 - a0 < 5) continue;
@@ -189,12 +189,15 @@ std::vector<StructureFinding> find_motion_structure(const MotionProblem& P,
           bz = z;
           bmean = m;
           bx = P.d[idx[(a0 + a1) / 2]][i];
+          blo = P.d[idx[a0]][i];
+          bhi = P.d[idx[a1 - 1]][i];
         }
       }
       const bool near_step = !out.empty() && out.back().kind == "step" && out.back().axis == i;
       if (std::fabs(bz) > 6.0 && std::fabs(bmean) > tiny && !near_step)
         out.push_back({"bump", i, cat("d", i + 1), bx, bmean, bz,
-                       cat("axis ", i + 1, ": a local excess of ", bmean, " N around d", i + 1, " = ", bx * 1e3, " mm")});
+                       cat("axis ", i + 1, ": a local excess of ", bmean, " N around d", i + 1, " = ", bx * 1e3, " mm"),
+                       blo, bhi});
     }
   }
   return out;

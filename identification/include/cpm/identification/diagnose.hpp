@@ -83,6 +83,7 @@ struct StructureFinding {
   double size = 0.0;        // amplitude in data units
   double z = 0.0;           // significance in standard errors
   std::string text;         // one sentence for people
+  double lo = 0.0, hi = 0.0;  // bump: the coordinate range it covers (SI)
 };
 
 struct DiagnoseOptions {
@@ -114,11 +115,14 @@ struct Diagnosis {
   [[nodiscard]] std::vector<int> found() const {
     std::vector<int> f;
     if (verdict >= 0) f.push_back(verdict);
-    f.insert(f.end(), also.begin(), also.end());
+    for (int j : also) f.push_back(j);
     return f;
   }
   std::string verdict_text;
   std::vector<StructureFinding> structure;
+  // Structure no library effect describes, strong enough to lead the verdict
+  // (JSON verdict.missing = "outside_library"): motion logs.
+  std::vector<StructureFinding> outside_library;
   std::vector<std::string> notes;
   std::vector<std::string> warnings;
   Eigen::VectorXd residual_final;   // after the verdict's effects (or the base refit)

@@ -1,0 +1,96 @@
+// Stage "outside the library" of the motion diagnosis (internal.hpp).
+//
+// The structure scan (structure.hpp) looks at what the chosen effects leave.
+// A strong finding there (|z| >= 8 and at least half the axis' noise) is
+// something no library effect describes: it leads the verdict, and the
+// selection is run again with that structure fitted as nuisance, so that a
+// library effect is named only for what the structure does not explain (a
+// local excess of force on one axis was otherwise named a force gain, which
+// explains a little of any bump).
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+#include <sstream>
+
+#include "internal.hpp"
+#include "cpm/identification/structure.hpp"
+
+namespace cpm::ident::detail {
+namespace {
+
+constexpr double kStrongZ = 8.0;
+
+// Columns that describe a finding on its axis' rows.
+Eigen::MatrixXd structure_columns(const StructureFinding& f, const MotionProblem& P) {
+  const int R = P.rows(), i = f.axis;
+  const double tp = 2.0 * std::numbers::pi;
+  const int j = f.coordinate.size() == 2 && f.coordinate[0] == 'd' ? f.coordinate[1] - '1' : -1;
+  const bool two = f.kind == "periodic" || f.kind == "periodic_time";
+  // A bump: its local profile, six sub-bins over twice the bin the scan found
+  // (one bin's mean leaves the shape of a narrow excess for other columns to take).
+  constexpr int kBumpBins = 6;
+  const bool bump = f.kind == "bump";
+  Eigen::MatrixXd X = Eigen::MatrixXd::Zero(3 * R, bump ? kBumpBins : (two ? 2 : 1));
+  const double w = std::max(f.hi - f.lo, 1e-6), x0 = f.location - w;
+  double tm = 0.0;
+  for (int r = 0; r < R; ++r) tm += P.t[r] / R;
+  for (int r = 0; r < R; ++r) {
+    const int row = 3 * r + i;
+    if (bump) {
+      const int b = static_cast<int>(std::floor((P.d[r][i] - x0) / (2.0 * w) * kBumpBins));
+      if (b >= 0 && b < kBumpBins) X(row, b) = 1.0;
+    }
+    else if (f.kind == "step") X(row, 0) = P.d[r][i] > f.location ? 1.0 : 0.0;
+    else if (f.kind == "trend") X(row, 0) = P.t[r] - tm;
+    else if (f.kind == "direction") X(row, 0) = P.v[r][i] > 0.0 ? 1.0 : (P.v[r][i] < 0.0 ? -1.0 : 0.0);
+    else if (f.kind == "periodic" && j >= 0) {
+      X(row, 0) = std::sin(tp * P.d[r][j] / f.location);
+      X(row, 1) = std::cos(tp * P.d[r][j] / f.location);
+    } else if (f.kind == "periodic_time") {
+      X(row, 0) = std::sin(tp * P.t[r] / f.location);
+      X(row, 1) = std::cos(tp * P.t[r] / f.location);
+    }
+  }
+  return X;
+}
+
+}  // namespace
+
+std::vector<StructureFinding> strong_structure(const Diagnosis& D, const MotionProblem& P, const DiagnoseOptions& opt) {
+  std::vector<StructureFinding> out;
+  if (!opt.structure_search) return out;
+  for (const auto& f : find_motion_structure(P, D.residual_final, D.axis_noise))
+    if (std::fabs(f.z) >= kStrongZ && f.axis >= 0 && std::fabs(f.size) >= 0.5 * D.axis_noise[f.axis])
+      out.push_back(f);
+  return out;
+}
+
+LinearProblem with_structure(const LinearProblem& L, const std::vector<StructureFinding>& S, const MotionProblem& P) {
+  LinearProblem out = L;
+  for (const auto& f : S) {
+    const Eigen::MatrixXd c = structure_columns(f, P);
+    const Eigen::Index nb = out.B.cols();
+    out.B.conservativeResize(Eigen::NoChange, nb + c.cols());
+    out.B.rightCols(c.cols()) = c;
+    for (Eigen::Index j = 0; j < c.cols(); ++j) {
+      out.base_names.push_back("structure: " + f.kind + " on axis " + std::to_string(f.axis + 1));
+      out.base_units.push_back("N");
+      out.base_values.push_back(0.0);
+      out.nuisance.push_back(1);
+    }
+  }
+  return out;
+}
+
+void lead_with_outside_library(Diagnosis& D) {
+  if (D.outside_library.empty()) return;
+  std::ostringstream os;
+  os << "missing: something no library effect describes: ";
+  for (std::size_t k = 0; k < D.outside_library.size(); ++k)
+    os << (k ? "; " : "") << D.outside_library[k].text << " (" << std::lround(std::fabs(D.outside_library[k].z)) << " σ)";
+  if (D.verdict >= 0) os << ". Beside it, " << D.verdict_text;
+  else os << ". No library effect is missing beside it";
+  D.verdict_text = os.str();
+}
+
+}  // namespace cpm::ident::detail
