@@ -154,6 +154,16 @@ Status Machine::forward_dynamics(const Vec3& p, const Vec3& p_dot, const Vec3& f
   return {};
 }
 
+Status Machine::holding_command(const Vec3& p, const kin::KinematicInputs& in, Vec3& command) const noexcept {
+  Vec3 d, F_p;
+  Mat3 J;
+  if (Status s = kin::inverse(kinematics(), p, in, d); !s) return s;
+  if (Status s = jacobian(d, p, in, J); !s) return s;
+  if (Status s = inverse_dynamics(p, Vec3::Zero(), Vec3::Zero(), F_p); !s) return s;
+  command = (J.transpose() * F_p + effect_forces(d, Vec3::Zero())).cwiseQuotient(drive_gain());
+  return {};
+}
+
 Vec3 Machine::effect_forces(const Vec3& d, const Vec3& d_dot) const noexcept {
   Vec3 f = Vec3::Zero();
   if (!additive_effects_) return f;
