@@ -55,8 +55,18 @@ struct Rig {
   std::int64_t next_id = 1;
   bool pump = true;   // false: the virtual drives are frozen (their process hangs)
 
-  explicit Rig(const DaemonConfig& c = canopen_config(), bool start = true) : cfg(c) {
+  // `timing`: when the drives apply a torque (synchronous: from the SYNC
+  // after the one whose positions it was computed from, as real CiA 402
+  // drives; lockstep: at once, as the in-process loop). `believed`: the
+  // model cpmd controls with (the truth is always machine.md's machine).
+  explicit Rig(const DaemonConfig& c = canopen_config(), bool start = true,
+               sim::DriveTiming timing = sim::DriveTiming::synchronous,
+               const ctl::MachineModel& believed = ctl::MachineModel::elkady(),
+               const sim::EncoderModel& encoder = {})
+      : cfg(c), model(believed) {
     sim::VirtualMachineConfig vc = sim::VirtualMachineConfig::defaults();
+    vc.timing = timing;
+    vc.plant.encoder = encoder;
     for (std::size_t i = 0; i < 3; ++i) {
       const auto& d = cfg.canopen.master.drives[i];
       vc.axes[i].node_id = d.node_id;
