@@ -146,9 +146,11 @@ void VirtualMachine::on_sync(std::int64_t) {
   const bool released = all_enabled && enabled_before_;
   enabled_before_ = all_enabled;
   // Synchronous: the period ending now ran under what the last SYNC
-  // activated, with the brakes as they were then; lockstep: the new torque
-  // acts over the period starting now, run at once.
-  const bool run = cfg_.timing == DriveTiming::synchronous ? released_ : released;
+  // activated, if the brakes were open then and the drives still hold their
+  // axes now (one that quick-stopped meanwhile, the master silent, applied
+  // nothing); lockstep: the new torque acts over the period starting now,
+  // run at once.
+  const bool run = cfg_.timing == DriveTiming::synchronous ? released_ && all_enabled : released;
   if (cfg_.timing == DriveTiming::lockstep) force_ = activated;
   if (run && !plant_failed_) {
     if (Status s = plant_->step(force_, cfg_.period); !s) plant_failed_ = true;  // left the strokes: stays put
