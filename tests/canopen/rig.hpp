@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 
 #include <fstream>
+#include <functional>
 #include <memory>
 #include <regex>
 #include <sstream>
@@ -54,6 +55,7 @@ struct Rig {
   std::int64_t k = 0;
   std::int64_t next_id = 1;
   bool pump = true;   // false: the virtual drives are frozen (their process hangs)
+  std::function<void(const cpm_msgs::state_t&)> on_state;  // every cycle's published state, when set
 
   // `timing`: when the drives apply a torque (synchronous: from the SYNC
   // after the one whose positions it was computed from, as real CiA 402
@@ -92,6 +94,7 @@ struct Rig {
   // One control cycle, then a period passes (the drives answer the SYNC).
   void step() {
     loop->cycle(k++, 0);
+    if (on_state) on_state(loop->last_state());
     while (loop->snapshots().front()) loop->snapshots().release();
     clock.wait(period_ns());
   }
