@@ -6,6 +6,7 @@
 #include <cstdio>
 
 #include "canopen/circle.hpp"
+#include "cpm/sim/closed_loop.hpp"
 
 namespace cpm::daemon::test {
 namespace {
@@ -101,6 +102,20 @@ TEST(DriveTiming, ThePapersCircleThroughTheBusWithTheDrivesVelocity) {
   const ThreeWays w = circle_three_ways(config_500hz_with_velocity(), "500 Hz, velocity TPDO ");
   EXPECT_GT(w.b.settled, 2.0 * w.c.settled);
   EXPECT_LT(w.c.settled, 1.5 * w.lockstep.settled);
+  // The synchronous bus is the plant with actuation_delay = T: in-process on
+  // such a plant, the same model gives (b) (the SIL test compares so).
+  ctl::MachineModel tm = ctl::MachineModel::elkady();
+  ctl::add_effect(tm, "actuation_delay", -1, {1.0 / 500});
+  const ctl::Machine truth(tm), model(ctl::MachineModel::elkady());
+  sim::Plant plant(truth, sim::PlantOptions{});
+  sim::LoopOptions lo;
+  lo.rate_hz = 500;
+  lo.keep_log = false;
+  const ctl::Controller ctrl(model, ctl::ControlLaw::computed_torque, ctl::table3_gains(ctl::ControlLaw::computed_torque));
+  const sim::RunResult in_process = sim::run_closed_loop(ctrl, plant, ctl::CircleTrajectory{ctl::CircleSpec{}}, lo);
+  ASSERT_TRUE(in_process.ok());
+  std::printf("      in-process, plant delay = T, model without delay %8.2f um\n", in_process.metrics.position_rmse * 1e6);
+  EXPECT_NEAR(w.b.rmse, in_process.metrics.position_rmse, 0.002 * in_process.metrics.position_rmse);
 }
 
 }  // namespace
