@@ -58,7 +58,7 @@ Status Controller::predict(const ControlInput& in, const ControllerState& state,
   const double tau = m.actuation_delay();
   if (!(tau > 0.0)) return {};
   // Until t + tau the commands already sent act: the model's dynamics under
-  // them from the measured state, in steps no longer than kPredictionStep.
+  // them from the measured state, in RK4 steps no longer than kPredictionStep.
   const int steps = std::max(1, static_cast<int>(std::ceil(tau / kPredictionStep - 1e-9)));
   TaskState& x = out.predicted;
   if (Status s = integrate_delayed(m, in.kin, state.sent, tau, in.kin.t, tau, steps, x.p, x.p_dot); !s)

@@ -97,11 +97,22 @@ TEST(DriveTiming, ThePapersCircleThroughTheBusWithTheDrivesVelocity) {
   // Here the dead time is two milliseconds: the segment's figure is the
   // abrupt start answered 2 ms late (as in-process with a 2-period delay,
   // tests/control), so only the settled tracking is compared. The drives'
-  // units (0.1 um, 0.04 N) already cost the lockstep bus 0.34 um (in
-  // quadrature) there; the prediction takes most of the dead time out.
+  // torque unit (0.04 N) is a force error the prediction cannot know: it
+  // costs the lockstep bus 0.34 um in quadrature, the delayed loop more.
   const ThreeWays w = circle_three_ways(config_500hz_with_velocity(), "500 Hz, velocity TPDO ");
   EXPECT_GT(w.b.settled, 2.0 * w.c.settled);
   EXPECT_LT(w.c.settled, 1.5 * w.lockstep.settled);
+  // With a torque unit ten times finer (rated force 4 N, clamp 30000 per
+  // mille: the same 120 N) the prediction through the bus tracks as the
+  // simulator backend does.
+  const ThreeWays fine = circle_three_ways(
+      canopen_config({{"rate_hz: 1000", "rate_hz: 500"},
+                      {"velocity_from_drive: false", "velocity_from_drive: true"},
+                      {"rated_force: 40", "rated_force: 4"},
+                      {"max_torque_permille: 3000", "max_torque_permille: 30000"}}),
+      "500 Hz, 0.004 N units ");
+  EXPECT_NEAR(fine.c.settled / fine.a.settled, 1.0, 0.10);
+  EXPECT_GT(fine.b.settled, 2.0 * fine.c.settled);
   // The synchronous bus is the plant with actuation_delay = T: in-process on
   // such a plant, the same model gives (b) (the SIL test compares so).
   ctl::MachineModel tm = ctl::MachineModel::elkady();

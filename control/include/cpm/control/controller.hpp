@@ -91,9 +91,12 @@ class Controller {
   // How far ahead of kin.t the reference must be sampled (s): the model's
   // actuation delay, when the command will start to act.
   [[nodiscard]] double lookahead() const noexcept { return model_->actuation_delay(); }
-  // Longest RK4 step of the prediction across the delay (s): the plant's
-  // sub-step at 1 kHz, so a perfect model predicts to integration precision.
-  static constexpr double kPredictionStep = 1e-4;
+  // Longest RK4 step of the prediction across the delay (s). One step over
+  // a 1 ms period errs by 3e-10 m on the paper's circle (docs/performance.md:
+  // one period at 1 against 40 sub-steps), far below an encoder count, and
+  // costs four evaluations of the forward dynamics (~1 us) where 0.1 ms
+  // steps cost ten times that in every cycle.
+  static constexpr double kPredictionStep = 1e-3;
 
   [[nodiscard]] ControlLaw law() const noexcept { return law_; }
   [[nodiscard]] const Gains& gains() const noexcept { return gains_; }
