@@ -245,7 +245,7 @@ void ControlLoop::handle(const Command& c, std::int64_t k) noexcept {
       if (mode_ == Mode::disabled) {
         hold_ = est_.p;  // resynchronise: hold where the platform is
         queue_end_ = hold_;
-        ctl_state_.reset();  // the drives applied nothing while off
+        ctl_state_.reset();  // the drives were given nothing while off
         enabling_since_ = k;
         enter(Mode::enabling);
         reply(c, true, 0, "enabling");

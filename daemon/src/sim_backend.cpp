@@ -32,8 +32,12 @@ BackendResult SimBackend::read(std::int64_t cycle, BackendInput& in) noexcept {
   while (plant_cycle_ < cycle) {
     if (drives_on() && !plant_failed_) {
       if (Status s = plant_->step(force_, period_); !s) plant_failed_ = true;
-    } else if (plant_->velocity().squaredNorm() > 0.0) {
-      (void)plant_->reset(plant_->position());
+    } else {
+      if (plant_->velocity().squaredNorm() > 0.0) (void)plant_->reset(plant_->position());
+      // The drives take the commands while the brakes hold: under an
+      // actuation delay the last one acts when they come on, until the
+      // first delayed one does.
+      plant_->forget_commands(force_);
     }
     ++plant_cycle_;
   }

@@ -59,7 +59,7 @@ struct ControlInput {
 // What the controller remembers between cycles: the commands it sent, for
 // the prediction across the actuation delay. Owned by the caller (the
 // Controller itself stays a constant description); reset() when the drives
-// are enabled, since until then they applied nothing (or with the force
+// are enabled, since until then they were given nothing (or with the force
 // they were applying, when a run starts from a platform held at rest).
 struct ControllerState {
   CommandHistory sent;  // forces returned by step(), stamped with in.kin.t

@@ -58,6 +58,11 @@ class Plant {
   // force_before (N). Fails outside the workspace.
   Status reset(const Vec3& p, const Vec3& p_dot = Vec3::Zero(),
                const Vec3& force_before = Vec3::Zero()) noexcept;
+  // Forget the commands given: `acting` (N per actuator) acts until the next
+  // command does (under the truth's delay). For drives that are given
+  // commands while the brakes hold the platform (a reset would also rewind
+  // the clock and the directions of motion).
+  void forget_commands(const Vec3& acting) noexcept { commands_.reset(acting); }
   // Advance by dt (s) under the commanded actuator forces held constant
   // (from t + tau when the truth has an actuation delay tau). Fails when the
   // command acting is older than the history keeps (a tau of more than
