@@ -15,6 +15,7 @@ SimBackend::SimBackend(std::unique_ptr<ctl::Machine> truth, const SimBackendOpti
 
 void SimBackend::start(double period) {
   if (!(period > 0.0)) throw Error("sim backend: period must be > 0");
+  ctl::check_delay_fits(truth_->actuation_delay(), 1.0 / period);  // the plant's command history
   period_ = period;
   plant_cycle_ = 0;
 }

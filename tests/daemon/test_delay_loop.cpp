@@ -67,14 +67,18 @@ TEST(DelayLoop, PredictingAcrossTheDelayFollowsAMoveAndAStopAllocationFree) {
   EXPECT_LT(with.stop_rms, 1.5 * undelayed.stop_rms);
 }
 
-TEST(DelayLoop, AModelWhoseDelayTheHistoryCannotHoldIsRefused) {
+TEST(DelayLoop, ADelayTheHistoryCannotHoldIsRefusedAtStart) {
   DaemonConfig c = test_config();
   c.loop.rate_hz = 10000;
   ctl::MachineModel far = ctl::MachineModel::elkady();
   ctl::add_effect(far, "actuation_delay", -1, {0.05});  // 500 periods: fits
   EXPECT_NO_THROW(LoopHarness(c, 0.005, far, far));
-  // The bound is the history's: 0.05 s at 10 kHz is the most effects.md allows.
+  // The bound is the history's: 0.05 s at 10 kHz is the most effects.md
+  // allows; beyond, the simulator refuses to start rather than fail a step.
   EXPECT_THROW(ctl::check_delay_fits(0.05, 10100.0), Error);
+  SimBackend sim(std::make_unique<ctl::Machine>(far), SimBackendOptions{});
+  EXPECT_NO_THROW(sim.start(1e-4));
+  EXPECT_THROW(sim.start(1.0 / 20000), Error);
 }
 
 }  // namespace

@@ -84,6 +84,7 @@ VirtualMachine::VirtualMachine(hal::CanBus& bus, const ctl::Machine& truth, cons
     a.scaling = effective(a.scaling);
   }
   cfg_.plant.validate();
+  ctl::check_delay_fits(truth.actuation_delay(), 1.0 / cfg_.period);  // the plant's command history
   plant_ = std::make_unique<Plant>(truth, cfg_.plant);
   if (Status s = plant_->reset(cfg_.initial_position); !s)
     throw Error("virtual machine: the initial position is outside the true machine's workspace: " + describe(s));
