@@ -167,9 +167,13 @@ TEST(ModelFile, ActuationDelayLoadsFromTheEffectTableAndRoundTrips) {
                                     "dynamic_effects:\n  - {effect: actuation_delay, tau: 0.2}"),
                                 "far.yaml"),
                Error);
-  // canopen.yaml's model: the nominal machine and one period at its 1 kHz.
-  const ModelFile bus = load_model_file("config/machine-canopen.yaml");
+  // canopen.yaml's model: machine.yaml and one period at its 1 kHz, nothing
+  // else (the two files must not drift apart).
+  ModelFile bus = load_model_file("config/machine-canopen.yaml");
   EXPECT_EQ(ctl::Machine(bus.model).actuation_delay(), 0.001);
+  ASSERT_EQ(bus.model.effects.size(), 1u);
+  bus.model.effects.clear();
+  expect_same_model(bus.model, load_model_file("config/machine.yaml").model);
 }
 
 // --- Refusals ---------------------------------------------------------------
