@@ -12,18 +12,24 @@ using namespace cpm;
 
 using bench::calibrated_model_with_effects;
 
-void control_step(benchmark::State& state, ctl::ControlLaw law, bool calibrated) {
-  const ctl::Machine model(calibrated ? calibrated_model_with_effects() : ctl::MachineModel::elkady());
+// tau > 0: the model has an actuation delay, so each step also predicts
+// across it (tau / 0.1 ms RK4 steps of the model's forward dynamics).
+void control_step(benchmark::State& state, ctl::ControlLaw law, bool calibrated, double tau = 0.0) {
+  ctl::MachineModel mm = calibrated ? calibrated_model_with_effects() : ctl::MachineModel::elkady();
+  if (tau > 0.0) ctl::add_effect(mm, "actuation_delay", -1, {tau});
+  const ctl::Machine model(std::move(mm));
   const ctl::Controller controller(model, law, ctl::table3_gains(law));
   const ctl::CircleTrajectory circle(ctl::CircleSpec{});
   ctl::ControlInput in;
   ctl::ControlOutput out;
+  ctl::ControllerState history;
   double t = 0.0;
   for (auto _ : state) {
-    in.ref = circle.sample(t);
-    in.d = in.ref.p - model.kinematics().d0 + Vec3(1e-5, -2e-5, 3e-5);
+    in.ref = circle.sample(t + tau);
+    in.d = circle.sample(t).p - model.kinematics().d0 + Vec3(1e-5, -2e-5, 3e-5);
     in.d_dot = in.ref.v;
-    const Status s = controller.step(in, out);
+    in.kin.t += 1e-3;  // the history's clock never goes back
+    const Status s = controller.step(in, history, out);
     benchmark::DoNotOptimize(s);
     benchmark::DoNotOptimize(out.force);
     t = t < 3.999 ? t + 1e-3 : 0.0;
@@ -33,6 +39,7 @@ BENCHMARK_CAPTURE(control_step, computed_torque_nominal, ctl::ControlLaw::comput
 BENCHMARK_CAPTURE(control_step, computed_torque_calibrated_effects, ctl::ControlLaw::computed_torque, true);
 BENCHMARK_CAPTURE(control_step, pd_feedforward_calibrated_effects, ctl::ControlLaw::pd_feedforward, true);
 BENCHMARK_CAPTURE(control_step, pd_nominal, ctl::ControlLaw::pd, false);
+BENCHMARK_CAPTURE(control_step, computed_torque_nominal_delay_1ms, ctl::ControlLaw::computed_torque, false, 1e-3);
 
 void plant_step(benchmark::State& state, bool calibrated) {
   const ctl::Machine truth(calibrated ? calibrated_model_with_effects() : ctl::MachineModel::elkady());

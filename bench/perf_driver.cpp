@@ -309,6 +309,7 @@ StepFigures steps(const daemon::DaemonConfig& shipped, long cycles) {
   (void)plant.reset(circle.sample(0.0).p);
   ctl::ControlInput in;
   ctl::ControlOutput out;
+  ctl::ControllerState history;
   const kin::DirectionTracker direction;
   for (long k = 0; k < cycles; ++k) {
     const double t = static_cast<double>(k % per_circle) * dt;  // the circle again and again
@@ -319,7 +320,7 @@ StepFigures steps(const daemon::DaemonConfig& shipped, long cycles) {
     in.kin.t = static_cast<double>(k) * dt;
     direction.update(in.ref.v, in.kin);
     std::int64_t a = now_ns();
-    (void)controller.step(in, out);
+    (void)controller.step(in, history, out);
     std::int64_t b = now_ns();
     f.controller.ns.push_back(b - a);
     forces.push_back(out.force);

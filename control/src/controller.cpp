@@ -42,7 +42,38 @@ Controller::Controller(const Machine& model, ControlLaw law, const Gains& gains)
   gains_.validate();
 }
 
-Status Controller::step(const ControlInput& in, ControlOutput& out) const noexcept {
+Status Controller::step(const ControlInput& in, ControllerState& state, ControlOutput& out) const noexcept {
+  const Status s = control_law(in, state, out);
+  // Recorded as sent: the force, or zero after a failure (what the caller then gives the drives).
+  state.sent.push(in.kin.t, out.force);
+  return s;
+}
+
+Status Controller::predict(const ControlInput& in, const ControllerState& state, ControlOutput& out, Vec3& d,
+                           Vec3& d_dot) const noexcept {
+  const Machine& m = *model_;
+  out.predicted = out.estimate;
+  d = in.d;
+  d_dot = in.d_dot;
+  const double tau = m.actuation_delay();
+  if (!(tau > 0.0)) return {};
+  // Until t + tau the commands already sent act: the model's dynamics under
+  // them from the measured state, in RK4 steps no longer than kPredictionStep.
+  const int steps = std::max(1, static_cast<int>(std::ceil(tau / kPredictionStep - 1e-9)));
+  TaskState& x = out.predicted;
+  if (Status s = integrate_delayed(m, in.kin, state.sent, tau, in.kin.t, tau, steps, x.p, x.p_dot); !s)
+    return s;
+  // The encoders as they will read then, for the laws that act on the joints.
+  Mat3 J_inv;
+  if (Status s = kin::inverse(m.kinematics(), x.p, in.kin, d); !s) return s;
+  if (Status s = m.jacobian(d, x.p, in.kin, x.J); !s) return s;
+  if (Status s = m.inverse_jacobian(d, x.p, in.kin, J_inv); !s) return s;
+  d_dot.noalias() = J_inv * x.p_dot;
+  return {};
+}
+
+Status Controller::control_law(const ControlInput& in, const ControllerState& state,
+                               ControlOutput& out) const noexcept {
   out.force.setZero();
   out.force_unlimited.setZero();
   out.saturated = {false, false, false};
@@ -51,6 +82,9 @@ Status Controller::step(const ControlInput& in, ControlOutput& out) const noexce
   if (!in.ref.p.allFinite() || !in.ref.v.allFinite() || !in.ref.a.allFinite())
     return Status::failure(Fault::not_finite);
   if (Status s = m.task_state(in.d, in.d_dot, in.kin, out.estimate); !s) return s;
+  // The state the command will meet: (d, d_dot) and out.predicted.
+  Vec3 d, d_dot;
+  if (Status s = predict(in, state, out, d, d_dot); !s) return s;
 
   // The reference through the calibrated inverse kinematics.
   Mat3 J_ref;
@@ -60,15 +94,15 @@ Status Controller::step(const ControlInput& in, ControlOutput& out) const noexce
 
   Vec3 F = Vec3::Zero();
   if (law_ == ControlLaw::computed_torque) {
-    const TaskState& x = out.estimate;
+    const TaskState& x = out.predicted;
     RigidBodyTerms t;
     if (Status s = m.rigid_body(x.p, x.p_dot, t); !s) return s;
     const Vec3 accel = in.ref.a + gains_.kd.cwiseProduct(in.ref.v - x.p_dot) +
                        gains_.kp.cwiseProduct(in.ref.p - x.p);
     F.noalias() = x.J.transpose() * (t.M * accel + t.Gv + t.K);
-    F += m.effect_forces(in.d, in.d_dot);
+    F += m.effect_forces(d, d_dot);
   } else {
-    F = gains_.kp.cwiseProduct(out.d_ref - in.d) + gains_.kd.cwiseProduct(out.d_dot_ref - in.d_dot);
+    F = gains_.kp.cwiseProduct(out.d_ref - d) + gains_.kd.cwiseProduct(out.d_dot_ref - d_dot);
     if (law_ != ControlLaw::pd) {
       RigidBodyTerms t;
       if (Status s = m.rigid_body(in.ref.p, in.ref.v, t); !s) return s;

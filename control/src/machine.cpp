@@ -129,6 +129,41 @@ Status Machine::inverse_dynamics(const Vec3& p, const Vec3& p_dot, const Vec3& p
   return {};
 }
 
+Status Machine::forward_dynamics(const Vec3& p, const Vec3& p_dot, const Vec3& force_command,
+                                 const kin::KinematicInputs& in, Vec3& p_dd) const noexcept {
+  Mat3 J_inv;
+  Vec3 d = Vec3::Zero();
+  // Without kinematic effects J is constant and d matters only to
+  // position-dependent dynamic effects: skip what is not needed. With them,
+  // the inverse kinematics gives dd/dp on the way.
+  if (!has_constant_jacobian()) {
+    if (Status s = kin::inverse(kinematics(), p, in, d, &J_inv); !s) return s;
+  } else {
+    J_inv = constant_jacobian_inverse();
+    if (has_additive_effects())
+      if (Status s = kin::inverse(kinematics(), p, in, d); !s) return s;
+  }
+  RigidBodyTerms t;
+  if (Status s = rigid_body(p, p_dot, t); !s) return s;
+  const Vec3 d_dot = J_inv * p_dot;
+  const Vec3 f_act = drive_gain().cwiseProduct(force_command) - effect_forces(d, d_dot);
+  // Platform force from actuator forces: F_d = J^T F_p.
+  const Vec3 f_platform = J_inv.transpose() * f_act;
+  p_dd = t.M.llt().solve(f_platform - t.Gv - t.K);
+  if (!all_finite(p_dd)) return Status::failure(Fault::not_finite);
+  return {};
+}
+
+Status Machine::holding_command(const Vec3& p, const kin::KinematicInputs& in, Vec3& command) const noexcept {
+  Vec3 d, F_p;
+  Mat3 J;
+  if (Status s = kin::inverse(kinematics(), p, in, d); !s) return s;
+  if (Status s = jacobian(d, p, in, J); !s) return s;
+  if (Status s = inverse_dynamics(p, Vec3::Zero(), Vec3::Zero(), F_p); !s) return s;
+  command = (J.transpose() * F_p + effect_forces(d, Vec3::Zero())).cwiseQuotient(drive_gain());
+  return {};
+}
+
 Vec3 Machine::effect_forces(const Vec3& d, const Vec3& d_dot) const noexcept {
   Vec3 f = Vec3::Zero();
   if (!additive_effects_) return f;

@@ -99,6 +99,8 @@ ControlLoop::ControlLoop(const DaemonConfig& config, Backend& backend, const ctl
       controller_(controller),
       dt_(1.0 / config.loop.rate_hz),
       queue_(std::make_unique<std::array<Segment, kQueueCapacity>>()) {
+  ctl::check_delay_fits(machine.actuation_delay(), config.loop.rate_hz);
+  ctl::check_delay_fits(controller.lookahead(), config.loop.rate_hz);
   stats_.rate_hz = config.loop.rate_hz;
   for (int s = 0; s < kSeries; ++s) stats_.min_ns[s] = 0;
   state_.mode = static_cast<std::int8_t>(Mode::init);
@@ -243,6 +245,7 @@ void ControlLoop::handle(const Command& c, std::int64_t k) noexcept {
       if (mode_ == Mode::disabled) {
         hold_ = est_.p;  // resynchronise: hold where the platform is
         queue_end_ = hold_;
+        ctl_state_.reset();  // the drives were given nothing while off
         enabling_since_ = k;
         enter(Mode::enabling);
         reply(c, true, 0, "enabling");
@@ -432,6 +435,37 @@ ctl::TrajectorySample ControlLoop::reference(std::int64_t k) noexcept {
   }
 }
 
+ctl::TrajectorySample ControlLoop::reference_ahead(std::int64_t k, double ahead) const noexcept {
+  // The profiles of reference(), sampled `ahead` s after cycle k, without
+  // their side effects (a segment finishes, a stop ends, when reference()
+  // reaches them). A segment that follows another starts at the first cycle
+  // at or after its predecessor's end, as reference() starts it.
+  if (mode_ == Mode::moving && playing_) {
+    double t = static_cast<double>(k - segment_start_cycle_) * dt_ + ahead;
+    for (int i = 0; i < q_count_; ++i) {
+      const Segment& s = (*queue_)[(q_head_ + i) % kQueueCapacity];
+      const ctl::Trajectory* tr = s.get();
+      const double played = std::ceil((tr->duration() - 1e-9) / dt_ - 1e-9) * dt_;
+      if (t < played) return tr->sample(t);
+      t -= played;
+    }
+    ctl::TrajectorySample r;  // past the queue's end: the hold there
+    r.p = (*queue_)[(q_head_ + q_count_ - 1) % kQueueCapacity].end;
+    return r;
+  }
+  if (mode_ == Mode::stopping) {
+    const double elapsed = static_cast<double>(k - stop_start_cycle_) * dt_ + stop_t0_ + ahead;
+    const double t = std::min(elapsed, stop_T_);
+    const double a = cfg_.limits.stop_deceleration;
+    ctl::TrajectorySample r;
+    r.p = stop_p0_ + stop_dir_ * (stop_v0_ * t - 0.5 * a * t * t);
+    r.v = stop_dir_ * (stop_v0_ - a * t);
+    r.a = t < stop_T_ ? Vec3(-a * stop_dir_) : Vec3::Zero();
+    return r;
+  }
+  return ref_;  // holding, enabling: the hold point, which does not move
+}
+
 void ControlLoop::record_schedule(bool overrun, std::int64_t skipped) noexcept {
   stats_.skipped += skipped;
   if (overrun) {
@@ -482,8 +516,11 @@ void ControlLoop::cycle(std::int64_t k, std::int64_t latency_ns) noexcept {
                        mode_ == Mode::stopping;
   Status sc;
   if (powered) {
-    cin_.ref = ref_;
-    sc = controller_.step(cin_, cout_);
+    // With an actuation delay in the model the command acts from t + tau:
+    // the controller aims at the reference then.
+    const double ahead = controller_.lookahead();
+    cin_.ref = ahead > 0.0 ? reference_ahead(k, ahead) : ref_;
+    sc = controller_.step(cin_, ctl_state_, cout_);
   } else {
     saturated_cycles_ = {};
     cout_.force.setZero();

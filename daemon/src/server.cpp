@@ -390,6 +390,7 @@ void Server::on_control(const lcm::ReceiveBuffer*, const std::string&, const con
         ctl::MachineModel model = load_model(m->model_path);
         model.force_limit = std::min(model.force_limit, cfg_.limits.force);
         auto machine = std::make_unique<ctl::Machine>(model);
+        ctl::check_delay_fits(machine->actuation_delay(), cfg_.loop.rate_hz);
         c.controller.emplace(*machine, law_, gains_);
         c.machine = models_.add(std::move(machine));
       } catch (const std::exception& e) {

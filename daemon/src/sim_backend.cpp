@@ -15,6 +15,7 @@ SimBackend::SimBackend(std::unique_ptr<ctl::Machine> truth, const SimBackendOpti
 
 void SimBackend::start(double period) {
   if (!(period > 0.0)) throw Error("sim backend: period must be > 0");
+  ctl::check_delay_fits(truth_->actuation_delay(), 1.0 / period);  // the plant's command history
   period_ = period;
   plant_cycle_ = 0;
 }
@@ -32,8 +33,12 @@ BackendResult SimBackend::read(std::int64_t cycle, BackendInput& in) noexcept {
   while (plant_cycle_ < cycle) {
     if (drives_on() && !plant_failed_) {
       if (Status s = plant_->step(force_, period_); !s) plant_failed_ = true;
-    } else if (plant_->velocity().squaredNorm() > 0.0) {
-      (void)plant_->reset(plant_->position());
+    } else {
+      if (plant_->velocity().squaredNorm() > 0.0) (void)plant_->reset(plant_->position());
+      // The drives take the commands while the brakes hold: under an
+      // actuation delay the last one acts when they come on, until the
+      // first delayed one does.
+      plant_->forget_commands(force_);
     }
     ++plant_cycle_;
   }

@@ -16,6 +16,7 @@ const char* fault_name(Fault f) noexcept {
     case Fault::near_singularity: return "near_singularity";
     case Fault::singular_planes: return "singular_planes";
     case Fault::no_convergence: return "no_convergence";
+    case Fault::history_short: return "history_short";
   }
   return "unknown";
 }
@@ -48,6 +49,10 @@ std::string describe(const Status& s) {
     case Fault::no_convergence:
       os << "an iterative solve did not converge";
       if (s.index >= 0) os << " (limb " << n << ")";
+      break;
+    case Fault::history_short:
+      os << "the command acting under the actuation delay of " << s.value * 1e3
+         << " ms is older than the command history keeps";
       break;
   }
   return os.str();

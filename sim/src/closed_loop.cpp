@@ -18,15 +18,28 @@ RunResult run_closed_loop(const ctl::Controller& controller, Plant& plant,
   const long n = std::lround(T * options.rate_hz);
   RunResult r;
   if (options.keep_log) r.log.reserve(static_cast<std::size_t>(n));
+  // The run starts at rest: the drives were holding the platform there, so
+  // under an actuation delay that holding force acts until the first
+  // command does (as the controller, with its model, believes too).
   const ctl::TrajectorySample start = trajectory.sample(0.0);
-  if (Status s = plant.reset(start.p); !s) {
-    r.fault = s;
+  Vec3 held = Vec3::Zero(), believed = Vec3::Zero();
+  Status sr = plant.truth().holding_command(start.p, {}, held);
+  if (sr) sr = controller.model().holding_command(start.p, {}, believed);
+  if (sr) sr = plant.reset(start.p, Vec3::Zero(), held);
+  if (!sr) {
+    r.fault = sr;
     return r;
   }
   double sum_e2 = 0.0, sum_v2 = 0.0;
   Vec3 sum_axis = Vec3::Zero();
+  // Delays longer than the command histories keep are refused here, not in the loop.
+  ctl::check_delay_fits(plant.truth().actuation_delay(), options.rate_hz);
+  ctl::check_delay_fits(controller.lookahead(), options.rate_hz);
+  const double ahead = controller.lookahead();
   ctl::ControlInput in;
   ctl::ControlOutput out;
+  ctl::ControllerState state;
+  state.reset(believed);
   // The controller knows only what it commands: it takes the direction of
   // motion (for backlash compensation) from its own reference velocity (the
   // actuator axes are the task axes to within a milliradian), not from the plant.
@@ -36,16 +49,18 @@ RunResult run_closed_loop(const ctl::Controller& controller, Plant& plant,
     const EncoderReading enc = plant.read();
     in.d = enc.d;
     in.d_dot = enc.d_dot;
-    in.ref = trajectory.sample(t);
+    const ctl::TrajectorySample ref = trajectory.sample(t);
+    // The controller aims at where the reference will be when its command acts.
+    in.ref = ahead > 0.0 ? trajectory.sample(t + ahead) : ref;
     in.kin.t = t;
-    direction.update(in.ref.v, in.kin);
-    if (Status s = controller.step(in, out); !s) {
+    direction.update(ref.v, in.kin);
+    if (Status s = controller.step(in, state, out); !s) {
       r.fault = s;
       r.fault_time = t;
       break;
     }
-    const Vec3 e = in.ref.p - plant.position();
-    const Vec3 ev = in.ref.v - plant.velocity();
+    const Vec3 e = ref.p - plant.position();
+    const Vec3 ev = ref.v - plant.velocity();
     sum_e2 += e.squaredNorm();
     sum_v2 += ev.squaredNorm();
     sum_axis += e.cwiseAbs2();
@@ -55,7 +70,7 @@ RunResult run_closed_loop(const ctl::Controller& controller, Plant& plant,
     if (out.saturated[0] || out.saturated[1] || out.saturated[2]) r.metrics.saturated_samples++;
     if (options.keep_log)
       r.log.push_back({t, enc.d, enc.d_dot, out.force, plant.position(), plant.velocity(),
-                       in.ref.p, in.ref.v});
+                       ref.p, ref.v});
     if (Status s = plant.step(out.force, dt); !s) {
       r.fault = s;
       r.fault_time = t + dt;

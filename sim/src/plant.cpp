@@ -24,10 +24,11 @@ Plant::Plant(const Machine& truth, const PlantOptions& options)
   opt_.validate();
 }
 
-Status Plant::reset(const Vec3& p, const Vec3& p_dot) noexcept {
+Status Plant::reset(const Vec3& p, const Vec3& p_dot, const Vec3& force_before) noexcept {
   if (!all_finite(p) || !all_finite(p_dot)) return Status::failure(Fault::not_finite);
   t_ = 0.0;
   kin_in_ = {};
+  commands_.reset(force_before);
   if (Status s = kin::check_pose(truth_->kinematics(), truth_->model().strokes, p, kin_in_); !s)
     return s;
   p_ = p;
@@ -37,49 +38,20 @@ Status Plant::reset(const Vec3& p, const Vec3& p_dot) noexcept {
 
 Status Plant::acceleration(const Vec3& p, const Vec3& p_dot, const Vec3& force_command,
                            Vec3& p_dd) const noexcept {
-  const Machine& m = *truth_;
-  const kin::KinematicInputs& in = kin_in_;
-  Mat3 J_inv;
-  Vec3 d = Vec3::Zero();
-  // Without kinematic effects J is constant and d matters only to
-  // position-dependent dynamic effects: skip what is not needed. With them,
-  // the inverse kinematics gives dd/dp on the way.
-  if (!m.has_constant_jacobian()) {
-    if (Status s = kin::inverse(m.kinematics(), p, in, d, &J_inv); !s) return s;
-  } else {
-    J_inv = m.constant_jacobian_inverse();
-    if (m.has_additive_effects())
-      if (Status s = kin::inverse(m.kinematics(), p, in, d); !s) return s;
-  }
-  ctl::RigidBodyTerms t;
-  if (Status s = m.rigid_body(p, p_dot, t); !s) return s;
-  const Vec3 d_dot = J_inv * p_dot;
-  const Vec3 f_act = m.drive_gain().cwiseProduct(force_command) - m.effect_forces(d, d_dot);
-  // Platform force from actuator forces: F_d = J^T F_p.
-  const Vec3 f_platform = J_inv.transpose() * f_act;
-  p_dd = t.M.llt().solve(f_platform - t.Gv - t.K);
-  if (!all_finite(p_dd)) return Status::failure(Fault::not_finite);
-  return {};
+  return truth_->forward_dynamics(p, p_dot, force_command, kin_in_, p_dd);
 }
 
 Status Plant::step(const Vec3& force_command, double dt) noexcept {
   if (!all_finite(force_command) || !std::isfinite(dt) || !(dt > 0.0))
     return Status::failure(Fault::not_finite);
-  const double h = dt / opt_.substeps;
+  // The command is given now; under the truth's actuation_delay it acts
+  // from t + tau on, and the commands given before it act until then.
+  commands_.push(t_, force_command);
   Vec3 p = p_, v = p_dot_;
-  for (int k = 0; k < opt_.substeps; ++k) {
-    Vec3 a1, a2, a3, a4;
-    if (Status s = acceleration(p, v, force_command, a1); !s) return s;
-    const Vec3 v1 = v;
-    const Vec3 v2 = v + 0.5 * h * a1;
-    if (Status s = acceleration(p + 0.5 * h * v1, v2, force_command, a2); !s) return s;
-    const Vec3 v3 = v + 0.5 * h * a2;
-    if (Status s = acceleration(p + 0.5 * h * v2, v3, force_command, a3); !s) return s;
-    const Vec3 v4 = v + h * a3;
-    if (Status s = acceleration(p + h * v3, v4, force_command, a4); !s) return s;
-    p += h / 6.0 * (v1 + 2.0 * v2 + 2.0 * v3 + v4);
-    v += h / 6.0 * (a1 + 2.0 * a2 + 2.0 * a3 + a4);
-  }
+  if (Status s = ctl::integrate_delayed(*truth_, kin_in_, commands_, truth_->actuation_delay(), t_, dt,
+                                        opt_.substeps, p, v);
+      !s)
+    return s;
   if (Status s = kin::check_pose(truth_->kinematics(), truth_->model().strokes, p, kin_in_); !s)
     return s;
   p_ = p;

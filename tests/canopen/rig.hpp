@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 
 #include <fstream>
+#include <functional>
 #include <memory>
 #include <regex>
 #include <sstream>
@@ -54,9 +55,20 @@ struct Rig {
   std::int64_t k = 0;
   std::int64_t next_id = 1;
   bool pump = true;   // false: the virtual drives are frozen (their process hangs)
+  std::function<void(const cpm_msgs::state_t&)> on_state;  // every cycle's published state, when set
 
-  explicit Rig(const DaemonConfig& c = canopen_config(), bool start = true) : cfg(c) {
+  // `timing`: when the drives apply a torque (synchronous: from the SYNC
+  // after the one whose positions it was computed from, as real CiA 402
+  // drives; lockstep: at once, as the in-process loop). `believed`: the
+  // model cpmd controls with (the truth is always machine.md's machine).
+  explicit Rig(const DaemonConfig& c = canopen_config(), bool start = true,
+               sim::DriveTiming timing = sim::DriveTiming::synchronous,
+               const ctl::MachineModel& believed = ctl::MachineModel::elkady(),
+               const sim::EncoderModel& encoder = {})
+      : cfg(c), model(believed) {
     sim::VirtualMachineConfig vc = sim::VirtualMachineConfig::defaults();
+    vc.timing = timing;
+    vc.plant.encoder = encoder;
     for (std::size_t i = 0; i < 3; ++i) {
       const auto& d = cfg.canopen.master.drives[i];
       vc.axes[i].node_id = d.node_id;
@@ -82,6 +94,7 @@ struct Rig {
   // One control cycle, then a period passes (the drives answer the SYNC).
   void step() {
     loop->cycle(k++, 0);
+    if (on_state) on_state(loop->last_state());
     while (loop->snapshots().front()) loop->snapshots().release();
     clock.wait(period_ns());
   }

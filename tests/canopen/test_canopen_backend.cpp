@@ -5,8 +5,7 @@
 
 #include <cmath>
 
-#include "canopen/rig.hpp"
-#include "cpm/daemon/sim_backend.hpp"
+#include "canopen/circle.hpp"
 #include "cpm/sim/closed_loop.hpp"
 #include "support/allocation_counter.hpp"
 
@@ -16,47 +15,6 @@ namespace {
 using hal::cia402::State;
 
 bool contains(const std::string& s, const std::string& part) { return s.find(part) != std::string::npos; }
-
-// The circle's tracking RMSE of the same loop on the simulator backend (the
-// plant stepped in-process): the figure the bus must reproduce.
-double circle_rmse_on_sim_backend(const DaemonConfig& cfg, const ctl::CircleTrajectory& circle) {
-  SimBackendOptions so;
-  so.enable_delay = 0;
-  SimBackend sim(std::make_unique<ctl::Machine>(ctl::MachineModel::elkady()), so);
-  sim.start(1.0 / cfg.loop.rate_hz);
-  const ctl::Machine model(ctl::MachineModel::elkady());
-  ControlLoop loop(cfg, sim, model, ctl::Controller(model, cfg.controller.law, cfg.controller.gains));
-  std::int64_t k = 0;
-  auto run = [&](int n) {
-    for (int i = 0; i < n; ++i) {
-      loop.cycle(k++, 0);
-      while (loop.snapshots().front()) loop.snapshots().release();
-    }
-  };
-  auto push = [&](Command c) {
-    c.id = k + 1;
-    EXPECT_TRUE(loop.commands().push(c));
-    run(1);
-    Ack a;
-    while (loop.acks().pop(a)) EXPECT_TRUE(a.accepted) << a.message;
-  };
-  run(2);
-  Command e;
-  e.kind = CommandKind::enable;
-  push(e);
-  run(10);
-  EXPECT_EQ(loop.mode(), Mode::holding);
-  Command c;
-  c.kind = CommandKind::segment;
-  const auto& st = loop.last_state();
-  c.segment.start = Vec3(st.queue_end[0], st.queue_end[1], st.queue_end[2]);
-  c.segment.end = circle.sample(circle.duration()).p;
-  c.segment.traj = circle;
-  push(c);
-  run(static_cast<int>(circle.duration() * cfg.loop.rate_hz) + 10);
-  EXPECT_EQ(loop.mode(), Mode::holding);
-  return loop.last_state().last_segment_rmse;
-}
 
 TEST(CanopenBackend, BringUpReadsThePlantsEncodersAndKeepsEverythingOff) {
   Rig r;
@@ -81,8 +39,11 @@ TEST(CanopenBackend, BringUpReadsThePlantsEncodersAndKeepsEverythingOff) {
   EXPECT_NEAR(r.backend->bus_load().load, 0.69, 0.005);
 }
 
-TEST(CanopenBackend, EnableCircleAndDisableMatchTheInProcessSimulator) {
-  Rig r(config_500hz_with_velocity());
+TEST(CanopenBackend, EnableCircleAndDisableMatchTheInProcessSimulatorInLockstep) {
+  // Lockstep drives apply a torque at once, as the in-process loop does:
+  // the bus then changes nothing but the drives' units. (Real drives apply
+  // it a SYNC later: DriveTiming, below.)
+  Rig r(config_500hz_with_velocity(), true, sim::DriveTiming::lockstep);
   r.to_holding();
   EXPECT_TRUE(r.io.outputs.drive_enable);
   EXPECT_TRUE(r.io.outputs.brake_release_z);
@@ -110,7 +71,7 @@ TEST(CanopenBackend, EnableCircleAndDisableMatchTheInProcessSimulator) {
   lo.keep_log = false;
   const auto ref = sim::run_closed_loop(ctrl, plant, circle, lo);
   ASSERT_TRUE(ref.ok());
-  const double on_sim = circle_rmse_on_sim_backend(r.cfg, circle);
+  const double on_sim = circle_on_sim_backend(r.cfg, circle).rmse;
   std::printf("canopen: circle RMSE %.3f um through the bus, %.3f um on the simulator backend, %.3f um in "
               "sim::run_closed_loop (500 Hz)\n", rmse * 1e6, on_sim * 1e6, ref.metrics.position_rmse * 1e6);
   // The same loop on the in-process plant: only the drives' units differ

@@ -20,6 +20,13 @@ ControlInput input_at(const Machine& m, const TrajectorySample& ref, const Vec3&
   return in;
 }
 
+// One step from a fresh state (the drives just enabled): these tests are
+// about the laws; a model without delay never reads the state.
+Status step_once(const Controller& c, const ControlInput& in, ControlOutput& out) {
+  ControllerState state;
+  return c.step(in, state, out);
+}
+
 TEST(Controller, PdIsProportionalPlusDerivativeOfTheJointError) {
   const Machine m(MachineModel::elkady());
   const Gains g{Vec3(1000, 2000, 3000), Vec3(10, 20, 30)};
@@ -29,7 +36,7 @@ TEST(Controller, PdIsProportionalPlusDerivativeOfTheJointError) {
   ref.v = Vec3(0.1, 0.0, -0.1);
   const Vec3 dp(1e-3, -2e-3, 0.5e-3), dv(0.01, 0.02, -0.03);
   ControlOutput out;
-  ASSERT_TRUE(c.step(input_at(m, ref, dp, dv), out));
+  ASSERT_TRUE(step_once(c, input_at(m, ref, dp, dv), out));
   // e = q_d - q = -dp, e_dot = -dv (Elkady eq. 15).
   const Vec3 expect = -g.kp.cwiseProduct(dp) - g.kd.cwiseProduct(dv);
   EXPECT_LT((out.force - expect).norm(), 1e-9);
@@ -44,9 +51,9 @@ TEST(Controller, GravityAndFeedforwardAddTheModelAtTheReference) {
   const Gains g = table3_gains(ControlLaw::pd_feedforward);
   ControlOutput pd, grav, ff;
   const ControlInput in = input_at(m, ref, Vec3(1e-4, 0, 0), Vec3::Zero());
-  ASSERT_TRUE(Controller(m, ControlLaw::pd, g).step(in, pd));
-  ASSERT_TRUE(Controller(m, ControlLaw::pd_gravity, g).step(in, grav));
-  ASSERT_TRUE(Controller(m, ControlLaw::pd_feedforward, g).step(in, ff));
+  ASSERT_TRUE(step_once(Controller(m, ControlLaw::pd, g), in, pd));
+  ASSERT_TRUE(step_once(Controller(m, ControlLaw::pd_gravity, g), in, grav));
+  ASSERT_TRUE(step_once(Controller(m, ControlLaw::pd_feedforward, g), in, ff));
   RigidBodyTerms t;
   ASSERT_TRUE(m.rigid_body(ref.p, ref.v, t));
   EXPECT_LT((grav.force - pd.force - t.K).norm(), 1e-9);
@@ -64,8 +71,8 @@ TEST(Controller, ComputedTorqueOnTheReferenceIsTheInverseDynamics) {
   ref.v = Vec3(-0.1, 0.2, 0.1);
   ref.a = Vec3(0.3, -0.4, 2.0);
   ControlOutput out;
-  ASSERT_TRUE(Controller(m, ControlLaw::computed_torque, table3_gains(ControlLaw::computed_torque))
-                  .step(input_at(m, ref, Vec3::Zero(), Vec3::Zero()), out));
+  ASSERT_TRUE(step_once(Controller(m, ControlLaw::computed_torque, table3_gains(ControlLaw::computed_torque)),
+                        input_at(m, ref, Vec3::Zero(), Vec3::Zero()), out));
   Vec3 f;
   ASSERT_TRUE(m.inverse_dynamics(ref.p, ref.v, ref.a, f));
   f.y() += 3.0 * std::tanh(0.2 / 1e-3);
@@ -79,7 +86,7 @@ TEST(Controller, ClampsEachActuatorToTheForceLimitAndSaysWhich) {
   TrajectorySample ref;
   ref.p = Vec3(0.4, 0.4, 0.35);
   ControlOutput out;
-  ASSERT_TRUE(c.step(input_at(m, ref, Vec3(0.02, -0.02, 0.0), Vec3::Zero()), out));
+  ASSERT_TRUE(step_once(c, input_at(m, ref, Vec3(0.02, -0.02, 0.0), Vec3::Zero()), out));
   EXPECT_DOUBLE_EQ(out.force.x(), -120.0);
   EXPECT_DOUBLE_EQ(out.force.y(), 120.0);
   EXPECT_TRUE(out.saturated[0] && out.saturated[1] && !out.saturated[2]);
@@ -97,7 +104,7 @@ TEST(Controller, CalibratedModelMapsTaskForcesThroughTheJacobianTranspose) {
   ASSERT_TRUE(kin::inverse(m.kinematics(), ref.p, {}, in.d));
   in.ref = ref;
   ControlOutput out;
-  ASSERT_TRUE(Controller(m, ControlLaw::computed_torque, table3_gains(ControlLaw::computed_torque)).step(in, out));
+  ASSERT_TRUE(step_once(Controller(m, ControlLaw::computed_torque, table3_gains(ControlLaw::computed_torque)), in, out));
   Vec3 fp;
   ASSERT_TRUE(m.inverse_dynamics(ref.p, Vec3::Zero(), Vec3::Zero(), fp));
   Mat3 J;
@@ -116,22 +123,22 @@ TEST(Controller, BadInputGivesAStatusAndNoForce) {
   ControlOutput out;
   out.force = Vec3::Constant(5.0);
   in.ref.v.y() = NAN;
-  EXPECT_EQ(c.step(in, out).fault, Fault::not_finite);
+  EXPECT_EQ(step_once(c, in, out).fault, Fault::not_finite);
   EXPECT_EQ(out.force, Vec3::Zero());
   in.ref.v.y() = 0.0;
   in.d_dot.x() = INFINITY;
-  EXPECT_EQ(c.step(in, out).fault, Fault::not_finite);
+  EXPECT_EQ(step_once(c, in, out).fault, Fault::not_finite);
   in.d_dot.x() = 0.0;
   // Encoders that put the platform far outside limb 2's reach (x - L = 1.42 m > L1 + L2).
   in.d = Vec3(1.3, 0.2, 0.1);
-  Status s = c.step(in, out);
+  Status s = step_once(c, in, out);
   EXPECT_EQ(s.fault, Fault::limb_unreachable);
   EXPECT_EQ(s.index, 1);
   EXPECT_EQ(out.force, Vec3::Zero());
   // A reference out of reach, for a law that evaluates the model there.
   in.d = Vec3(0.2, 0.2, 0.1);
   in.ref.p = Vec3(1.5, 0.4, 0.35);
-  s = Controller(m, ControlLaw::pd_gravity, table3_gains(ControlLaw::pd_gravity)).step(in, out);
+  s = step_once(Controller(m, ControlLaw::pd_gravity, table3_gains(ControlLaw::pd_gravity)), in, out);
   EXPECT_EQ(s.fault, Fault::limb_unreachable);
   EXPECT_EQ(out.force, Vec3::Zero());
   EXPECT_THROW(Controller(m, ControlLaw::pd, Gains{Vec3(-1, 0, 0), Vec3::Zero()}), Error);
@@ -150,6 +157,7 @@ TEST(Controller, AStepAllocatesNothing) {
     const Controller c(m, law, table3_gains(law));
     ControlInput in;
     ControlOutput out;
+    ControllerState state;
     in.kin.t = 10.0;
     std::size_t allocations = 0;
     for (int k = 0; k < 200; ++k) {
@@ -157,7 +165,7 @@ TEST(Controller, AStepAllocatesNothing) {
       ASSERT_TRUE(kin::inverse(m.kinematics(), in.ref.p + Vec3(1e-5, 0, -1e-5), in.kin, in.d));
       in.d_dot = in.ref.v;
       const test::CountAllocations count;
-      const Status s = c.step(in, out);
+      const Status s = c.step(in, state, out);
       allocations += count.count();
       ASSERT_TRUE(s) << describe(s);
     }

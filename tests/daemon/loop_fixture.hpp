@@ -29,10 +29,14 @@ struct LoopHarness {
   std::int64_t k = 0;
   std::int64_t next_id = 1;
 
-  explicit LoopHarness(const DaemonConfig& c = test_config(), double enable_delay = 0.005) : cfg(c) {
+  // `truth`: the simulator's machine; `believed`: the loop's model.
+  explicit LoopHarness(const DaemonConfig& c = test_config(), double enable_delay = 0.005,
+                       const ctl::MachineModel& truth = ctl::MachineModel::elkady(),
+                       const ctl::MachineModel& believed = ctl::MachineModel::elkady())
+      : cfg(c), machine(believed) {
     SimBackendOptions so;
     so.enable_delay = enable_delay;
-    auto b = std::make_unique<SimBackend>(std::make_unique<ctl::Machine>(ctl::MachineModel::elkady()), so);
+    auto b = std::make_unique<SimBackend>(std::make_unique<ctl::Machine>(truth), so);
     sim = b.get();
     backend = std::move(b);
     backend->start(1.0 / cfg.loop.rate_hz);

@@ -148,6 +148,34 @@ TEST(ModelFile, DefaultConfigIsTheNominalMachine) {
   EXPECT_TRUE(mf.fitted.empty());
 }
 
+TEST(ModelFile, ActuationDelayLoadsFromTheEffectTableAndRoundTrips) {
+  // A machine-wide dynamic effect without an axis, like payload_mass.
+  const ModelFile mf = parse_model_file(
+      render_model_file(ModelFile{}).replace(render_model_file(ModelFile{}).find("dynamic_effects: []"),
+                                             std::string("dynamic_effects: []").size(),
+                                             "dynamic_effects:\n  - {effect: actuation_delay, tau: 0.001}"),
+      "delay.yaml");
+  ASSERT_EQ(mf.model.effects.size(), 1u);
+  EXPECT_EQ(mf.model.effects[0].type, ctl::DynamicEffectType::actuation_delay);
+  EXPECT_EQ(ctl::Machine(mf.model).actuation_delay(), 0.001);
+  const ModelFile back = parse_model_file(render_model_file(mf), "back.yaml");
+  EXPECT_EQ(ctl::Machine(back.model).actuation_delay(), 0.001);
+  // The bounds of the effect library: 0 .. 0.05 s.
+  EXPECT_THROW(parse_model_file(render_model_file(ModelFile{}).replace(
+                                    render_model_file(ModelFile{}).find("dynamic_effects: []"),
+                                    std::string("dynamic_effects: []").size(),
+                                    "dynamic_effects:\n  - {effect: actuation_delay, tau: 0.2}"),
+                                "far.yaml"),
+               Error);
+  // canopen.yaml's model: machine.yaml and one period at its 1 kHz, nothing
+  // else (the two files must not drift apart).
+  ModelFile bus = load_model_file("config/machine-canopen.yaml");
+  EXPECT_EQ(ctl::Machine(bus.model).actuation_delay(), 0.001);
+  ASSERT_EQ(bus.model.effects.size(), 1u);
+  bus.model.effects.clear();
+  expect_same_model(bus.model, load_model_file("config/machine.yaml").model);
+}
+
 // --- Refusals ---------------------------------------------------------------
 
 std::string nominal_text() { return render_model_file(ModelFile{}); }

@@ -327,9 +327,14 @@ int run(Sil& t, int argc, char** argv) {
   skipped = end->skipped;
   const double motion_s = since(t_start);
   // The in-process run: the same plant (machine.yaml), controller and period.
+  // The virtual drives apply a torque from the SYNC after the one whose
+  // positions it was computed from (CiA 402 cyclic synchronous torque), so
+  // the in-process plant carries that dead time: actuation_delay = T.
   const ctl::Machine m(daemon::load_model(t.cfg.model_file));
   const ctl::Controller ctrl(m, t.cfg.controller.law, t.cfg.controller.gains);
-  const ctl::Machine truth(daemon::load_model(t.model));
+  ctl::MachineModel truth_model = daemon::load_model(t.model);
+  ctl::add_effect(truth_model, "actuation_delay", -1, {1.0 / t.rate});
+  const ctl::Machine truth(truth_model);
   sim::Plant plant_truth(truth, sim::PlantOptions{});
   const ctl::CircleTrajectory circle{ctl::CircleSpec{}};
   sim::LoopOptions lo;

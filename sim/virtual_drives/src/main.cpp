@@ -38,6 +38,9 @@ void usage() {
                "  --counts-per-m N     0x6064 counts per metre (velocity in counts/s) [1e7]\n"
                "  --rated-force N      force of 1000 per mille of 0x6071 (N) [40]\n"
                "  --substeps N         RK4 steps per period [10]\n"
+               "  --timing T           synchronous: a torque received before SYNC k acts from SYNC k, after\n"
+               "                       the positions of SYNC k were sampled (CiA 402 CST: one period of dead\n"
+               "                       time); lockstep: it acts at once, as the in-process loop [synchronous]\n"
                "  --control PATH       UNIX stream socket for fault-injection commands\n"
                "  --stdin              read fault-injection commands from stdin too\n"
                "  --fault SYNC:CMD     run CMD when the SYNC counter reaches SYNC (repeatable)\n"
@@ -98,6 +101,12 @@ int run(int argc, char** argv) {
       const double v = numbers(value(), 1, a)[0];
       for (auto& ax : cfg.axes) ax.scaling.rated_force_n = v;
     } else if (a == "--substeps") cfg.plant.substeps = static_cast<int>(numbers(value(), 1, a)[0]);
+    else if (a == "--timing") {
+      const std::string t = value();
+      const auto timing = sim::timing_from_name(t);
+      if (!timing) throw Error("--timing: expected synchronous or lockstep, got '" + t + "'");
+      cfg.timing = *timing;
+    }
     else if (a == "--control") control = value();
     else if (a == "--stdin") use_stdin = true;
     else if (a == "--ready-file") ready_file = value();
@@ -146,8 +155,9 @@ int run(int argc, char** argv) {
 
   vm.power_on(clock.now_ns());
   if (!ready_file.empty()) std::ofstream(ready_file) << getpid() << "\n";
-  std::fprintf(stderr, "virtual-drives: nodes %d %d %d on %s, %.0f Hz per SYNC, model %s\n", cfg.axes[0].node_id,
-               cfg.axes[1].node_id, cfg.axes[2].node_id, interface.c_str(), rate, model.c_str());
+  std::fprintf(stderr, "virtual-drives: nodes %d %d %d on %s, %.0f Hz per SYNC, %s timing, model %s\n",
+               cfg.axes[0].node_id, cfg.axes[1].node_id, cfg.axes[2].node_id, interface.c_str(), rate,
+               sim::timing_name(cfg.timing), model.c_str());
 
   std::vector<ControlClient> clients;
   std::string stdin_buf;

@@ -49,6 +49,16 @@ class VirtualMachine::Port final : public hal::CanBus {
   std::size_t head_ = 0, count_ = 0;
 };
 
+const char* timing_name(DriveTiming t) noexcept {
+  return t == DriveTiming::lockstep ? "lockstep" : "synchronous";
+}
+
+std::optional<DriveTiming> timing_from_name(std::string_view name) noexcept {
+  for (DriveTiming t : {DriveTiming::synchronous, DriveTiming::lockstep})
+    if (name == timing_name(t)) return t;
+  return std::nullopt;
+}
+
 VirtualMachineConfig VirtualMachineConfig::defaults() {
   VirtualMachineConfig c;
   for (int i = 0; i < 3; ++i) {
@@ -74,6 +84,7 @@ VirtualMachine::VirtualMachine(hal::CanBus& bus, const ctl::Machine& truth, cons
     a.scaling = effective(a.scaling);
   }
   cfg_.plant.validate();
+  ctl::check_delay_fits(truth.actuation_delay(), 1.0 / cfg_.period);  // the plant's command history
   plant_ = std::make_unique<Plant>(truth, cfg_.plant);
   if (Status s = plant_->reset(cfg_.initial_position); !s)
     throw Error("virtual machine: the initial position is outside the true machine's workspace: " + describe(s));
@@ -125,20 +136,31 @@ void VirtualMachine::on_sync(std::int64_t) {
     took[i] = drives_[i]->sync_count() > sync_seen_[i];  // it handled this SYNC (operational, not silent)
     all_enabled = all_enabled && took[i] && drives_[i]->state() == hal::cia402::State::operation_enabled;
   }
+  // The torques the drives took from their RPDOs at this SYNC.
+  Vec3 activated;
   for (int i = 0; i < 3; ++i)
-    force_[i] = hal::pdo::force_n(drives_[static_cast<std::size_t>(i)]->applied_torque(), cfg_.axes[static_cast<std::size_t>(i)].scaling);
+    activated[i] = hal::pdo::force_n(drives_[static_cast<std::size_t>(i)]->applied_torque(), cfg_.axes[static_cast<std::size_t>(i)].scaling);
   // The brakes open one period after every drive holds its axis (the master
   // releases the z brake once drive 3 reports operation enabled), so the
   // first SYNC in operation enabled, whose torque the master sent before it
   // knew, still finds the platform braked.
   const bool released = all_enabled && enabled_before_;
   enabled_before_ = all_enabled;
-  if (released && !plant_failed_) {
+  // Synchronous: the period ending now ran under what the last SYNC
+  // activated, if the brakes were open then and the drives still hold their
+  // axes now (one that quick-stopped meanwhile, the master silent, applied
+  // nothing); lockstep: the new torque acts over the period starting now,
+  // run at once.
+  const bool run = cfg_.timing == DriveTiming::synchronous ? released_ && all_enabled : released;
+  if (cfg_.timing == DriveTiming::lockstep) force_ = activated;
+  if (run && !plant_failed_) {
     if (Status s = plant_->step(force_, cfg_.period); !s) plant_failed_ = true;  // left the strokes: stays put
     ++steps_;
   } else if (plant_->velocity().squaredNorm() > 0.0) {
     (void)plant_->reset(plant_->position());  // brakes hold it still
   }
+  released_ = released;
+  force_ = activated;
   const EncoderReading r = plant_->read();
   for (std::size_t i = 0; i < 3; ++i) {
     const auto& s = cfg_.axes[i].scaling;

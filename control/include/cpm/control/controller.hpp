@@ -14,11 +14,21 @@
 // Every law then divides by the model's drive gain (force_gain effect) and
 // clamps each actuator to +-force_limit. With the nominal kinematics J = I
 // and all of this reduces to the paper's equations.
+//
+// Actuation delay: when the model has an actuation_delay tau > 0, the
+// command computed now acts only from t + tau. The controller therefore
+// first predicts the platform state at t + tau: the model's forward
+// dynamics integrated from the measured state under the commands it already
+// sent that act before then (its ControllerState, switched at the same
+// fractional instants as the plant), and applies the law at that predicted
+// state against the reference at t + tau. The caller samples the reference
+// at t + lookahead(). With tau = 0 nothing of this runs.
 #pragma once
 
 #include <optional>
 #include <string_view>
 
+#include "cpm/control/actuation.hpp"
 #include "cpm/control/machine.hpp"
 #include "cpm/control/trajectory.hpp"
 
@@ -41,8 +51,19 @@ Gains table3_gains(ControlLaw law) noexcept;
 struct ControlInput {
   Vec3 d = Vec3::Zero();       // encoder positions (m)
   Vec3 d_dot = Vec3::Zero();   // encoder velocities (m/s)
-  kin::KinematicInputs kin;    // direction of motion, time (for kinematic effects)
-  TrajectorySample ref;        // reference of the platform centre
+  kin::KinematicInputs kin;    // direction of motion, time (for kinematic effects); kin.t (s)
+                               // is also when this command is given, which stamps it for the delay
+  TrajectorySample ref;        // reference of the platform centre at kin.t + Controller::lookahead()
+};
+
+// What the controller remembers between cycles: the commands it sent, for
+// the prediction across the actuation delay. Owned by the caller (the
+// Controller itself stays a constant description); reset() when the drives
+// are enabled, since until then they were given nothing (or with the force
+// they were applying, when a run starts from a platform held at rest).
+struct ControllerState {
+  CommandHistory sent;  // forces returned by step(), stamped with in.kin.t
+  void reset(const Vec3& before = Vec3::Zero()) noexcept { sent.reset(before); }
 };
 
 struct ControlOutput {
@@ -50,6 +71,8 @@ struct ControlOutput {
   Vec3 force_unlimited = Vec3::Zero();  // before it (N)
   std::array<bool, 3> saturated{};      // which actuators hit the limit
   TaskState estimate;                   // platform state from the encoders
+  TaskState predicted;                  // state at kin.t + lookahead() the law acted on
+                                        // (the estimate when the model has no delay)
   Vec3 d_ref = Vec3::Zero();            // actuator reference (m)
   Vec3 d_dot_ref = Vec3::Zero();        // actuator velocity reference (m/s)
 };
@@ -59,16 +82,31 @@ class Controller {
   // The controller keeps a reference to `model`: it must outlive it.
   Controller(const Machine& model, ControlLaw law, const Gains& gains);
 
-  // One control step: allocation-free and noexcept. On failure (reference
-  // or state outside the model's workspace, NaN) `out.force` is zero and the
-  // status says why.
-  Status step(const ControlInput& in, ControlOutput& out) const noexcept;
+  // One control step: allocation-free and noexcept. Records the command it
+  // returns in `state`. On failure (reference or state outside the model's
+  // workspace, NaN, the history too short for the delay) `out.force` is
+  // zero, recorded as such, and the status says why.
+  Status step(const ControlInput& in, ControllerState& state, ControlOutput& out) const noexcept;
+
+  // How far ahead of kin.t the reference must be sampled (s): the model's
+  // actuation delay, when the command will start to act.
+  [[nodiscard]] double lookahead() const noexcept { return model_->actuation_delay(); }
+  // Longest RK4 step of the prediction across the delay (s). One step over
+  // a 1 ms period errs by 3e-10 m on the paper's circle (docs/performance.md:
+  // one period at 1 against 40 sub-steps), far below an encoder count, and
+  // costs four evaluations of the forward dynamics (~1 us) where 0.1 ms
+  // steps cost ten times that in every cycle.
+  static constexpr double kPredictionStep = 1e-3;
 
   [[nodiscard]] ControlLaw law() const noexcept { return law_; }
   [[nodiscard]] const Gains& gains() const noexcept { return gains_; }
   [[nodiscard]] const Machine& model() const noexcept { return *model_; }
 
  private:
+  Status control_law(const ControlInput& in, const ControllerState& state, ControlOutput& out) const noexcept;
+  Status predict(const ControlInput& in, const ControllerState& state, ControlOutput& out, Vec3& d,
+                 Vec3& d_dot) const noexcept;
+
   const Machine* model_;
   ControlLaw law_;
   Gains gains_;

@@ -106,6 +106,18 @@ class Machine {
   // Platform force for a motion: M p_dd + G p_dot + K (N).
   Status inverse_dynamics(const Vec3& p, const Vec3& p_dot, const Vec3& p_dd,
                           Vec3& force) const noexcept;
+  // Platform acceleration (m/s^2) under actuator commands (N), the plant's
+  // equation with this machine as the truth:
+  //   d = IK(p), d_dot = J^-1 p_dot, F_d = (1 + k) F_cmd - effects(d, d_dot),
+  //   p_dd = M^-1 (J^-T F_d - G p_dot - K).
+  // The command is the one acting now: actuation_delay is the caller's
+  // (integrate_delayed in actuation.hpp).
+  Status forward_dynamics(const Vec3& p, const Vec3& p_dot, const Vec3& force_command,
+                          const kin::KinematicInputs& in, Vec3& p_dd) const noexcept;
+  // The actuator command (N) that holds the platform at rest at p: the
+  // weight through J^T, the effects at rest, over the drive gain. What the
+  // drives were applying before a motion that starts at rest.
+  Status holding_command(const Vec3& p, const kin::KinematicInputs& in, Vec3& command) const noexcept;
   // Sum of the additive effect forces on each actuator (N).
   [[nodiscard]] Vec3 effect_forces(const Vec3& d, const Vec3& d_dot) const noexcept;
   // J = dp/dd at (d, p): the prepared constant one when the planes carry no

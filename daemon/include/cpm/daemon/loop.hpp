@@ -132,7 +132,9 @@ class ControlLoop {
   // server answers REASON_BUSY when it is full).
   static constexpr int kCommandsPerCycle = 4;
 
-  // Keeps references to `backend` and `machine`; the controller refers to `machine`.
+  // Keeps references to `backend` and `machine`; the controller refers to
+  // `machine`. Throws Error when the model's actuation delay needs more
+  // commands than the controller's history keeps at the loop rate.
   ControlLoop(const DaemonConfig& config, Backend& backend, const ctl::Machine& machine,
               const ctl::Controller& controller);
 
@@ -177,6 +179,7 @@ class ControlLoop {
   bool start_next_segment(std::int64_t k) noexcept;
   void finish_segment() noexcept;
   ctl::TrajectorySample reference(std::int64_t k) noexcept;
+  ctl::TrajectorySample reference_ahead(std::int64_t k, double ahead) const noexcept;
   void fill_state(std::int64_t k) noexcept;
   void add_sample(int series, std::int64_t ns) noexcept;
 
@@ -237,6 +240,7 @@ class ControlLoop {
   BackendOutput out_;
   ctl::ControlInput cin_;
   ctl::ControlOutput cout_;
+  ctl::ControllerState ctl_state_;  // the commands sent since enable (actuation delay)
   ctl::TaskState est_;
   ctl::TrajectorySample ref_;
   Vec3 d_ref_ = Vec3::Zero();

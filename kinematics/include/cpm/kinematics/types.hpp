@@ -34,6 +34,7 @@ enum class Fault : std::uint8_t {
   near_singularity,    // the limb's elbow is (almost) straight or folded
   singular_planes,     // the three limb planes do not intersect in one point
   no_convergence,      // an iterative solve did not converge
+  history_short,       // a delayed command is older than the command history keeps
 };
 
 // Result of a real-time computation. `index` is the limb or actuator (0..2)

@@ -4,7 +4,12 @@
 // State: platform point p (m) and velocity p_dot (m/s) in the machine frame.
 // Input: the actuator forces commanded (N), held constant over a control
 // period (zero-order hold) while the state is integrated by RK4 in equal
-// sub-steps. Output: what the drives' encoders read (m, m/s), with optional
+// sub-steps. When the truth has an actuation_delay tau, the command given
+// at step k acts over [t_k + tau, t_k+1 + tau): the plant keeps the
+// commands it was given (ctl::CommandHistory, fixed capacity) and switches
+// the held force at the exact instant t_k + tau, splitting the RK4 sub-step
+// it falls in. Before the first command acts, the force given to reset()
+// acts (zero by default: drives that were off). Output: what the drives' encoders read (m, m/s), with optional
 // quantisation and noise.
 //
 // Forward dynamics, per sub-step stage:
@@ -17,6 +22,7 @@
 #include <cstdint>
 #include <random>
 
+#include "cpm/control/actuation.hpp"
 #include "cpm/control/machine.hpp"
 
 namespace cpm::sim {
@@ -47,9 +53,20 @@ class Plant {
  public:
   Plant(const Machine& truth, const PlantOptions& options);  // keeps a reference to truth
 
-  // Place the platform at p with velocity p_dot, at time 0. Fails outside the workspace.
-  Status reset(const Vec3& p, const Vec3& p_dot = Vec3::Zero()) noexcept;
-  // Advance by dt (s) under the commanded actuator forces held constant.
+  // Place the platform at p with velocity p_dot, at time 0, and forget the
+  // commands: until the first one acts under the delay, the actuators apply
+  // force_before (N). Fails outside the workspace.
+  Status reset(const Vec3& p, const Vec3& p_dot = Vec3::Zero(),
+               const Vec3& force_before = Vec3::Zero()) noexcept;
+  // Forget the commands given: `acting` (N per actuator) acts until the next
+  // command does (under the truth's delay). For drives that are given
+  // commands while the brakes hold the platform (a reset would also rewind
+  // the clock and the directions of motion).
+  void forget_commands(const Vec3& acting) noexcept { commands_.reset(acting); }
+  // Advance by dt (s) under the commanded actuator forces held constant
+  // (from t + tau when the truth has an actuation delay tau). Fails when the
+  // command acting is older than the history keeps (a tau of more than
+  // ctl::kCommandHistoryCapacity - 2 steps).
   // Fails (and keeps the last good state) when the platform leaves the
   // strokes or the limbs' reach.
   Status step(const Vec3& force_command, double dt) noexcept;
@@ -74,6 +91,7 @@ class Plant {
   Vec3 p_ = Vec3::Zero(), p_dot_ = Vec3::Zero();
   double t_ = 0.0;
   kin::KinematicInputs kin_in_;
+  ctl::CommandHistory commands_;  // the commands given, stamped with their time (for the delay)
   std::mt19937_64 rng_;
   std::normal_distribution<double> normal_{0.0, 1.0};
 };

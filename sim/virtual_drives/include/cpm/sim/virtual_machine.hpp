@@ -4,14 +4,23 @@
 //
 // The plant steps by exactly one control period per SYNC frame, never by
 // the wall clock, so the closed loop through the bus is deterministic
-// whatever the host's speed (a software-emulated VM included). At a SYNC,
-// every drive first applies the RPDOs it got before it (controlword, target
-// torque 0x6071); then the plant steps under the three forces held for one
-// period (zero-order hold, as sim::run_closed_loop); then each drive answers
-// with its actual position 0x6064 and velocity 0x606C read from the plant's
-// encoders. That is the same sample / hold timing as the in-process loop: a
-// master that reads those TPDOs before its next cycle sees what
-// run_closed_loop's controller sees.
+// whatever the host's speed (a software-emulated VM included). Two timings:
+//
+//  * synchronous (the default, what a CiA 402 drive in cyclic synchronous
+//    torque does): the SYNC ends the period that ran since the last one, so
+//    the plant first steps through it under the torque that became active at
+//    the last SYNC; then each drive samples its actual position 0x6064 and
+//    velocity 0x606C and answers with them; then it activates the target
+//    torque 0x6071 of the RPDO it got before this SYNC, for the period that
+//    starts now. The master computes that torque from the positions of the
+//    SYNC before, so a command acts one period after the sample it was made
+//    from: the dead time of a synchronous bus, an actuation_delay of T.
+//  * lockstep: every drive applies the RPDOs it got before the SYNC, then the
+//    plant steps under them, then the drives answer: the command acts from
+//    the sample it was made from, as in sim::run_closed_loop, which no real
+//    bus does. Kept to compare with the in-process loop.
+//
+// Either way the plant holds the force over a period (zero-order hold).
 //
 // Brakes: while any drive is not in "operation enabled" (and during the
 // first SYNC after all are, when the brake is still opening) the platform is
@@ -24,6 +33,8 @@
 #include <array>
 #include <cstdint>
 #include <memory>
+#include <optional>
+#include <string_view>
 #include <string>
 #include <vector>
 
@@ -40,8 +51,14 @@ struct VirtualAxis {
   hal::pdo::Scaling scaling;   // the same numbers as the master's drive config
 };
 
+// When an RPDO's torque acts (see the header comment).
+enum class DriveTiming : std::uint8_t { synchronous, lockstep };
+const char* timing_name(DriveTiming t) noexcept;                     // "synchronous", "lockstep"
+std::optional<DriveTiming> timing_from_name(std::string_view name) noexcept;
+
 struct VirtualMachineConfig {
   std::array<VirtualAxis, 3> axes{};
+  DriveTiming timing = DriveTiming::synchronous;
   double period = 1e-3;                                  // s the plant advances per SYNC
   Vec3 initial_position = Vec3(0.600, 0.425, 0.300);     // platform centre at power-on (m)
   PlantOptions plant;
@@ -78,7 +95,8 @@ class VirtualMachine {
   [[nodiscard]] const Plant& plant() const noexcept { return *plant_; }
   [[nodiscard]] std::uint64_t steps() const noexcept { return steps_; }     // SYNCs that moved the plant
   [[nodiscard]] std::uint64_t syncs() const noexcept { return syncs_; }     // SYNCs seen
-  [[nodiscard]] const Vec3& last_force() const noexcept { return force_; }  // N, per actuator
+  // N, per actuator: the force acting now (synchronous: over the period that starts at the last SYNC).
+  [[nodiscard]] const Vec3& last_force() const noexcept { return force_; }
   [[nodiscard]] bool plant_failed() const noexcept { return plant_failed_; }
   [[nodiscard]] const VirtualMachineConfig& config() const noexcept { return cfg_; }
 
@@ -95,6 +113,7 @@ class VirtualMachine {
   std::uint64_t steps_ = 0, syncs_ = 0;
   bool plant_failed_ = false;
   bool enabled_before_ = false;  // every drive was in operation enabled at the previous SYNC
+  bool released_ = false;        // synchronous timing: the brakes were open over the period now ending
   bool gone_ = false;
 };
 
