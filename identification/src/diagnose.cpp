@@ -163,6 +163,26 @@ void check_effect_for_kind(const std::string& effect, const std::string& kind) {
                 " data cannot show it; record a motion log (kind = motion) with the commanded forces");
 }
 
+LinearProblem nuisance_only(const LinearProblem& L) {
+  LinearProblem N = L;
+  std::vector<int> keep;
+  for (std::size_t b = 0; b < L.nuisance.size(); ++b)
+    if (L.nuisance[b]) keep.push_back(static_cast<int>(b));
+  N.B.resize(L.B.rows(), static_cast<Eigen::Index>(keep.size()));
+  N.base_names.clear();
+  N.base_units.clear();
+  N.base_values.clear();
+  N.nuisance.clear();
+  for (std::size_t q = 0; q < keep.size(); ++q) {
+    N.B.col(static_cast<Eigen::Index>(q)) = L.B.col(keep[q]);
+    N.base_names.push_back(L.base_names[static_cast<std::size_t>(keep[q])]);
+    N.base_units.push_back(L.base_units[static_cast<std::size_t>(keep[q])]);
+    N.base_values.push_back(L.base_values[static_cast<std::size_t>(keep[q])]);
+    N.nuisance.push_back(1);
+  }
+  return N;
+}
+
 LinearProblem motion_linear_problem(const MotionProblem& P, Vec3* axis_noise) {
   LinearProblem L;
   const int N = 3 * P.rows();
@@ -376,6 +396,10 @@ CandidateResult evaluate_dynamic_candidate(const MotionProblem& P, const Engine&
         c.params[1].at_bound = true;
         c.params[1].std_error = -1.0;
         c.note = "the spring's rest position is outside [-1, 1] m; held at the bound";
+        // The selection fits without the base refit, where a constant force on
+        // the axis is its own (on z it is the weight's E only once the base is
+        // refitted): it gets the spring's whole linear pair.
+        c.columns = X;
       }
       break;
     }
@@ -566,26 +590,7 @@ void refine_chosen(Diagnosis& D, const Engine& E, const MotionProblem& P, const 
   const std::vector<int> found = D.found();
   bool base_in = false;
   for (int j : found) base_in |= D.candidates[static_cast<std::size_t>(j)].effect == "inertia_error";
-  LinearProblem L = E.problem();
-  if (!base_in) {  // only the nuisance stays in the base
-    LinearProblem N = L;
-    std::vector<int> keep;
-    for (std::size_t b = 0; b < L.nuisance.size(); ++b)
-      if (L.nuisance[b]) keep.push_back(static_cast<int>(b));
-    N.B.resize(L.B.rows(), static_cast<Eigen::Index>(keep.size()));
-    N.base_names.clear();
-    N.base_units.clear();
-    N.base_values.clear();
-    N.nuisance.clear();
-    for (std::size_t q = 0; q < keep.size(); ++q) {
-      N.B.col(static_cast<Eigen::Index>(q)) = L.B.col(keep[q]);
-      N.base_names.push_back(L.base_names[static_cast<std::size_t>(keep[q])]);
-      N.base_units.push_back(L.base_units[static_cast<std::size_t>(keep[q])]);
-      N.base_values.push_back(L.base_values[static_cast<std::size_t>(keep[q])]);
-      N.nuisance.push_back(1);
-    }
-    L = std::move(N);
-  }
+  LinearProblem L = base_in ? E.problem() : nuisance_only(E.problem());
   const Eigen::VectorXd y0 = L.y;
   for (int j : found) {
     CandidateResult& c = D.candidates[static_cast<std::size_t>(j)];

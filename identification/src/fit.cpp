@@ -83,10 +83,15 @@ FitResult fit_motion(const io::MotionData& data, const ctl::MachineModel& model,
                         " was in the model: refitted from scratch");
   }
   // actuation_delay is the alignment (align.hpp); the others are fitted on the aligned log.
+  // inertia_error is the base refit; without it the base stays as the model
+  // says, as in the diagnosis' selection, so that the effects are fitted as the
+  // verdict named them (a base refitted for the fit and then not written left
+  // the effects compensating a change the model does not have).
   std::vector<FitRequest> additive;
-  bool fit_delay = false;
+  bool fit_delay = false, refit_base = false;
   for (const auto& r : requests) {
     if (r.effect == "actuation_delay") fit_delay = true;
+    else if (r.effect == "inertia_error") refit_base = true;
     else additive.push_back(r);
   }
   const ctl::Machine mw(work);
@@ -104,7 +109,8 @@ FitResult fit_motion(const io::MotionData& data, const ctl::MachineModel& model,
     c.params.push_back({"tau", "s", tau, A.std_error, tau != A.missing()});
     R.delay = c;
   }
-  LinearProblem L = motion_linear_problem(P);
+  const LinearProblem L_full = motion_linear_problem(P);
+  LinearProblem L = refit_base ? L_full : nuisance_only(L_full);
   // Back-fitting: each effect on what the others leave, twice round.
   std::vector<CandidateResult> got(additive.size());
   std::vector<Eigen::VectorXd> contrib(additive.size(), Eigen::VectorXd::Zero(L.y.size()));
@@ -122,16 +128,20 @@ FitResult fit_motion(const io::MotionData& data, const ctl::MachineModel& model,
       contrib[k] = c.fitted;
       got[k] = std::move(c);
     }
-  // The base: write A..E changes only when the data call for them.
-  L.y = y0;
-  for (const auto& c : contrib) L.y -= c;
-  const Engine Ef(L);
+  // The base: A..E changed when inertia_error was asked for.
+  LinearProblem Lb = L_full;
+  Lb.y = y0;
+  for (const auto& c : contrib) Lb.y -= c;
+  const Engine Ef(Lb);
   CandidateResult base = evaluate_dynamic_candidate(P, Ef, work, "inertia_error", -1, opt);
-  {
+  R.base_refitted = refit_base;
+  R.base_change = base.params;
+  if (!refit_base) {
     const NestedTest t = Ef.nested(Ef.rss_given(), Ef.rss_base(), std::max(1, Ef.base_rank_beyond_nuisance()),
                                    Ef.base_rank(), std::max(base.n_eff, 10.0));
-    R.base_refitted = t.p_value < opt.alpha;
-    R.base_change = base.params;
+    if (t.p_value < opt.alpha)
+      R.notes.push_back("the rigid-body constants A, B, C, E differ significantly from the model's on these data: "
+                        "add inertia_error to refit them");
   }
   // The new model.
   ctl::MachineModel out = work;
@@ -160,8 +170,6 @@ FitResult fit_motion(const io::MotionData& data, const ctl::MachineModel& model,
     ctl::add_effect(out, "inertia_error", -1, d);
     for (const auto& p : base.params)
       R.fitted.push_back({"effects.inertia_error." + p.name, p.unit, 0.0, p.value, p.std_error});
-  } else {
-    R.notes.push_back("the rigid-body constants A, B, C, E are not significantly different from the model's: kept");
   }
   out.validate();
   const ctl::Machine check(out);  // throws when the fitted constants are not a machine

@@ -49,6 +49,8 @@ void select_motion_effects(Diagnosis& D, const Engine& E, const DiagnoseOptions&
 // The verdict text of a motion diagnosis from its found() effects, their
 // parameters and alternatives (after the parameters are refined).
 void verdict_text_motion(Diagnosis& D);
+// Why a fitted value is physically implausible for this machine, or empty.
+std::string implausible(const CandidateResult& c);
 // Motion logs, outside the library (outside.cpp): the strong findings of the
 // structure scan in what the chosen effects leave; the problem with their
 // columns as nuisance (to select again beside them); the verdict text led by them.

@@ -7,6 +7,7 @@
 
 #include "cpm/identification/kinematic.hpp"
 #include "cpm/identification/structure.hpp"
+#include "internal.hpp"
 
 namespace cpm::ident {
 namespace {
@@ -143,7 +144,34 @@ std::string plots_of(const MotionProblem& P, const Eigen::VectorXd& before, cons
     if (after) ss.push_back(sa);
     o << svg_plot("axis " + std::to_string(i + 1), "t (s)", "force residual (N)", ss);
   }
-  o << "</div><h2>Residual along each axis' position, by direction of motion</h2><div>";
+  o << "</div>";
+  if (after) {
+    // The evidence a person checks at a glance: the residual against velocity
+    // (the friction map) and against position, before and after, with what the
+    // named effects take out drawn over it.
+    const Eigen::VectorXd fitted = before - *after;
+    for (int coord = 0; coord < 2; ++coord) {
+      o << (coord == 0 ? "<h2>Friction map: residual against each axis' velocity, before and after, with what the "
+                         "named effects explain</h2><div>"
+                       : "<h2>Residual against each axis' position, before and after, with what the named effects "
+                         "explain</h2><div>");
+      for (int i = 0; i < 3; ++i) {
+        Series sb{{}, {}, "#bbb", "model as given", false}, sa{{}, {}, "#36c", after_label, false},
+            sf{{}, {}, "#d33", "named effects", false};
+        for (int r : idx) {
+          const double x = coord == 0 ? P.v[r][i] * 1e3 : P.d[r][i] * 1e3;
+          sb.x.push_back(x); sb.y.push_back(before(3 * r + i));
+          sa.x.push_back(x); sa.y.push_back((*after)(3 * r + i));
+          sf.x.push_back(x); sf.y.push_back(fitted(3 * r + i));
+        }
+        o << svg_plot("axis " + std::to_string(i + 1), coord == 0 ? "v" + std::to_string(i + 1) + " (mm/s)"
+                                                                  : "d" + std::to_string(i + 1) + " (mm)",
+                      "force residual (N)", {sb, sa, sf});
+      }
+      o << "</div>";
+    }
+  }
+  o << "<h2>Residual along each axis' position, by direction of motion</h2><div>";
   const Eigen::VectorXd& show = after ? *after : before;
   for (int i = 0; i < 3; ++i) {
     Series sp{{}, {}, "#1a7", "moving +", false}, sn{{}, {}, "#d33", "moving -", false};
@@ -501,7 +529,8 @@ std::string diagnosis_json(const Diagnosis& D) {
     const auto& c = D.candidates[static_cast<std::size_t>(found[j])];
     o << (j ? ", " : "") << "{\"effect\": " << json_string(c.effect) << ", \"axis\": " << axis(c.axis) << ", ";
     params_json(c);
-    o << ", \"alternatives\": [";
+    o << ", \"implausible\": " << (detail::implausible(c).empty() ? "null" : json_string(detail::implausible(c)))
+      << ", \"alternatives\": [";
     for (std::size_t q = 0; q < c.alternatives.size(); ++q) o << (q ? ", " : "") << json_string(c.alternatives[q]);
     o << "]}";
   }
@@ -572,9 +601,7 @@ std::string diagnosis_html(const Diagnosis& D) {
       << (c.significant ? "yes" : (c.identifiable ? "no" : "n/a")) << "</td><td class='l'>";
     for (std::size_t j = 0; j < c.params.size(); ++j) {
       const auto& p = c.params[j];
-      o << (j ? "<br>" : "") << esc(p.name) << " = " << num(p.value, 4);
-      if (p.std_error >= 0) o << " ± " << num(p.std_error, 2);
-      o << " " << esc(p.unit);
+      o << (j ? "<br>" : "") << esc(p.name) << " = " << esc(detail::human_value(p));
     }
     o << "</td><td class='l'>";
     for (const auto& cf : c.confounded)
@@ -589,8 +616,11 @@ std::string diagnosis_html(const Diagnosis& D) {
     for (const auto& f : D.structure) o << "<li>" << esc(f.text) << " (" << num(f.z, 3) << " σ)</li>";
     o << "</ul>";
   }
-  const std::string after_label = D.verdict >= 0 ? "with " + D.candidates[D.verdict].label()
-                                                 : (motion ? "base refitted" : "calibrated base");
+  const std::string after_label =
+      !D.outside_library.empty() ? "with the structure and effects found"
+      : D.found().size() > 1     ? "with the " + std::to_string(D.found().size()) + " effects found"
+      : D.verdict >= 0           ? "with " + D.candidates[D.verdict].label()
+                                 : (motion ? "base refitted" : "calibrated base");
   if (motion) {
     const Eigen::VectorXd* after = D.residual_final.size() == D.motion.residual.size() ? &D.residual_final : nullptr;
     o << plots_of(D.motion, D.motion.residual, after, after_label);

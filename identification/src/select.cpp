@@ -198,6 +198,20 @@ void select_motion_effects(Diagnosis& D, const Engine& E, const DiagnoseOptions&
   verdict_text_motion(D);
 }
 
+std::string implausible(const CandidateResult& c) {
+  // Values no healthy machine of this size has: worth a second look before
+  // they go into a model (a sign error in the log, a wrong unit, a model far off).
+  if (c.params.empty()) return {};
+  const double v = c.params[0].value;
+  if (c.effect == "payload_mass" && v < 0.0) return "a negative payload: mass taken off the platform, or the model's masses too large";
+  if (c.effect == "force_gain" && std::fabs(v) > 0.3) return "a drive gain off by more than 30 %: check the torque constant and the units of the force column";
+  if (c.effect == "coulomb_friction" && v > 30.0) return "more than 30 N of dry friction (a quarter of the force limit)";
+  if (c.effect == "viscous_friction" && v > 200.0) return "more than 200 N s/m of viscous friction";
+  if (c.effect == "cogging" && v > 20.0) return "more than 20 N of cogging";
+  if (c.effect == "actuation_delay" && v > 0.02) return "a dead time of more than 20 ms";
+  return {};
+}
+
 void verdict_text_motion(Diagnosis& D) {
   const std::vector<int> found = D.found();
   if (found.empty()) {
@@ -231,6 +245,8 @@ void verdict_text_motion(Diagnosis& D) {
     for (std::size_t q = 0; q < v.params.size(); ++q)
       os << (q ? ", " : "") << v.params[q].name << " = " << human_value(v.params[q]);
     os << ")";
+    const std::string why = implausible(v);
+    if (!why.empty()) os << " [implausible: " << why << "]";
   }
   const int n_chosen = static_cast<int>(found.size());
   os << ". " << (n_chosen > 1 ? "Together they bring" : "It brings") << " the residual from "

@@ -141,6 +141,11 @@ Diagnosis diagnose_motion(const io::MotionData& data, const ctl::Machine& model,
 // sigma_i the noise of axis i estimated from the base refit (returned).
 LinearProblem motion_linear_problem(const MotionProblem& P, Vec3* axis_noise = nullptr);
 
+// The same problem with only its nuisance columns in the base: fits on it keep
+// the base parameters at the model's values (the selection before it chooses
+// inertia_error, and cpm fit without it).
+LinearProblem nuisance_only(const LinearProblem& L);
+
 // One candidate evaluated on an engine (used by diagnose and fit).
 CandidateResult evaluate_dynamic_candidate(const MotionProblem& P, const Engine& E,
                                            const ctl::MachineModel& model, const std::string& effect,

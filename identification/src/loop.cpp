@@ -1,0 +1,179 @@
+#include "cpm/identification/loop.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <memory>
+#include <sstream>
+
+#include "cpm/identification/kinematic.hpp"
+#include "cpm/identification/report.hpp"
+
+namespace cpm::ident {
+namespace {
+
+Diagnosis diagnose_any(const io::DataSet& data, const ctl::MachineModel& model, const DiagnoseOptions& o) {
+  if (const auto* m = std::get_if<io::MotionData>(&data)) return diagnose_motion(*m, ctl::Machine(model), o);
+  return diagnose_kinematic(std::make_shared<const KinematicProblem>(prepare_kinematic(data, model.kinematics)), o);
+}
+
+std::string label_of(const FitRequest& r) {
+  return r.effect + (r.axis >= 0 ? "[axis " + std::to_string(r.axis + 1) + "]" : "");
+}
+
+}  // namespace
+
+LoopResult run_loop(const io::DataSet& data, const ctl::MachineModel& model, const DiagnoseOptions& o, int max_steps) {
+  LoopResult R;
+  R.model = model;
+  const bool motion = std::holds_alternative<io::MotionData>(data);
+  Diagnosis D = diagnose_any(data, model, o);
+  R.kind = D.kind;
+  R.units = D.units;
+  if (motion) {
+    R.steps.push_back({"", motion_rms(std::get<io::MotionData>(data), model, o.motion), D.noise_floor, D.verdict_text});
+  } else {
+    // Kinematic data: the model as given, then its planes calibrated (the base), then the effects.
+    R.steps.push_back({"", D.baseline_rms, D.noise_floor, ""});
+    R.steps.push_back({"calibrated planes", D.base_refit_rms, D.noise_floor, D.verdict_text});
+  }
+  for (int step = 0; step < max_steps; ++step) {
+    if (!D.outside_library.empty()) {
+      R.outside_library = true;
+      R.stop = "something no library effect describes remains: " + D.outside_library.front().text;
+      return R;
+    }
+    const std::vector<int> found = D.found();
+    if (found.empty()) {
+      R.stop = "nothing is missing: the diagnosis finds no significant effect";
+      return R;
+    }
+    const CandidateResult& next = D.candidates[static_cast<std::size_t>(found.front())];
+    FitRequest req{next.effect, next.axis};
+    if (std::any_of(R.added.begin(), R.added.end(),
+                    [&](const FitRequest& a) { return a.effect == req.effect && a.axis == req.axis; })) {
+      R.stop = "the diagnosis names " + label_of(req) + " again after it was fitted: the data cannot settle it";
+      return R;
+    }
+    std::vector<FitRequest> trial = R.added;
+    trial.push_back(req);
+    ctl::MachineModel out = model;
+    double rms = 0.0;
+    std::vector<io::FittedParameter> fitted;
+    std::vector<CandidateResult> effects;
+    if (motion) {
+      const FitResult F = fit_motion(std::get<io::MotionData>(data), model, trial, o, nullptr, false);
+      out = F.model;
+      fitted = F.fitted;
+      effects = F.effects;
+      rms = F.on_fit.after;
+    } else {
+      const KinematicFit F = fit_kinematic(data, model.kinematics, trial, o, nullptr, false);
+      out.kinematics = F.model;
+      fitted = F.fitted;
+      effects = F.effects;
+      rms = F.on_fit.after;
+    }
+    // A step that does not lower the residual of the model is not kept: what
+    // the diagnosis fits (with the nuisance beside it) the model file cannot
+    // hold in that form (a base refit on a circle that never moves z).
+    if (!(rms < R.steps.back().rms)) {
+      R.stop = "adding " + label_of(req) + " did not lower the model's residual (" + std::to_string(rms) + " against " +
+               std::to_string(R.steps.back().rms) + " " + R.units + "); not kept";
+      return R;
+    }
+    R.added = trial;
+    R.fitted = fitted;
+    R.effects = effects;
+    R.model = out;
+    D = diagnose_any(data, out, o);
+    R.steps.push_back({label_of(req), rms, D.noise_floor, D.verdict_text});
+  }
+  R.stop = "stopped after " + std::to_string(max_steps) + " steps";
+  return R;
+}
+
+std::string loop_text(const LoopResult& R) {
+  const bool m = R.units == "m";
+  const double k = m ? 1e6 : 1.0;
+  const std::string u = m ? "µm" : "N";
+  std::ostringstream o;
+  o.precision(4);
+  o << "waterfall (" << R.kind << " data; residual RMS after each step, " << u << "):\n";
+  for (std::size_t j = 0; j < R.steps.size(); ++j) {
+    const LoopStep& s = R.steps[j];
+    o << "  " << j << "  " << (s.added.empty() ? "model as given" : "+ " + s.added);
+    o << std::string(s.added.empty() ? 16 : std::max<std::size_t>(2, 30 - s.added.size() - 2), ' ') << s.rms * k << " "
+      << u << "  (" << (s.noise_floor > 0.0 ? s.rms / s.noise_floor : 0.0) << " x the noise floor " << s.noise_floor * k
+      << " " << u << ")\n";
+  }
+  o << "stop: " << R.stop << "\n";
+  if (!R.steps.empty()) o << "last diagnosis: " << R.steps.back().verdict << "\n";
+  return o.str();
+}
+
+std::string loop_json(const LoopResult& R, const std::string& data_file, const std::string& out_file) {
+  std::ostringstream o;
+  o << "{\"kind\": " << json_string(R.kind) << ", \"units\": " << json_string(R.units) << ", \"data_file\": "
+    << json_string(data_file) << ", \"out\": " << json_string(out_file) << ",\n \"waterfall\": [";
+  for (std::size_t j = 0; j < R.steps.size(); ++j) {
+    const LoopStep& s = R.steps[j];
+    o << (j ? "," : "") << "\n  {\"step\": " << j << ", \"added\": " << (s.added.empty() ? "null" : json_string(s.added))
+      << ", \"rms\": " << json_num(s.rms) << ", \"noise_floor\": " << json_num(s.noise_floor)
+      << ", \"verdict\": " << json_string(s.verdict) << "}";
+  }
+  o << "],\n \"effects\": [";
+  for (std::size_t j = 0; j < R.effects.size(); ++j) {
+    const CandidateResult& c = R.effects[j];
+    o << (j ? ", " : "") << "{\"effect\": " << json_string(c.effect) << ", \"axis\": "
+      << (c.axis >= 0 ? std::to_string(c.axis + 1) : "null") << ", \"params\": {";
+    for (std::size_t q = 0; q < c.params.size(); ++q)
+      o << (q ? ", " : "") << json_string(c.params[q].name) << ": " << json_num(c.params[q].value);
+    o << "}}";
+  }
+  o << "],\n \"outside_library\": " << (R.outside_library ? "true" : "false") << ", \"stop\": " << json_string(R.stop)
+    << "}\n";
+  return o.str();
+}
+
+std::string loop_html(const LoopResult& R, const std::string& data_file) {
+  const bool m = R.units == "m";
+  const double k = m ? 1e6 : 1.0;
+  const std::string u = m ? "µm" : "N";
+  // Bars: one per step, the noise floor as a dashed line across them.
+  const double W = 120.0 + 110.0 * static_cast<double>(R.steps.size()), H = 300, l = 70, b = 70, t = 30;
+  double top = 0.0;
+  for (const auto& s : R.steps) top = std::max({top, s.rms * k, s.noise_floor * k});
+  top = top > 0.0 ? top * 1.1 : 1.0;
+  auto Y = [&](double v) { return H - b - (H - t - b) * v / top; };
+  std::ostringstream o;
+  o << "<!DOCTYPE html><html><head><meta charset='utf-8'><title>cpm loop: " << data_file
+    << "</title><style>body{font-family:sans-serif;margin:18px;color:#222}</style></head><body>";
+  o << "<h1>cpm loop: " << data_file << "</h1><p>Diagnose, add the effect found, refit, diagnose again. Residual RMS ("
+    << u << ") of the model after each step; the dashed line is the noise floor the diagnosis estimates.</p>";
+  o << "<svg xmlns='http://www.w3.org/2000/svg' width='" << W << "' height='" << H
+    << "' style='background:#fff;border:1px solid #ddd'>";
+  o << "<line x1='" << l << "' y1='" << Y(0) << "' x2='" << W - 10 << "' y2='" << Y(0) << "' stroke='#888'/>";
+  o << "<text x='14' y='" << (H - b + t) / 2 << "' font-size='11' transform='rotate(-90 14 " << (H - b + t) / 2
+    << ")' text-anchor='middle'>residual RMS (" << u << ")</text>";
+  for (std::size_t j = 0; j < R.steps.size(); ++j) {
+    const LoopStep& s = R.steps[j];
+    const double x = l + 20 + 110.0 * static_cast<double>(j), v = s.rms * k;
+    o << "<rect x='" << x << "' y='" << Y(v) << "' width='70' height='" << Y(0) - Y(v) << "' fill='#36c'/>";
+    char buf[64];
+    std::snprintf(buf, sizeof buf, "%.4g", v);
+    o << "<text x='" << x + 35 << "' y='" << Y(v) - 4 << "' font-size='11' text-anchor='middle'>" << buf << "</text>";
+    o << "<text x='" << x + 35 << "' y='" << H - b + 16 << "' font-size='10' text-anchor='middle'>"
+      << (s.added.empty() ? "as given" : "+ " + s.added) << "</text>";
+    const double f = s.noise_floor * k;
+    o << "<line x1='" << x - 10 << "' x2='" << x + 80 << "' y1='" << Y(f) << "' y2='" << Y(f)
+      << "' stroke='#d33' stroke-dasharray='4 3'/>";
+  }
+  o << "<text x='" << W - 12 << "' y='" << t - 10 << "' font-size='11' fill='#d33' text-anchor='end'>noise floor</text>";
+  o << "</svg><p><b>Stop:</b> " << R.stop << "</p><ol start='0'>";
+  for (const auto& s : R.steps)
+    o << "<li>" << (s.added.empty() ? "model as given" : "+ " + s.added) << ": " << s.verdict << "</li>";
+  o << "</ol></body></html>\n";
+  return o.str();
+}
+
+}  // namespace cpm::ident
