@@ -213,7 +213,7 @@ MatrixResult run_matrix(const MatrixOptions& o, const std::function<void(const L
     }
 
   std::vector<Job> jobs;
-  for (int seed = 1; seed <= o.seeds; ++seed)
+  for (int seed = o.first_seed; seed < o.first_seed + o.seeds; ++seed)
     for (double rate : o.rates)
       for (NoisePlacement nz : o.noises)
         for (Timing t : o.timings) {
@@ -388,7 +388,7 @@ std::string markdown_table(const MatrixResult& r) {
 std::string to_json(const MatrixResult& r) {
   std::ostringstream os;
   const MatrixOptions& o = r.options;
-  os << "{\n  \"options\": {\"seeds\": " << o.seeds << ", \"duration_s\": " << json_num(o.duration)
+  os << "{\n  \"options\": {\"seeds\": " << o.seeds << ", \"first_seed\": " << o.first_seed << ", \"duration_s\": " << json_num(o.duration)
      << ", \"threads\": " << o.threads << ", \"rates\": [";
   for (std::size_t i = 0; i < o.rates.size(); ++i) os << (i ? ", " : "") << json_num(o.rates[i]);
   os << "], \"timings\": [";

@@ -58,6 +58,7 @@ struct MatrixOptions {
   std::vector<double> multiples = {3.0, 10.0};
   bool nulls = true;
   int seeds = 1;
+  int first_seed = 1;                      // seeds first_seed .. first_seed + seeds - 1
   double duration = 20.0;                  // s per log
   int threads = 1;
   std::string write_logs;                  // directory: write every log as CSV ("" = no)

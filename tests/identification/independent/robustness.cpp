@@ -2,7 +2,7 @@
 // the independent generator. Prints a markdown table (one row per cell) and,
 // with --json FILE, every log's result.
 //
-//   cpm_robustness [--seeds N] [--rates 250,1000,4000] [--timings sampled,zoh,delay1,delay1_5]
+//   cpm_robustness [--seeds N] [--first-seed K] [--rates 250,1000,4000] [--timings sampled,zoh,delay1,delay1_5]
 //                  [--noise plant,command] [--effects viscous_friction,...|none] [--multiples 3,10]
 //                  [--no-null] [--duration S] [--threads N] [--json FILE] [--write-logs DIR]
 //                  [--quick] [--check] [--estimate] [--quiet]
@@ -48,7 +48,7 @@ std::vector<double> numbers(const std::string& s) {
 
 int usage(const char* msg) {
   std::fprintf(stderr,
-               "%s\nusage: cpm_robustness [--seeds N] [--rates 250,1000,4000] "
+               "%s\nusage: cpm_robustness [--seeds N] [--first-seed K] [--rates 250,1000,4000] "
                "[--timings sampled,zoh,delay1,delay1_5] [--noise plant,command] [--effects NAME,...|none] "
                "[--multiples 3,10] [--no-null] [--duration S] [--threads N] [--json FILE] [--write-logs DIR] "
                "[--quick] [--check] [--estimate] [--quiet]\n",
@@ -112,6 +112,7 @@ int main(int argc, char** argv) {
         return argv[++i];
       };
       if (a == "--seeds") o.seeds = std::stoi(value());
+      else if (a == "--first-seed") o.first_seed = std::stoi(value());
       else if (a == "--rates") o.rates = numbers(value());
       else if (a == "--timings") {
         o.timings.clear();
