@@ -105,9 +105,10 @@ Reference Excitation::operator()(double t) const noexcept {
     double f = 0.0, fd = 0.0, fdd = 0.0;
     for (int j = 0; j < 3; ++j) {
       const double w = kTwoPi * kFreq[i][j], phi = phase_[i][j];
-      // Offset so that each term starts at 0 (the ramp then starts at the centre at rest).
+      // No offset: the ramp (s(0) = 0) starts the path at the centre at rest,
+      // and the excursion stays within the centre +- the sum of the amplitudes.
       const double x = w * t + phi;
-      f += kAmp[i][j] * (std::sin(x) - std::sin(phi));
+      f += kAmp[i][j] * std::sin(x);
       fd += kAmp[i][j] * w * std::cos(x);
       fdd += -kAmp[i][j] * w * w * std::sin(x);
     }

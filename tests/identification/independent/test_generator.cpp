@@ -159,6 +159,26 @@ TEST(IndependentGenerator, CommandNoiseHasTheStatedSigmaOnTheLoggedForce) {
   EXPECT_NEAR(std::sqrt(sv / (3.0 * n)), 2e-4, 2e-4 * 0.05);
 }
 
+// The reference alone, over many seeds (the phases vary with the seed): it
+// keeps a 40 mm margin to every stroke end and the force limit is far.
+TEST(IndependentGenerator, TheExcitationStaysInsideTheStrokesForEverySeed) {
+  const Vec3 d0(0.2250, 0.2250, 0.2268), lo(0.04, 0.04, 0.04), hi(0.36, 0.36, 0.26);
+  for (std::uint64_t seed = 0; seed < 200; ++seed) {
+    const Excitation path(seed);
+    Vec3 amax = Vec3::Zero();
+    for (int k = 0; k <= 30000; ++k) {
+      const Reference r = path(k * 1e-3);
+      const Vec3 d = r.p - d0;
+      for (int i = 0; i < 3; ++i) {
+        ASSERT_GT(d[i], lo[i]) << "seed " << seed << " axis " << i + 1 << " t " << k * 1e-3;
+        ASSERT_LT(d[i], hi[i]) << "seed " << seed << " axis " << i + 1 << " t " << k * 1e-3;
+      }
+      amax = amax.cwiseMax(r.a.cwiseAbs());
+    }
+    ASSERT_LT(amax.maxCoeff(), 3.0) << "seed " << seed;  // m/s^2: a few kg need well under 120 N
+  }
+}
+
 TEST(IndependentGenerator, EveryConventionStaysInTheWorkspaceAndReversesEveryAxisOften) {
   for (Timing t : {Timing::sampled, Timing::zoh, Timing::delay1, Timing::delay1_5}) {
     GeneratorSpec s;
