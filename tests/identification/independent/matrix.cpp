@@ -114,10 +114,8 @@ std::vector<double> planted_values(const EffectShape& e, double amplitude) {
 // base, or, for payload and inertia error, which are base directions
 // themselves, against the model as given. It only scales the planted
 // amplitudes; the judgement is diagnose_motion's alone.
-double amplitude_standard_error(const io::MotionData& null_log, const ctl::Machine& nominal, const EffectShape& e,
+double amplitude_standard_error(const ident::MotionProblem& P, const ident::Engine& E, const EffectShape& e,
                                 int axis) {
-  const ident::MotionProblem P = ident::prepare_motion(null_log, nominal);
-  const ident::Engine E(ident::motion_linear_problem(P));
   Eigen::MatrixXd X(E.rows(), 1);
   bool with_base = true;
   if (e.amp_index < 0 || e.name == "payload_mass") {
@@ -200,12 +198,14 @@ MatrixResult run_matrix(const MatrixOptions& o, const std::function<void(const L
       s.duration = o.duration;
       s.seed = 987654;
       const io::MotionData null_log = generate(s).log;
+      const ident::MotionProblem P = ident::prepare_motion(null_log, nominal);
+      const ident::Engine E(ident::motion_linear_problem(P));
       auto& u = unit[{static_cast<int>(nz), rate}];
       u.assign(lib.size(), {0.0, 0.0, 0.0});
       for (int ei : effect_idx) {
         const EffectShape& e = lib[static_cast<std::size_t>(ei)];
         for (int axis = 0; axis < (e.per_axis ? 3 : 1); ++axis) {
-          const double v = 4.0 * amplitude_standard_error(null_log, nominal, e, e.per_axis ? axis : -1);
+          const double v = 4.0 * amplitude_standard_error(P, E, e, e.per_axis ? axis : -1);
           u[static_cast<std::size_t>(ei)][static_cast<std::size_t>(axis)] = v;
           res.units.push_back({nz, rate, e.name, e.per_axis ? axis : -1, v});
         }

@@ -16,6 +16,8 @@
 #include <vector>
 
 #include "cpm/identification/diagnose.hpp"
+#include "cpm/identification/engine.hpp"
+#include "cpm/identification/motion.hpp"
 #include "generator.hpp"
 
 namespace cpm::indep {
@@ -47,8 +49,10 @@ std::vector<double> planted_values(const EffectShape& e, double amplitude);
 
 // Standard error of the effect's amplitude on effect-free data with its shape
 // known (the approach of tests/identification/test_identification.cpp).
-double amplitude_standard_error(const io::MotionData& null_log, const ctl::Machine& nominal,
-                                const EffectShape& e, int axis);
+// P and E are the prepared null log (ident::prepare_motion) and its engine
+// (ident::motion_linear_problem): prepared once, used for every effect and axis.
+double amplitude_standard_error(const ident::MotionProblem& P, const ident::Engine& E, const EffectShape& e,
+                                int axis);
 
 struct MatrixOptions {
   std::vector<Timing> timings = {Timing::sampled, Timing::zoh, Timing::delay1, Timing::delay1_5};
