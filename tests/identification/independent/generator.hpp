@@ -1,0 +1,110 @@
+// An independent motion-log generator: the yardstick against which
+// `cpm diagnose` is judged on logs it did not make itself.
+//
+// Written apart from the project's simulator (sim::Plant,
+// sim::run_closed_loop, tests/identification/sim_data.hpp) and from
+// identification/ (its filters and kernels): its own time integration (RK4
+// on a fixed fine step that lands exactly on every instant where the applied
+// force switches), its own excitation (per axis a sum of three sines at
+// incommensurate frequencies, ramped in from rest), its own controller (PD
+// plus the nominal model's feed-forward in task space) and its own
+// conventions for when the logged force acts and where the noise enters.
+// Only the rigid-body physics of the true machine is shared
+// (ctl::Machine: M, G, K, J, the effect forces, the drive gain).
+//
+// Timing of the logged force f_k (data-formats.md, "Timing of the force column"):
+//   sampled  - the controller is continuous (evaluated at every RK4 stage);
+//              the drive applies that continuous force; the log records it at t_k.
+//   zoh      - f_k is computed at t_k and applied over [t_k, t_k+1).
+//   delay1   - f_k is applied over [t_k + T, t_k+1 + T).
+//   delay1_5 - f_k is applied over [t_k + 1.5T, t_k+1 + 1.5T) (the switch
+//              falls inside a period).
+// Before the first command the drive holds f_0 (the machine rests under it).
+//
+// Noise placement:
+//   plant    - a disturbance force, white per sample period (constant over
+//              [t_k, t_k+1)), enters the plant; the log holds exactly the command.
+//   command  - no disturbance; the log holds the command plus white noise
+//              (a logger measuring the force).
+// In both the logged d and v carry white encoder noise and the controller
+// acts on those noisy readings.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "cpm/control/machine.hpp"
+#include "cpm/io/data_files.hpp"
+
+namespace cpm::indep {
+
+enum class Timing { sampled, zoh, delay1, delay1_5 };
+enum class NoisePlacement { plant, command };
+
+const char* timing_name(Timing t) noexcept;            // "sampled", "zoh", "delay1", "delay1_5"
+const char* noise_name(NoisePlacement n) noexcept;     // "plant", "command"
+Timing timing_from_name(const std::string& s);         // throws Error on an unknown name
+NoisePlacement noise_from_name(const std::string& s);
+// Delay of the applied force behind the logged one, in sample periods:
+// 0 (sampled, zoh), 1, 1.5.
+double delay_periods(Timing t) noexcept;
+
+struct PlantedEffect {
+  std::string name;             // effects.md name
+  int axis = -1;                // 0..2, -1 for machine-wide effects
+  std::vector<double> values;   // in the order and units of effects.md
+};
+
+struct GeneratorSpec {
+  Timing timing = Timing::zoh;
+  NoisePlacement noise = NoisePlacement::plant;
+  double rate = 1000.0;                // Hz
+  double duration = 20.0;              // s of log
+  std::uint64_t seed = 1;
+  std::vector<PlantedEffect> effects;  // on the true machine
+  double disturbance_sigma = 0.3;      // N per axis, per sample period (plant noise)
+  double force_noise_sigma = 0.3;      // N per axis, white on the logged force (command noise)
+  double position_noise = 1e-6;        // m, white on logged d
+  double velocity_noise = 2e-4;        // m/s, white on logged v
+  double max_step = 25e-6;             // s: the internal step is T / n, n even, T / n <= max_step
+  // Task-space PD gains (per unit platform mass-free: N/m, N s/m).
+  double kp = 4000.0, kd = 200.0;
+};
+
+// Everything the generator knows, for tests: the log plus the truth behind it.
+struct GeneratedLog {
+  io::MotionData log;               // what a user would bring (t, d, v, f noisy as specified)
+  std::vector<Vec3> commanded;      // the controller's output at t_k (clamped), noise-free
+  std::vector<Vec3> applied_mean;   // mean drive input over [t_k, t_k+1) (before the drive gain)
+  std::vector<Vec3> disturbance;    // plant disturbance over [t_k, t_k+1) (0 for command noise)
+  std::vector<Vec3> d_true, v_true; // the true state at t_k
+  double step = 0.0;                // internal step (s)
+  int substeps = 0;                 // internal steps per sample period
+  double max_abs_force = 0.0;       // largest |f| commanded (N)
+  Vec3 d_min = Vec3::Zero(), d_max = Vec3::Zero();  // true actuator range reached (m)
+};
+
+// The machine with `effects` planted on Elkady's nominal model.
+ctl::MachineModel true_model(const std::vector<PlantedEffect>& effects);
+
+// Runs the closed loop and writes the log. Throws Error if the platform leaves
+// the strokes or the limbs cannot reach a pose.
+GeneratedLog generate(const GeneratorSpec& spec);
+
+// The reference: a smooth excitation centred at p = (0.425, 0.425, 0.36).
+struct Reference {
+  Vec3 p, v, a;
+};
+class Excitation {
+ public:
+  explicit Excitation(std::uint64_t seed);
+  [[nodiscard]] Reference operator()(double t) const noexcept;
+
+ private:
+  double phase_[3][3] = {};
+};
+Reference excitation(double t, std::uint64_t seed);
+
+}  // namespace cpm::indep

@@ -1,0 +1,202 @@
+// cpm_robustness: the robustness matrix of `cpm diagnose` on motion logs from
+// the independent generator. Prints a markdown table (one row per cell) and,
+// with --json FILE, every log's result.
+//
+//   cpm_robustness [--seeds N] [--first-seed K] [--rates 250,1000,4000] [--timings sampled,zoh,delay1,delay1_5]
+//                  [--noise plant,command] [--effects viscous_friction,...|none] [--multiples 3,10]
+//                  [--no-null] [--duration S] [--threads N] [--json FILE] [--write-logs DIR]
+//                  [--quick] [--check] [--estimate] [--quiet]
+//
+// --quick   the reduced matrix of the ctest identification.robustness_quick:
+//           one seed, 1000 and 250 Hz, every timing and noise placement,
+//           null + viscous, Coulomb and force gain at 10x, 15 s logs
+//           (options after --quick override it).
+// --check   exit 1 unless every planted effect is named, every null log is
+//           clean and phantoms stay <= 1 in 50 logs in every cell.
+// --estimate  time one log (generate + diagnose) at each selected rate and
+//           print how long the selected matrix would take; run nothing else.
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <iostream>
+#include <map>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "matrix.hpp"
+
+namespace {
+
+using namespace cpm::indep;
+
+std::vector<std::string> split(const std::string& s) {
+  std::vector<std::string> out;
+  std::stringstream ss(s);
+  std::string item;
+  while (std::getline(ss, item, ','))
+    if (!item.empty()) out.push_back(item);
+  return out;
+}
+
+std::vector<double> numbers(const std::string& s) {
+  std::vector<double> out;
+  for (const std::string& x : split(s)) out.push_back(std::stod(x));
+  return out;
+}
+
+int usage(const char* msg) {
+  std::fprintf(stderr,
+               "%s\nusage: cpm_robustness [--seeds N] [--first-seed K] [--rates 250,1000,4000] "
+               "[--timings sampled,zoh,delay1,delay1_5] [--noise plant,command] [--effects NAME,...|none] "
+               "[--multiples 3,10] [--no-null] [--duration S] [--threads N] [--json FILE] [--write-logs DIR] "
+               "[--quick] [--check] [--estimate] [--quiet]\n",
+               msg);
+  return 2;
+}
+
+int logs_per_cell(const MatrixOptions& o) {
+  const std::size_t ne = o.effects.empty() ? dynamic_library().size() : o.effects.size();
+  return (o.nulls ? 1 : 0) + static_cast<int>(ne * o.multiples.size());
+}
+
+// One null log per rate, zoh with plant noise: the time to generate and diagnose it.
+void estimate(const MatrixOptions& o) {
+  const cpm::ctl::Machine nominal(cpm::ctl::MachineModel::elkady());
+  const int cells_per_rate = static_cast<int>(o.timings.size() * o.noises.size());
+  const int per_cell = logs_per_cell(o) * o.seeds;
+  double total = 0.0;
+  std::printf("| rate | generate (s) | diagnose (s) | one log (s) | logs at this rate | estimate (min, %d thread%s) |\n",
+              o.threads, o.threads > 1 ? "s" : "");
+  std::printf("|---|---|---|---|---|---|\n");
+  for (double rate : o.rates) {
+    double gen = 0.0, diag = 0.0;
+    for (Timing t : {Timing::zoh, Timing::sampled}) {
+      GeneratorSpec s;
+      s.timing = t;
+      s.rate = rate;
+      s.duration = o.duration;
+      s.seed = 5;
+      auto t0 = std::chrono::steady_clock::now();
+      const GeneratedLog g = generate(s);
+      const double tg = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      t0 = std::chrono::steady_clock::now();
+      (void)cpm::ident::diagnose_motion(g.log, nominal, o.diagnose);
+      const double td = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+      gen += 0.5 * tg;  // the mean of the held and the continuous controller
+      diag += 0.5 * td;
+      std::fprintf(stderr, "  %s at %.0f Hz: generate %.2f s, diagnose %.2f s\n", timing_name(t), rate, tg, td);
+    }
+    const int n = cells_per_rate * per_cell;
+    // Plus the unit-amplitude null logs (one per noise placement).
+    const double t_rate = (n * (gen + diag)) / std::max(1, o.threads) + o.noises.size() * (gen + diag);
+    total += t_rate;
+    std::printf("| %.0f Hz | %.2f | %.2f | %.2f | %d | %.1f |\n", rate, gen, diag, gen + diag, n, t_rate / 60.0);
+  }
+  std::printf("\nestimated wall time of the selected matrix: %.1f min (%d seeds, %.0f s logs)\n", total / 60.0,
+              o.seeds, o.duration);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  MatrixOptions o;
+  std::string json_path;
+  bool check = false, do_estimate = false, quiet = false;
+  try {
+    for (int i = 1; i < argc; ++i) {
+      const std::string a = argv[i];
+      auto value = [&]() -> std::string {
+        if (i + 1 >= argc) throw cpm::Error(a + " needs a value");
+        return argv[++i];
+      };
+      if (a == "--seeds") o.seeds = std::stoi(value());
+      else if (a == "--first-seed") o.first_seed = std::stoi(value());
+      else if (a == "--rates") o.rates = numbers(value());
+      else if (a == "--timings") {
+        o.timings.clear();
+        for (const std::string& s : split(value())) o.timings.push_back(timing_from_name(s));
+      } else if (a == "--noise") {
+        o.noises.clear();
+        for (const std::string& s : split(value())) o.noises.push_back(noise_from_name(s));
+      } else if (a == "--effects") {
+        const std::string v = value();
+        o.effects = v == "none" ? std::vector<std::string>{"__none__"} : split(v);
+      } else if (a == "--multiples") o.multiples = numbers(value());
+      else if (a == "--no-null") o.nulls = false;
+      else if (a == "--duration") o.duration = std::stod(value());
+      else if (a == "--threads") o.threads = std::stoi(value());
+      else if (a == "--json") json_path = value();
+      else if (a == "--write-logs") o.write_logs = value();
+      else if (a == "--quick") {
+        o.seeds = 1;
+        o.rates = {1000.0, 250.0};
+        o.effects = {"viscous_friction", "coulomb_friction", "force_gain"};
+        o.multiples = {10.0};
+        o.duration = 15.0;  // keeps the ctest under 3 min on one core
+      } else if (a == "--check") check = true;
+      else if (a == "--estimate") do_estimate = true;
+      else if (a == "--quiet") quiet = true;
+      else if (a == "--help" || a == "-h") return usage("");
+      else return usage(("unknown option " + a).c_str());
+    }
+    if (o.effects.size() == 1 && o.effects[0] == "__none__") {
+      o.effects.clear();
+      o.multiples.clear();
+    }
+    if (o.seeds < 1 || o.threads < 1 || !(o.duration > 0.0)) return usage("seeds, threads and duration must be > 0");
+
+    if (do_estimate) {
+      estimate(o);
+      return 0;
+    }
+    std::fprintf(stderr, "cpm_robustness: %zu rates x %zu timings x %zu noise placements, %d logs per cell, %d seed%s, "
+                         "%.0f s logs, %d thread%s\n",
+                 o.rates.size(), o.timings.size(), o.noises.size(), logs_per_cell(o), o.seeds, o.seeds > 1 ? "s" : "",
+                 o.duration, o.threads, o.threads > 1 ? "s" : "");
+    const MatrixResult r = run_matrix(o, [&](const LogResult& l, int done, int total) {
+      if (quiet) return;
+      std::string named;
+      for (const NamedEffect& n : l.named) named += (named.empty() ? "" : ", ") + n.label();
+      std::fprintf(stderr, "[%d/%d] %s %s %.0f Hz seed %d %s%s%s: named {%s}%s%s (%.1f + %.1f s)\n", done, total,
+                   timing_name(l.timing), noise_name(l.noise), l.rate, l.seed,
+                   l.planted.empty() ? "null" : l.planted.c_str(),
+                   l.axis >= 0 ? ("[axis " + std::to_string(l.axis + 1) + "]").c_str() : "",
+                   l.multiple > 0 ? (" x" + std::to_string(static_cast<int>(l.multiple))).c_str() : "", named.c_str(),
+                   l.planted.empty() ? "" : (l.hit ? " HIT" : " MISS"), l.error.empty() ? "" : (" ERROR " + l.error).c_str(),
+                   l.generate_s, l.diagnose_s);
+    });
+    std::printf("%s", markdown_table(r).c_str());
+    // Per-log time at each rate, as measured in this run.
+    std::map<double, std::pair<double, int>> gen, diag;
+    for (const LogResult& l : r.logs) {
+      gen[l.rate].first += l.generate_s, ++gen[l.rate].second;
+      diag[l.rate].first += l.diagnose_s, ++diag[l.rate].second;
+    }
+    std::printf("\nper log (mean): ");
+    for (const auto& [rate, g] : gen)
+      std::printf("%.0f Hz generate %.2f s + diagnose %.2f s; ", rate, g.first / g.second,
+                  diag[rate].first / diag[rate].second);
+    std::printf("\nwall time %.1f s\n", r.wall_s);
+    if (!json_path.empty()) {
+      std::ofstream f(json_path);
+      f << to_json(r);
+      if (!f) throw cpm::Error("cannot write " + json_path);
+    }
+    if (check) {
+      const auto fails = threshold_failures(r);
+      if (!fails.empty()) {
+        std::printf("\nFAIL: %zu of %zu cells miss the thresholds (planted named, null clean, phantoms <= 1 in 50):\n",
+                    fails.size(), r.cells.size());
+        for (const std::string& s : fails) std::printf("  %s\n", s.c_str());
+        return 1;
+      }
+      std::printf("\nPASS: every cell meets the thresholds\n");
+    }
+    return 0;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "cpm_robustness: %s\n", e.what());
+    return 2;
+  }
+}
