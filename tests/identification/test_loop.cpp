@@ -5,6 +5,7 @@
 
 #include <algorithm>
 
+#include "cpm/identification/kinematic.hpp"
 #include "cpm/identification/loop.hpp"
 #include "identification/kin_data.hpp"
 #include "identification/sim_data.hpp"
@@ -52,6 +53,54 @@ TEST(Loop, TwoKinematicEffectsAtOnceOnBallBarDataAreBothAdded) {
   EXPECT_TRUE(added(R, "cyclic_error", 1));
   ASSERT_GE(R.steps.size(), 3u);
   EXPECT_LE(R.steps.back().rms, 1.2 * R.steps.back().noise_floor);
+}
+
+}  // namespace
+}  // namespace cpm::ident
+
+namespace cpm::ident {
+namespace {
+
+// Two kinematic effects at once, with one and two bar radii, approached from
+// one and from both directions: what each cell can show is named, what it
+// cannot is not named and the diagnosis says which measurement would.
+TEST(KinematicCells, TwoEffectsAtOnceOneAndTwoRadiiOneAndBothDirections) {
+  const std::vector<test::PlantedKinematic> planted = {{"backlash", 0, {6e-6, 0, 0}},
+                                                      {"cyclic_error", 1, {4e-6, 0.016, 0.3}}};
+  for (int radii : {1, 2})
+    for (bool both : {true, false}) {
+      test::KinSimOptions so;
+      so.seed = 9;
+      so.one_direction = !both;
+      const std::vector<double> r = radii == 2 ? std::vector<double>{0.100, 0.150} : std::vector<double>{0.150};
+      const io::BallbarData b = test::kim_ballbar(planted, test::hemisphere_poses(r, 6, 16, 7), so);
+      const Diagnosis D =
+          diagnose_kinematic(std::make_shared<const KinematicProblem>(prepare_kinematic(io::DataSet(b), ctl::MachineModel::elkady().kinematics)));
+      std::vector<std::string> named;
+      for (int j : D.found()) named.push_back(D.candidates[static_cast<std::size_t>(j)].label());
+      auto has = [&](const std::string& l) { return std::find(named.begin(), named.end(), l) != named.end(); };
+      std::string all;
+      for (const auto& n : named) all += n + " ";
+      std::printf("%d radii, %s: named %s\n", radii, both ? "both directions" : "one direction", all.c_str());
+      SCOPED_TRACE(D.verdict_text);
+      EXPECT_TRUE(has("cyclic_error[axis 2]"));
+      if (both) {
+        EXPECT_TRUE(has("backlash[axis 1]"));
+        EXPECT_EQ(named.size(), 2u);
+      } else {
+        // From one side backlash is a constant shift of the axis: the pivot error takes it.
+        EXPECT_FALSE(has("backlash[axis 1]"));
+        EXPECT_EQ(named.size(), 1u);
+        // ... and the diagnosis says which measurement would show it.
+        bool advised = false;
+        for (const auto& c : D.candidates)
+          if (c.label() == "backlash[axis 1]") {
+            advised |= c.note.find("both directions") != std::string::npos;
+            for (const auto& cf : c.confounded) advised |= cf.separate_by.find("both directions") != std::string::npos;
+          }
+        EXPECT_TRUE(advised);
+      }
+    }
 }
 
 }  // namespace

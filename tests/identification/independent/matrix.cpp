@@ -77,8 +77,11 @@ std::vector<NamedEffect> named_effects(const ident::Diagnosis& D) {
     n.effect = c.effect;
     n.axis = c.axis;
     if (c.effect == "actuation_delay" && !c.params.empty()) n.tau = c.params[0].value;
+    n.alternatives = c.alternatives;
     out.push_back(std::move(n));
   };
+  // Structure no library effect describes is a claim too (verdict.missing = "outside_library").
+  if (!D.outside_library.empty()) out.push_back({"outside_library", D.outside_library.front().axis, {}, {}});
   if (D.verdict >= 0) take(D.verdict);
   for (int i : D.also) take(i);
   return out;
@@ -158,7 +161,13 @@ void score(LogResult& r, double period) {
       if (std::isfinite(n.tau)) r.tau_error_periods = std::fabs(n.tau / period - true_delay);
       if (is_delay_cell(r.timing)) continue;  // the cell's own convention: expected
     }
-    const bool planted = !r.planted.empty() && n.effect == r.planted && n.axis == r.axis;
+    // The planted effect named, or named as the alternative of an ambiguous verdict.
+    NamedEffect p;
+    p.effect = r.planted;
+    p.axis = r.axis;
+    const bool planted = !r.planted.empty() &&
+                         ((n.effect == r.planted && n.axis == r.axis) ||
+                          std::find(n.alternatives.begin(), n.alternatives.end(), p.label()) != n.alternatives.end());
     if (planted)
       r.hit = true;
     else

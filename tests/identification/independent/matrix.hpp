@@ -27,6 +27,9 @@ struct NamedEffect {
   std::string effect;
   int axis = -1;
   double tau = std::numeric_limits<double>::quiet_NaN();
+  // Effects the verdict names beside it as explaining these data as well
+  // (an ambiguous verdict); labels as label() writes them.
+  std::vector<std::string> alternatives;
   [[nodiscard]] std::string label() const;  // "viscous_friction[axis 2]" (axis 1-based), "payload_mass"
 };
 
