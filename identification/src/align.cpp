@@ -119,17 +119,5 @@ Alignment align_motion(const io::MotionData& data, const ctl::Machine& model, co
   return estimate_alignment(Pa, Engine(alignment_linear_problem(Pa)));
 }
 
-void apply_alignment(MotionProblem& P, double tau) {
-  P.set_delay(tau);
-  const Eigen::Index nb = P.base.cols();
-  P.base.conservativeResize(Eigen::NoChange, nb + 1);
-  P.base.col(nb) = -P.force_delay_slope(tau);
-  BaseParameter bp;
-  bp.name = "alignment.tau";
-  bp.unit = "s";
-  bp.value = tau;
-  bp.nuisance = true;
-  P.base_params.push_back(bp);
-}
 
 }  // namespace cpm::ident

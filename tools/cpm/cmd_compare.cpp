@@ -6,6 +6,7 @@
 #include <cstdio>
 
 #include "cli.hpp"
+#include "cpm/identification/align.hpp"
 #include "cpm/identification/kinematic.hpp"
 #include "cpm/identification/report.hpp"
 #include "cpm/io/data_files.hpp"
@@ -43,7 +44,13 @@ int run(Args& a) {
   }
   const io::MotionData& data = std::get<io::MotionData>(ds);
   const ctl::Machine model(mf.model);
-  const ident::MotionProblem P = ident::prepare_motion(data, model, mo);
+  ident::MotionProblem P = ident::prepare_motion(data, model, mo);
+  // The model as given may take the force's alignment within half a period of
+  // its own actuation_delay (how the log was sampled); beyond is its error.
+  const ident::Alignment A = ident::align_motion(data, model, mo);
+  P.set_delay(A.reference);
+  std::printf("force alignment: %.3f ms after t_k (%s); compared at %.3f ms (model's actuation_delay %.3f ms)\n",
+              A.tau * 1e3, A.convention().c_str(), A.reference * 1e3, A.model_tau * 1e3);
   const ident::ResidualSummary s = ident::summarize(P, P.residual);
   std::printf("model %s on %s (kind motion, %zu samples)\n", model_path.c_str(), data_path->c_str(), data.t.size());
   std::fputs(ident::summary_text(s, P).c_str(), stdout);

@@ -7,10 +7,10 @@
 // from the next SYNC (tau = T or more). A wrong alignment leaves a residual
 // proportional to the force's rate of change, which reads as viscous friction
 // on every axis. So the alignment is estimated on every log, over
-// [kShiftLo, kShiftHi] periods, with the base model refitted, before any
-// effect is looked for; every candidate is then fitted on the aligned
-// residual with the alignment's linearisation as a nuisance column (so a
-// candidate that trades off against the delay is fitted jointly with it).
+// [kShiftLo, kShiftHi] periods, with the base model and friction on every
+// axis refitted, before any effect is looked for; every candidate is then
+// fitted on the aligned residual, and the alignment is estimated again with
+// the effects found until it settles (diagnose_motion).
 //
 // A tau within +-T/2 of the model's own actuation_delay is how the data were
 // sampled; beyond T/2 it is a delay the drive adds (effects.md): the
@@ -67,9 +67,6 @@ LinearProblem alignment_linear_problem(const MotionProblem& Pa);
 // The base-only alignment of a log for a model (compare, fit).
 Alignment align_motion(const io::MotionData& data, const ctl::Machine& model, const MotionOptions& o);
 
-// Align P to tau and append the alignment's nuisance column ("alignment.tau",
-// s): minus the slope of the aligned force in tau, so that a fit may move tau
-// jointly with any candidate.
-void apply_alignment(MotionProblem& P, double tau);
+
 
 }  // namespace cpm::ident

@@ -1,20 +1,22 @@
-// Diagnosis: which effect of shared/spec/effects.md is missing from a model,
-// judged on measurements. For a motion log:
-//  1. the force residual of the model as given (motion.hpp) -> baseline;
-//  2. the base model's own parameters refitted (A, B, C, E and the linear
-//     parameters of the model's own effects) -> inertia_error's score;
-//  3. every dynamic effect the data can show, on every axis, fitted jointly
-//     with the base (nonlinear parameters found by search: the cogging
-//     wavelength by a periodogram over 2-100 mm then golden-section
-//     refinement, the Stribeck speed by a log grid then refinement), with
-//     physical bounds enforced;
-//  4. each scored: RMS after, share explained, nested F-test (corrected for
-//     residual autocorrelation and for the number of candidates and search
-//     trials), BIC, standard errors, confounding with the base and with the
-//     other candidates and the measurement that would separate them;
-//  5. a ranking, a verdict (the missing effect or none, then further
-//     effects by forward selection), and a search of what remains for
-//     structure no library effect explains (structure.hpp).
+// Diagnosis: which effects of shared/spec/effects.md are missing from a
+// model, judged on measurements. For a motion log, a straight list of stages
+// (docs/identification.md):
+//  1. read: the force residual of the model as given (motion.hpp);
+//  2. align: when the logged force acts, actuation_delay (align.hpp), redone
+//     with the effects found until it settles;
+//  3. columns: every dynamic effect the data can show, on every axis, its
+//     nonlinear parameters found by search (the cogging wavelength by a
+//     periodogram over 2-100 mm then golden-section refinement, the Stribeck
+//     speed by a log grid then refinement), physical bounds enforced; the
+//     force gain instrumented (diagnose.cpp, instrumented);
+//  4. confounding with the base and between candidates, and the measurement
+//     that would separate them (decide.cpp);
+//  5. selection: forward, by one statistic, from the model as given, the base
+//     refit itself a candidate (select.cpp); each effect chosen refitted on what
+//     the others leave;
+//  6. outside the library: strong structure in what is left leads the verdict
+//     and the selection is redone beside it (outside.cpp);
+//  7. verdict and report: every effect found with its parameters (report.hpp).
 #pragma once
 
 #include <memory>
