@@ -15,6 +15,7 @@
 #include "cpm/identification/fit.hpp"
 #include "cpm/identification/report.hpp"
 #include "cpm/identification/stats.hpp"
+#include "independent/matrix.hpp"
 #include "sim_data.hpp"
 
 namespace cpm::ident {
@@ -113,13 +114,12 @@ struct Planted {
 constexpr double kM1 = 1.892994, kL1 = 0.5;
 const std::vector<double> kLinkBalanceShape = {0.0, kM1 * kL1 / 2.0, kM1 * ctl::kGravity, 0.0};
 
+// The shape of a planted effect as the robustness matrix has it (one
+// implementation of planted values and amplitude standard errors).
+indep::EffectShape shape_of(const Planted& pe) { return {pe.name, pe.axis >= 0, pe.shape, pe.amp_index}; }
+
 std::vector<double> planted_values(const Planted& pe, double amplitude) {
-  std::vector<double> v = pe.shape;
-  if (pe.amp_index < 0)
-    for (double& x : v) x *= amplitude;
-  else
-    v[static_cast<std::size_t>(pe.amp_index)] = amplitude;
-  return v;
+  return indep::planted_values(shape_of(pe), amplitude);
 }
 
 // The noise floor of the identification: residual RMS of the TRUE machine
@@ -132,34 +132,9 @@ double true_model_rms(const io::MotionData& d, const test::SimSpec& s) {
 }
 
 // Standard error of the effect's amplitude on effect-free data when its shape
-// (the nonlinear parameters: v_s, lambda and phi, d_ref; the direction of an
-// inertia error) is known: the amplitude's column fitted jointly with the base,
-// or, for payload and inertia error, which are base directions themselves,
-// against the model as given. 4 of these are what noise alone could hide.
-// (A probe fit at a tiny amplitude instead would search the shape in noise
-// and give a standard error that varies fifty-fold between seeds.)
+// is known (independent/matrix.hpp): 4 of these are what noise alone could hide.
 double amplitude_standard_error(const MotionProblem& P, const Engine& E, const Planted& pe) {
-  Eigen::MatrixXd X(E.rows(), 1);
-  bool with_base = true;
-  if (pe.amp_index < 0 || std::string(pe.name) == "payload_mass") {
-    Eigen::VectorXd dir(4);
-    if (pe.amp_index < 0)
-      for (int j = 0; j < 4; ++j) dir(j) = pe.shape[static_cast<std::size_t>(j)];
-    else
-      dir << 0.5, 0.0, 0.0, ctl::kGravity;  // payload: dA = dm/2, dE = dm g
-    X.col(0) = P.base.leftCols(4) * dir;
-    with_base = false;
-  } else if (std::string(pe.name) == "force_gain") {
-    X.col(0) = P.force_gain_column(pe.axis);
-  } else {
-    ctl::DynamicEffect e;
-    e.type = *ctl::dynamic_effect_from_name(pe.name);
-    e.axis = static_cast<std::int8_t>(pe.axis);
-    for (std::size_t j = 0; j < pe.shape.size(); ++j) e.param[j] = pe.shape[j];
-    X.col(0) = P.effect_force_column(e);
-  }
-  const JointFit f = E.fit(X, with_base);
-  return std::sqrt(E.covariance(X, f, (with_base ? E.base_rank() : 0) + 1, with_base)(0, 0));
+  return indep::amplitude_standard_error(P, E, shape_of(pe), pe.axis);
 }
 
 class PlantedEffect : public ::testing::TestWithParam<int> {};

@@ -104,6 +104,15 @@ void write_file_atomically(const std::string& path, const std::string& text) {
   io::write_file_atomically(path, text);
 }
 
+void record_fit(io::ModelFile& mf, const std::vector<io::FittedParameter>& fitted, const std::string& tool,
+                const std::string& data_path, const std::string& note) {
+  for (const auto& p : fitted) {
+    std::erase_if(mf.fitted, [&](const io::FittedParameter& q) { return q.name == p.name; });
+    mf.fitted.push_back(p);
+  }
+  mf.history.push_back({tool, data_path, io::sha256_file(data_path), io::utc_now_iso8601(), note});
+}
+
 std::string default_model_path() {
   namespace fs = std::filesystem;
   const fs::path published = "config/machine.yaml";

@@ -14,6 +14,7 @@
 #include <string>
 #include <vector>
 
+#include "cpm/io/model_file.hpp"
 #include "cpm/kinematics/types.hpp"
 
 namespace cpm::cli {
@@ -68,6 +69,12 @@ void write_file_atomically(const std::string& path, const std::string& text);
 // (/etc/cpmd/machine.yaml). The relative path when none exists, so the
 // error names it.
 std::string default_model_path();
+
+// A model file after a fit (cpm fit, cpm loop): the fitted parameters replace
+// those of the same name, and the history records the tool, the data file with
+// its hash, the time and the note.
+void record_fit(io::ModelFile& mf, const std::vector<io::FittedParameter>& fitted, const std::string& tool,
+                const std::string& data_path, const std::string& note);
 // "x,y,z" in metres. Non-finite values are refused unless `allow_non_finite`
 // (the daemon client passes them on so that the daemon's refusal can be seen).
 Vec3 parse_point(const std::string& what, const std::string& text, bool allow_non_finite = false);

@@ -29,16 +29,12 @@ int run_kinematic(const io::DataSet& ds, const std::vector<ident::FitRequest>& r
   }
   const ident::KinematicFit R = ident::fit_kinematic(ds, mf.model.kinematics, req, {}, hold ? &*hold : nullptr);
   mf.model.kinematics = R.model;
-  for (const auto& p : R.fitted) {
-    std::erase_if(mf.fitted, [&](const io::FittedParameter& q) { return q.name == p.name; });
-    mf.fitted.push_back(p);
-  }
   std::ostringstream note;
   note << "added";
   for (const auto& s : adds) note << " " << s;
   note << " (planes recalibrated with them); residual RMS " << R.on_fit.before * 1e6 << " -> " << R.on_fit.after * 1e6
        << " µm";
-  mf.history.push_back({"cpm fit", data_path, io::sha256_file(data_path), io::utc_now_iso8601(), note.str()});
+  record_fit(mf, R.fitted, "cpm fit", data_path, note.str());
   io::save_model_file(out_path, mf, model_path);
   for (const auto& c : R.effects) {
     std::printf("%s:", c.label().c_str());
@@ -120,15 +116,11 @@ int run(Args& a) {
   const ident::FitResult R = ident::fit_motion(data, mf.model, req, o, hold ? &*hold : nullptr);
 
   mf.model = R.model;
-  for (const auto& p : R.fitted) {
-    std::erase_if(mf.fitted, [&](const io::FittedParameter& q) { return q.name == p.name; });
-    mf.fitted.push_back(p);
-  }
   std::ostringstream note;
   note << "added";
   for (const auto& s : adds) note << " " << s;
   note << "; force residual RMS " << R.on_fit.before << " -> " << R.on_fit.after << " N";
-  mf.history.push_back({"cpm fit", *data_path, io::sha256_file(*data_path), io::utc_now_iso8601(), note.str()});
+  record_fit(mf, R.fitted, "cpm fit", *data_path, note.str());
   io::save_model_file(*out_path, mf, model_path);
 
   for (const auto& c : R.effects) {

@@ -32,16 +32,12 @@ int run(Args& a) {
   const ident::LoopResult R = ident::run_loop(ds, mf.model, o, max_steps);
   std::fputs(ident::loop_text(R).c_str(), stdout);
   mf.model = R.model;
-  for (const auto& p : R.fitted) {
-    std::erase_if(mf.fitted, [&](const io::FittedParameter& q) { return q.name == p.name; });
-    mf.fitted.push_back(p);
-  }
   std::ostringstream note;
   note << "cpm loop added";
   for (std::size_t j = 1; j < R.steps.size(); ++j)
     if (R.steps[j].added != "calibrated planes") note << " " << R.steps[j].added;
   if (R.steps.size() > 1) note << "; residual RMS " << R.steps.front().rms << " -> " << R.steps.back().rms << " " << R.units;
-  mf.history.push_back({"cpm loop", *data_path, io::sha256_file(*data_path), io::utc_now_iso8601(), note.str()});
+  record_fit(mf, R.fitted, "cpm loop", *data_path, note.str());
   io::save_model_file(*out_path, mf, model_path);
   std::printf("new model: %s\n", out_path->c_str());
   if (json_path) io::write_file_atomically(*json_path, ident::loop_json(R, *data_path, *out_path));

@@ -112,11 +112,12 @@ std::vector<double> planted_values(const EffectShape& e, double amplitude) {
   return v;
 }
 
-// Copied from tests/identification/test_identification.cpp
-// (amplitude_standard_error): the amplitude's column fitted jointly with the
-// base, or, for payload and inertia error, which are base directions
-// themselves, against the model as given. It only scales the planted
-// amplitudes; the judgement is diagnose_motion's alone.
+// The amplitude's column fitted jointly with the base, or, for payload and
+// inertia error, which are base directions themselves, against the model as
+// given (the planted-effect tests of test_identification.cpp use it too). It
+// only scales the planted amplitudes; the judgement is diagnose_motion's alone.
+// (A probe fit at a tiny amplitude instead would search the shape in noise and
+// give a standard error that varies fifty-fold between seeds.)
 double amplitude_standard_error(const ident::MotionProblem& P, const ident::Engine& E, const EffectShape& e,
                                 int axis) {
   Eigen::MatrixXd X(E.rows(), 1);
