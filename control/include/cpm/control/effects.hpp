@@ -20,6 +20,9 @@
 
 namespace cpm::ctl {
 
+// Adding an effect: its type below, its row in the library (kInfo in
+// effects.cpp), its force and gradient (effect_force, effect_force_gradient),
+// and how identification fits it (the fitter table, identification/src/candidates.cpp).
 enum class DynamicEffectType : std::uint8_t {
   viscous_friction,   // b (N s/m):            b v
   coulomb_friction,   // f_c (N):              f_c sgn_eps(v)
@@ -45,10 +48,21 @@ struct EffectParameter {
   bool nonlinear; // found by search in identification (lambda, v_s), not by least squares
 };
 
+// What an effect's force depends on besides its parameters. Identification
+// reads it to name the measurement that would tell two effects apart (two
+// effects that depend on the same things look alike in any data).
+struct EffectDependence {
+  bool direction;  // the sign of the axis velocity
+  bool speed;      // the magnitude of the axis velocity
+  bool position;   // the axis displacement d
+  bool force;      // the commanded force or the acceleration (drive gain, rigid-body constants, timing)
+};
+
 struct DynamicEffectInfo {
   DynamicEffectType type;
   const char* name;       // stable name of effects.md
   bool per_axis;          // acts on one axis (true) or on the machine as a whole
+  EffectDependence depends_on;
   int n_params;
   std::array<EffectParameter, 4> params;
   const char* cause;      // one line: the physical cause

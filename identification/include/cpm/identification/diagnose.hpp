@@ -8,7 +8,8 @@
 //     nonlinear parameters found by search (the cogging wavelength by a
 //     periodogram over 2-100 mm then golden-section refinement, the Stribeck
 //     speed by a log grid then refinement), physical bounds enforced; the
-//     force gain instrumented (diagnose.cpp, instrumented);
+//     force gain instrumented (candidate_fitters.cpp, instrumented). One
+//     fitter per effect type, from the table in candidates.cpp;
 //  4. confounding with the base and between candidates, and the measurement
 //     that would separate them (decide.cpp);
 //  5. selection: forward, by one statistic, from the model as given, the base
