@@ -1,3 +1,8 @@
+// Shared tail of a diagnosis (internal.hpp, rank_and_decide): look-elsewhere
+// correction and the score against the model as given, the ranking, the
+// confounding between candidates, and for the kinematic kinds the verdict with
+// forward selection on top of it (motion logs choose in select.cpp); and the
+// way values are said to people.
 #include <algorithm>
 #include <cmath>
 #include <sstream>

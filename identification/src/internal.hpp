@@ -75,13 +75,13 @@ std::string human_value(const ParamEstimate& p);
 std::string no_effect_text(const Diagnosis& D);
 
 // Motion logs: forward selection by one statistic from the model as given
-// (select.cpp): reorders the candidates, sets verdict, also, significance and
-// the verdict text.
+// (select.cpp; its units in selection.hpp): reorders the candidates, sets
+// verdict, also, significance and the verdict text.
 void select_motion_effects(Diagnosis& D, const Engine& E, const DiagnoseOptions& opt);
 // The verdict text of a motion diagnosis from its found() effects, their
-// parameters and alternatives (after the parameters are refined).
+// parameters and alternatives (after the parameters are refined; verdict.cpp).
 void verdict_text_motion(Diagnosis& D);
-// Why a fitted value is physically implausible for this machine, or empty.
+// Why a fitted value is physically implausible for this machine, or empty (verdict.cpp).
 std::string implausible(const CandidateResult& c);
 // Motion logs, outside the library (outside.cpp): the strong findings of the
 // structure scan in what the chosen effects leave; the problem with their
