@@ -9,6 +9,7 @@
 #include <sstream>
 
 #include "cpm/identification/stats.hpp"
+#include "internal.hpp"
 
 namespace cpm::ident {
 namespace {
@@ -67,101 +68,133 @@ double motion_rms(const io::MotionData& data, const ctl::MachineModel& model, co
   return Engine::rms(P.residual);
 }
 
-FitResult fit_motion(const io::MotionData& data, const ctl::MachineModel& model,
-                     const std::vector<FitRequest>& requests, const DiagnoseOptions& opt,
-                     const io::MotionData* holdout, bool cross_validate) {
-  if (requests.empty()) throw Error("fit: no effect to add (--add EFFECT[:AXIS])");
-  FitResult R;
-  // An effect already in the model on that axis is refitted: take it out first.
+namespace {
+
+// What the requests ask for: actuation_delay is the alignment (align.hpp);
+// inertia_error is the base refit; the others are additive effects fitted on the aligned log.
+struct RequestRoles {
+  std::vector<FitRequest> additive;
+  bool fit_delay = false, refit_base = false;
+};
+
+RequestRoles roles_of(const std::vector<FitRequest>& requests) {
+  RequestRoles roles;
+  for (const auto& r : requests) {
+    if (detail::is_alignment(r.effect)) roles.fit_delay = true;
+    else if (detail::is_base_refit(r.effect)) roles.refit_base = true;
+    else roles.additive.push_back(r);
+  }
+  return roles;
+}
+
+// An effect already in the model on that axis is refitted: take it out first.
+ctl::MachineModel take_out_requested(const ctl::MachineModel& model, const std::vector<FitRequest>& requests,
+                                     std::vector<std::string>& notes) {
   ctl::MachineModel work = model;
   for (const auto& r : requests) {
     check_effect_for_kind(r.effect, "motion");
     const bool before = work.effects.size();
     work = without(work, r);
     if (before && work.effects.size() < model.effects.size())
-      R.notes.push_back(r.effect + (r.axis >= 0 ? "[axis " + std::to_string(r.axis + 1) + "]" : "") +
-                        " was in the model: refitted from scratch");
+      notes.push_back(r.effect + (r.axis >= 0 ? "[axis " + std::to_string(r.axis + 1) + "]" : "") +
+                      " was in the model: refitted from scratch");
   }
-  // actuation_delay is the alignment (align.hpp); the others are fitted on the aligned log.
-  // inertia_error is the base refit; without it the base stays as the model
-  // says, as in the diagnosis' selection, so that the effects are fitted as the
-  // verdict named them (a base refitted for the fit and then not written left
-  // the effects compensating a change the model does not have).
-  std::vector<FitRequest> additive;
-  bool fit_delay = false, refit_base = false;
-  for (const auto& r : requests) {
-    if (r.effect == "actuation_delay") fit_delay = true;
-    else if (r.effect == "inertia_error") refit_base = true;
-    else additive.push_back(r);
-  }
-  const ctl::Machine mw(work);
-  MotionProblem P = prepare_motion(data, mw, opt.motion);
-  const Alignment A = align_motion(data, mw, opt.motion);
-  P.set_delay(fit_delay ? A.tau : A.reference);
-  if (fit_delay) {
-    const double tau = std::clamp(A.missing(), 0.0, 0.05);
-    if (A.missing() < 0.5 * A.period)
-      R.notes.push_back("the force acts within half a period of the model's alignment (" + A.convention() +
-                        "): actuation_delay " + std::to_string(tau * 1e3) + " ms is how the data were sampled");
-    ctl::add_effect(work, "actuation_delay", -1, {tau});
-    CandidateResult c;
-    c.effect = "actuation_delay";
-    c.params.push_back({"tau", "s", tau, A.std_error, tau != A.missing()});
-    R.delay = c;
-  }
-  const LinearProblem L_full = motion_linear_problem(P);
-  LinearProblem L = refit_base ? L_full : nuisance_only(L_full);
-  // Back-fitting: each effect on what the others leave, twice round.
-  std::vector<CandidateResult> got(additive.size());
-  std::vector<Eigen::VectorXd> contrib(additive.size(), Eigen::VectorXd::Zero(L.y.size()));
+  return work;
+}
+
+// actuation_delay from the alignment, added to the work model.
+CandidateResult fit_delay(const Alignment& A, ctl::MachineModel& work, std::vector<std::string>& notes) {
+  const double tau = std::clamp(A.missing(), 0.0, 0.05);
+  if (A.missing() < 0.5 * A.period)
+    notes.push_back("the force acts within half a period of the model's alignment (" + A.convention() +
+                    "): actuation_delay " + std::to_string(tau * 1e3) + " ms is how the data were sampled");
+  ctl::add_effect(work, "actuation_delay", -1, {tau});
+  CandidateResult c;
+  c.effect = "actuation_delay";
+  c.params.push_back({"tau", "s", tau, A.std_error, tau != A.missing()});
+  return c;
+}
+
+// The additive effects fitted together by back-fitting: each on what the
+// others leave, twice round. Refuses (Error) one the data do not determine.
+struct Backfit {
+  std::vector<CandidateResult> effects;   // one per additive request
+  std::vector<Eigen::VectorXd> contrib;   // their fitted contributions (N)
+};
+
+Backfit backfit(const MotionProblem& P, LinearProblem L, const ctl::MachineModel& work,
+                const std::vector<FitRequest>& additive, const DiagnoseOptions& opt, const std::string& path) {
+  Backfit B;
+  B.effects.resize(additive.size());
+  B.contrib.assign(additive.size(), Eigen::VectorXd::Zero(L.y.size()));
   const Eigen::VectorXd y0 = L.y;
   for (int pass = 0; pass < (additive.size() > 1 ? 2 : 1); ++pass)
     for (std::size_t k = 0; k < additive.size(); ++k) {
       L.y = y0;
       for (std::size_t j = 0; j < additive.size(); ++j)
-        if (j != k) L.y -= contrib[j];
+        if (j != k) L.y -= B.contrib[j];
       const Engine E(L);
       CandidateResult c = evaluate_dynamic_candidate(P, E, work, additive[k].effect, additive[k].axis, opt);
-      if (!c.identifiable && c.effect != "inertia_error")
-        throw Error("cannot fit " + c.label() + " on " + (data.info.path.empty() ? "these data" : data.info.path) +
-                    ": " + (c.note.empty() ? "the data do not determine it" : c.note));
-      contrib[k] = c.fitted;
-      got[k] = std::move(c);
+      if (!c.identifiable && !detail::is_base_refit(c.effect))
+        throw Error("cannot fit " + c.label() + " on " + (path.empty() ? "these data" : path) + ": " +
+                    (c.note.empty() ? "the data do not determine it" : c.note));
+      B.contrib[k] = c.fitted;
+      B.effects[k] = std::move(c);
     }
-  // The base: A..E changed when inertia_error was asked for.
+  return B;
+}
+
+// The base (A..E) on what the effects leave: changed when inertia_error was
+// asked for; otherwise a note when the data say it differs from the model's.
+CandidateResult base_change(const MotionProblem& P, const LinearProblem& L_full, const Backfit& B,
+                            const ctl::MachineModel& work, const DiagnoseOptions& opt, bool refit_base,
+                            std::vector<std::string>& notes) {
   LinearProblem Lb = L_full;
-  Lb.y = y0;
-  for (const auto& c : contrib) Lb.y -= c;
+  for (const auto& c : B.contrib) Lb.y -= c;
   const Engine Ef(Lb);
   CandidateResult base = evaluate_dynamic_candidate(P, Ef, work, "inertia_error", -1, opt);
-  R.base_refitted = refit_base;
-  R.base_change = base.params;
   if (!refit_base) {
     const NestedTest t = Ef.nested(Ef.rss_given(), Ef.rss_base(), std::max(1, Ef.base_rank_beyond_nuisance()),
                                    Ef.base_rank(), std::max(base.n_eff, 10.0));
     if (t.p_value < opt.alpha)
-      R.notes.push_back("the rigid-body constants A, B, C, E differ significantly from the model's on these data: "
-                        "add inertia_error to refit them");
+      notes.push_back("the rigid-body constants A, B, C, E differ significantly from the model's on these data: "
+                      "add inertia_error to refit them");
   }
-  // The new model.
+  return base;
+}
+
+// The values a fitted effect is written with: a force gain composes with the
+// model's own (relative changes multiply), a cogging phase is wrapped to
+// (-pi, pi], every value held within its physical bounds.
+std::vector<double> values_for_model(const CandidateResult& c, const ctl::MachineModel& model) {
+  const auto t = *ctl::dynamic_effect_from_name(c.effect);
+  const ctl::DynamicEffectInfo& in = ctl::info(t);
+  std::vector<double> v;
+  for (const auto& p : c.params) v.push_back(p.value);
+  if (t == ctl::DynamicEffectType::force_gain) {
+    for (const auto& e : model.effects)
+      if (e.type == t && e.axis == c.axis) v[0] = (1.0 + e.param[0]) * (1.0 + v[0]) - 1.0;
+  }
+  if (t == ctl::DynamicEffectType::cogging) {
+    v[2] = std::remainder(v[2], 2.0 * 3.141592653589793);
+  }
+  for (int j = 0; j < in.n_params; ++j) v[j] = std::clamp(v[j], in.params[j].lower, in.params[j].upper);
+  return v;
+}
+
+std::string axis_key(int a) { return a >= 0 ? ".axis" + std::to_string(a + 1) : std::string(); }
+
+// The new model: the work model with the fitted effects (and the base change)
+// added; R.fitted lists what was written. Throws when it is not a machine.
+ctl::MachineModel new_model(const ctl::MachineModel& work, const ctl::MachineModel& model,
+                            const std::vector<CandidateResult>& got, const CandidateResult& base, FitResult& R) {
   ctl::MachineModel out = work;
-  auto axis_name = [](int a) { return a >= 0 ? ".axis" + std::to_string(a + 1) : std::string(); };
   for (const auto& c : got) {
-    const auto t = *ctl::dynamic_effect_from_name(c.effect);
-    const ctl::DynamicEffectInfo& in = ctl::info(t);
-    std::vector<double> v;
-    for (const auto& p : c.params) v.push_back(p.value);
-    if (t == ctl::DynamicEffectType::force_gain) {
-      for (const auto& e : model.effects)
-        if (e.type == t && e.axis == c.axis) v[0] = (1.0 + e.param[0]) * (1.0 + v[0]) - 1.0;
-    }
-    if (t == ctl::DynamicEffectType::cogging) {
-      v[2] = std::remainder(v[2], 2.0 * 3.141592653589793);
-    }
-    for (int j = 0; j < in.n_params; ++j) v[j] = std::clamp(v[j], in.params[j].lower, in.params[j].upper);
+    const std::vector<double> v = values_for_model(c, model);
+    const ctl::DynamicEffectInfo& in = ctl::info(*ctl::dynamic_effect_from_name(c.effect));
     ctl::add_effect(out, c.effect, c.axis, v);
     for (int j = 0; j < in.n_params; ++j)
-      R.fitted.push_back({"effects." + c.effect + axis_name(c.axis) + "." + in.params[j].name, in.params[j].unit, 0.0,
+      R.fitted.push_back({"effects." + c.effect + axis_key(c.axis) + "." + in.params[j].name, in.params[j].unit, 0.0,
                           v[j], c.params[j].std_error});
   }
   if (R.base_refitted) {
@@ -173,30 +206,69 @@ FitResult fit_motion(const io::MotionData& data, const ctl::MachineModel& model,
   }
   out.validate();
   const ctl::Machine check(out);  // throws when the fitted constants are not a machine
-  R.model = out;
-  R.effects = got;
-  if (R.delay) {
-    R.effects.insert(R.effects.begin(), *R.delay);
-    R.fitted.push_back({"effects.actuation_delay.tau", "s", 0.0, R.delay->params[0].value, R.delay->params[0].std_error});
-  }
+  return out;
+}
+
+// 2-fold by halves in time: fit on one half, measure on the other.
+ErrorFigures cross_validation(const io::MotionData& data, const ctl::MachineModel& model,
+                              const std::vector<FitRequest>& requests, const DiagnoseOptions& opt) {
+  const std::size_t h = data.t.size() / 2;
+  const io::MotionData a = slice(data, 0, h), b = slice(data, h, data.t.size());
+  const FitResult fa = fit_motion(a, model, requests, opt, nullptr, false);
+  const FitResult fb = fit_motion(b, model, requests, opt, nullptr, false);
+  const double bb = motion_rms(b, model, opt.motion), ab = motion_rms(b, fa.model, opt.motion);
+  const double ba = motion_rms(a, model, opt.motion), aa = motion_rms(a, fb.model, opt.motion);
+  return ErrorFigures{std::sqrt(0.5 * (bb * bb + ba * ba)), std::sqrt(0.5 * (ab * ab + aa * aa))};
+}
+
+// The error before and after on the fitted data, and on a holdout log or by cross-validation.
+void measure_errors(FitResult& R, const io::MotionData& data, const ctl::MachineModel& model,
+                    const std::vector<FitRequest>& requests, const DiagnoseOptions& opt,
+                    const io::MotionData* holdout, bool cross_validate) {
   R.on_fit.before = motion_rms(data, model, opt.motion);
-  R.on_fit.after = motion_rms(data, out, opt.motion);
+  R.on_fit.after = motion_rms(data, R.model, opt.motion);
   if (holdout) {
-    R.holdout = ErrorFigures{motion_rms(*holdout, model, opt.motion), motion_rms(*holdout, out, opt.motion)};
+    R.holdout = ErrorFigures{motion_rms(*holdout, model, opt.motion), motion_rms(*holdout, R.model, opt.motion)};
   } else if (cross_validate && data.t.size() >= 400) {
-    // 2-fold by halves in time: fit on one half, measure on the other.
-    const std::size_t h = data.t.size() / 2;
-    const io::MotionData a = slice(data, 0, h), b = slice(data, h, data.t.size());
     try {
-      const FitResult fa = fit_motion(a, model, requests, opt, nullptr, false);
-      const FitResult fb = fit_motion(b, model, requests, opt, nullptr, false);
-      const double bb = motion_rms(b, model, opt.motion), ab = motion_rms(b, fa.model, opt.motion);
-      const double ba = motion_rms(a, model, opt.motion), aa = motion_rms(a, fb.model, opt.motion);
-      R.cross_validation = ErrorFigures{std::sqrt(0.5 * (bb * bb + ba * ba)), std::sqrt(0.5 * (ab * ab + aa * aa))};
+      R.cross_validation = cross_validation(data, model, requests, opt);
     } catch (const Error& e) {
       R.notes.push_back(std::string("no cross-validation: ") + e.what());
     }
   }
+}
+
+}  // namespace
+
+FitResult fit_motion(const io::MotionData& data, const ctl::MachineModel& model,
+                     const std::vector<FitRequest>& requests, const DiagnoseOptions& opt,
+                     const io::MotionData* holdout, bool cross_validate) {
+  if (requests.empty()) throw Error("fit: no effect to add (--add EFFECT[:AXIS])");
+  FitResult R;
+  ctl::MachineModel work = take_out_requested(model, requests, R.notes);
+  // inertia_error is the base refit; without it the base stays as the model
+  // says, as in the diagnosis' selection, so that the effects are fitted as the
+  // verdict named them (a base refitted for the fit and then not written left
+  // the effects compensating a change the model does not have).
+  const RequestRoles roles = roles_of(requests);
+  const ctl::Machine mw(work);
+  MotionProblem P = prepare_motion(data, mw, opt.motion);
+  const Alignment A = align_motion(data, mw, opt.motion);
+  P.set_delay(roles.fit_delay ? A.tau : A.reference);
+  if (roles.fit_delay) R.delay = fit_delay(A, work, R.notes);
+  const LinearProblem L_full = motion_linear_problem(P);
+  const Backfit B = backfit(P, roles.refit_base ? L_full : nuisance_only(L_full), work, roles.additive, opt,
+                            data.info.path);
+  const CandidateResult base = base_change(P, L_full, B, work, opt, roles.refit_base, R.notes);
+  R.base_refitted = roles.refit_base;
+  R.base_change = base.params;
+  R.model = new_model(work, model, B.effects, base, R);
+  R.effects = B.effects;
+  if (R.delay) {
+    R.effects.insert(R.effects.begin(), *R.delay);
+    R.fitted.push_back({"effects.actuation_delay.tau", "s", 0.0, R.delay->params[0].value, R.delay->params[0].std_error});
+  }
+  measure_errors(R, data, model, requests, opt, holdout, cross_validate);
   return R;
 }
 

@@ -30,6 +30,35 @@ double golden(F&& f, double a, double b, int iters, double& fbest) {
 }
 
 
+// The roles effects of the library play in the stages, said once: an effect
+// that takes one of these roles is added here, not at every stage that asks.
+// The alignment itself (align.hpp): estimated with it, never a column of the selection.
+inline bool is_alignment(const std::string& effect) { return effect == "actuation_delay"; }
+// The base refit itself (A, B, C, E changed): no columns of its own; choosing
+// it in the selection refits the base.
+inline bool is_base_refit(const std::string& effect) { return effect == "inertia_error"; }
+// A base direction: its signature lies in the span of the rigid-body base, so
+// it is judged against the model as given (off the nuisance only), where the
+// base does not absorb the others.
+inline bool is_base_direction(const std::string& effect) {
+  return effect == "payload_mass" || is_base_refit(effect);
+}
+
+// [a, b]: the columns of a and then of b (either may have none).
+inline Eigen::MatrixXd hstack(const Eigen::MatrixXd& a, const Eigen::MatrixXd& b) {
+  Eigen::MatrixXd X(a.rows() ? a.rows() : b.rows(), a.cols() + b.cols());
+  if (a.cols()) X.leftCols(a.cols()) = a;
+  if (b.cols()) X.rightCols(b.cols()) = b;
+  return X;
+}
+
+// BIC change of a model with weighted RSS `rss` and q parameters more than
+// its parent's (`rss_parent`), both with the resolution floor `floor_rss`, at
+// n effective rows (< 0 favours the model).
+inline double bic_change(double n, double rss, double rss_parent, double floor_rss, int q) {
+  return n * std::log((rss + floor_rss) / (rss_parent + floor_rss)) + q * std::log(std::max(2.0, n));
+}
+
 // Fill the statistics of a fitted candidate: RMS after, shares explained,
 // nested F-test against `rss_parent` with q parameters (k_total fitted in
 // all), BIC.
@@ -42,14 +71,17 @@ std::string amount(double v, const std::string& units);
 // "4.01 ± 0.03 µm", "1.00 ± 0.01 ms", "2.5 ± 0.3 %", "150 ± 20 mN".
 std::string human_value(const ParamEstimate& p);
 
+// "none: no effect of the library explains ..." with the residual and the noise floor.
+std::string no_effect_text(const Diagnosis& D);
+
 // Motion logs: forward selection by one statistic from the model as given
-// (select.cpp): reorders the candidates, sets verdict, also, significance and
-// the verdict text.
+// (select.cpp; its units in selection.hpp): reorders the candidates, sets
+// verdict, also, significance and the verdict text.
 void select_motion_effects(Diagnosis& D, const Engine& E, const DiagnoseOptions& opt);
 // The verdict text of a motion diagnosis from its found() effects, their
-// parameters and alternatives (after the parameters are refined).
+// parameters and alternatives (after the parameters are refined; verdict.cpp).
 void verdict_text_motion(Diagnosis& D);
-// Why a fitted value is physically implausible for this machine, or empty.
+// Why a fitted value is physically implausible for this machine, or empty (verdict.cpp).
 std::string implausible(const CandidateResult& c);
 // Motion logs, outside the library (outside.cpp): the strong findings of the
 // structure scan in what the chosen effects leave; the problem with their

@@ -20,73 +20,92 @@ std::string label_of(const FitRequest& r) {
   return r.effect + (r.axis >= 0 ? "[axis " + std::to_string(r.axis + 1) + "]" : "");
 }
 
+// The first bars of the waterfall: the model as given (kinematic data: then
+// its planes calibrated, the base).
+void record_model_as_given(LoopResult& R, const Diagnosis& D, const io::DataSet& data, const ctl::MachineModel& model,
+                           const DiagnoseOptions& o) {
+  R.kind = D.kind;
+  R.units = D.units;
+  if (const auto* m = std::get_if<io::MotionData>(&data)) {
+    R.steps.push_back({"", motion_rms(*m, model, o.motion), D.noise_floor, D.verdict_text});
+  } else {
+    R.steps.push_back({"", D.baseline_rms, D.noise_floor, ""});
+    R.steps.push_back({"calibrated planes", D.base_refit_rms, D.noise_floor, D.verdict_text});
+  }
+}
+
+// Why the loop stops at this diagnosis (empty: go on and add `next`).
+std::string why_stop(const Diagnosis& D, const LoopResult& R, FitRequest& next) {
+  if (!D.outside_library.empty())
+    return "something no library effect describes remains: " + D.outside_library.front().text;
+  const std::vector<int> found = D.found();
+  if (found.empty()) return "nothing is missing: the diagnosis finds no significant effect";
+  const CandidateResult& c = D.candidates[static_cast<std::size_t>(found.front())];
+  next = FitRequest{c.effect, c.axis};
+  if (std::any_of(R.added.begin(), R.added.end(),
+                  [&](const FitRequest& a) { return a.effect == next.effect && a.axis == next.axis; }))
+    return "the diagnosis names " + label_of(next) + " again after it was fitted: the data cannot settle it";
+  return {};
+}
+
+// Every effect of `trial` refitted together on the model as given.
+struct Refit {
+  ctl::MachineModel model;
+  double rms = 0.0;  // residual RMS of the new model (N or m)
+  std::vector<io::FittedParameter> fitted;
+  std::vector<CandidateResult> effects;
+};
+
+Refit refit(const io::DataSet& data, const ctl::MachineModel& model, const std::vector<FitRequest>& trial,
+            const DiagnoseOptions& o) {
+  Refit out{model, 0.0, {}, {}};
+  if (const auto* m = std::get_if<io::MotionData>(&data)) {
+    const FitResult F = fit_motion(*m, model, trial, o, nullptr, false);
+    out.model = F.model;
+    out.fitted = F.fitted;
+    out.effects = F.effects;
+    out.rms = F.on_fit.after;
+  } else {
+    const KinematicFit F = fit_kinematic(data, model.kinematics, trial, o, nullptr, false);
+    out.model.kinematics = F.model;
+    out.fitted = F.fitted;
+    out.effects = F.effects;
+    out.rms = F.on_fit.after;
+  }
+  return out;
+}
+
 }  // namespace
 
 LoopResult run_loop(const io::DataSet& data, const ctl::MachineModel& model, const DiagnoseOptions& o, int max_steps) {
   LoopResult R;
   R.model = model;
-  const bool motion = std::holds_alternative<io::MotionData>(data);
   Diagnosis D = diagnose_any(data, model, o);
-  R.kind = D.kind;
-  R.units = D.units;
-  if (motion) {
-    R.steps.push_back({"", motion_rms(std::get<io::MotionData>(data), model, o.motion), D.noise_floor, D.verdict_text});
-  } else {
-    // Kinematic data: the model as given, then its planes calibrated (the base), then the effects.
-    R.steps.push_back({"", D.baseline_rms, D.noise_floor, ""});
-    R.steps.push_back({"calibrated planes", D.base_refit_rms, D.noise_floor, D.verdict_text});
-  }
+  record_model_as_given(R, D, data, model, o);
   for (int step = 0; step < max_steps; ++step) {
-    if (!D.outside_library.empty()) {
-      R.outside_library = true;
-      R.stop = "something no library effect describes remains: " + D.outside_library.front().text;
-      return R;
-    }
-    const std::vector<int> found = D.found();
-    if (found.empty()) {
-      R.stop = "nothing is missing: the diagnosis finds no significant effect";
-      return R;
-    }
-    const CandidateResult& next = D.candidates[static_cast<std::size_t>(found.front())];
-    FitRequest req{next.effect, next.axis};
-    if (std::any_of(R.added.begin(), R.added.end(),
-                    [&](const FitRequest& a) { return a.effect == req.effect && a.axis == req.axis; })) {
-      R.stop = "the diagnosis names " + label_of(req) + " again after it was fitted: the data cannot settle it";
+    FitRequest req;
+    R.stop = why_stop(D, R, req);
+    if (!R.stop.empty()) {
+      R.outside_library = !D.outside_library.empty();
       return R;
     }
     std::vector<FitRequest> trial = R.added;
     trial.push_back(req);
-    ctl::MachineModel out = model;
-    double rms = 0.0;
-    std::vector<io::FittedParameter> fitted;
-    std::vector<CandidateResult> effects;
-    if (motion) {
-      const FitResult F = fit_motion(std::get<io::MotionData>(data), model, trial, o, nullptr, false);
-      out = F.model;
-      fitted = F.fitted;
-      effects = F.effects;
-      rms = F.on_fit.after;
-    } else {
-      const KinematicFit F = fit_kinematic(data, model.kinematics, trial, o, nullptr, false);
-      out.kinematics = F.model;
-      fitted = F.fitted;
-      effects = F.effects;
-      rms = F.on_fit.after;
-    }
+    Refit F = refit(data, model, trial, o);
     // A step that does not lower the residual of the model is not kept: what
     // the diagnosis fits (with the nuisance beside it) the model file cannot
     // hold in that form (a base refit on a circle that never moves z).
-    if (!(rms < R.steps.back().rms)) {
-      R.stop = "adding " + label_of(req) + " did not lower the model's residual (" + std::to_string(rms) + " against " +
-               std::to_string(R.steps.back().rms) + " " + R.units + "); not kept";
+    if (!(F.rms < R.steps.back().rms)) {
+      R.stop = "adding " + label_of(req) + " did not lower the model's residual (" + std::to_string(F.rms) +
+               " against " + std::to_string(R.steps.back().rms) + " " + R.units + "); not kept";
       return R;
     }
     R.added = trial;
-    R.fitted = fitted;
-    R.effects = effects;
-    R.model = out;
-    D = diagnose_any(data, out, o);
-    R.steps.push_back({label_of(req), rms, D.noise_floor, D.verdict_text});
+    R.fitted = std::move(F.fitted);
+    R.effects = std::move(F.effects);
+    R.model = std::move(F.model);
+    D = diagnose_any(data, R.model, o);
+    R.steps.push_back({label_of(req), F.rms, D.noise_floor, D.verdict_text});
   }
   R.stop = "stopped after " + std::to_string(max_steps) + " steps";
   return R;

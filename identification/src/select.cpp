@@ -13,133 +13,94 @@
 // error) is then a finding of its own instead of vanishing into it.
 #include <algorithm>
 #include <cmath>
-#include <sstream>
 
-#include "internal.hpp"
+#include "selection.hpp"
 
 namespace cpm::ident::detail {
 namespace {
 
-struct Term {
-  int candidate = -1;
-  bool base = false;    // inertia_error: the base refit
-  Eigen::MatrixXd X;    // columns (unweighted); none for the base
-};
+// Alternatives: as good by BIC (within 6, "strong" evidence) with a signature
+// alike (what either adds to the fit so far, off the nuisance: |cos| > 0.9).
+constexpr double kAlternativeBic = 6.0;
+constexpr double kAlternativeCos = 0.9;
 
-struct StepFit {
-  double rss = 0.0, n_eff = 0.0, p_adj = 1.0, dbic = 0.0, f_stat = 0.0, p = 1.0;
-  bool ok = false;
-  JointFit fit;
-};
-
-Eigen::MatrixXd hstack(const Eigen::MatrixXd& a, const Eigen::MatrixXd& b) {
-  Eigen::MatrixXd X(a.rows() ? a.rows() : b.rows(), a.cols() + b.cols());
-  if (a.cols()) X.leftCols(a.cols()) = a;
-  if (b.cols()) X.rightCols(b.cols()) = b;
-  return X;
+// Parameters a term adds: the columns, or the effect's parameters where some
+// were searched (a cogging wavelength, a Stribeck speed) and so were fitted
+// too; the base refit adds the base beyond the nuisance.
+int params_added(const Term& t, const CandidateResult& c, const Engine& E) {
+  return t.base ? E.base_rank_beyond_nuisance() : std::max(static_cast<int>(t.X.cols()), c.n_params);
 }
 
-}  // namespace
+const Term& term_of(const std::vector<Term>& terms, int candidate) {
+  return *std::find_if(terms.begin(), terms.end(), [&](const Term& t) { return t.candidate == candidate; });
+}
 
-void select_motion_effects(Diagnosis& D, const Engine& E, const DiagnoseOptions& opt) {
-  std::vector<Term> terms;
-  for (std::size_t j = 0; j < D.candidates.size(); ++j) {
-    const CandidateResult& c = D.candidates[j];
-    if (!c.identifiable || c.effect == "actuation_delay") continue;
-    if (!c.params.empty() && c.params[0].at_bound && c.params[0].value == 0.0) continue;
-    Term t;
-    t.candidate = static_cast<int>(j);
-    t.base = c.effect == "inertia_error";
-    if (!t.base) {
-      if (c.columns.cols() == 0) continue;
-      t.X = c.columns;
-    } else if (E.base_rank_beyond_nuisance() == 0) {
-      continue;
-    }
-    terms.push_back(std::move(t));
-  }
+// One term fitted on top of the state, tested against it with the
+// look-elsewhere correction over `family` candidates.
+StepFit step_fit(const Engine& E, const DiagnoseOptions& opt, const Term& t, const CandidateResult& c,
+                 const SelectionState& S, double family) {
+  StepFit s;
+  s.fit = E.fit(t.base ? S.XS : hstack(S.XS, t.X), S.base_in || t.base);
+  const int q = params_added(t, c, E);
+  if (!s.fit.full_rank || s.fit.rss >= S.rss) return s;
+  const NestedTest nt = E.nested(S.rss, s.fit.rss, q, S.k + q, std::max(s.fit.n_eff, 10.0));
   const double ne_ref = std::max(10.0, E.base_fit().n_eff);
-  Eigen::MatrixXd XS(E.rows(), 0);
-  bool base_in = false;
-  double rss_cur = E.rss_given();
-  int k_cur = E.nuisance_rank();
-  std::vector<int> chosen;  // candidate indices, in order
-  std::vector<StepFit> at_choice(D.candidates.size());
-  std::vector<StepFit> last(D.candidates.size());
   const double fr = E.floor_rss();
-  const int max_steps = std::max(1, opt.max_forward_steps);
-  for (int step = 0; step <= max_steps; ++step) {
-    // The family: every candidate of the library on every axis that has not been
-    // chosen, whether or not the data can show it (those held at a bound were
-    // looked at too).
-    const double remaining = static_cast<double>(D.candidates.size() - chosen.size());
-    int best = -1;
-    for (const Term& t : terms) {
-      if (std::find(chosen.begin(), chosen.end(), t.candidate) != chosen.end()) continue;
-      const CandidateResult& c = D.candidates[static_cast<std::size_t>(t.candidate)];
-      StepFit s;
-      const bool with_base = base_in || t.base;
-      const Eigen::MatrixXd X = t.base ? XS : hstack(XS, t.X);
-      s.fit = E.fit(X, with_base);
-      // Parameters added: the columns, or the effect's parameters where some
-      // were searched (a cogging wavelength, a Stribeck speed) and so were fitted too.
-      const int q = t.base ? E.base_rank_beyond_nuisance() : std::max(static_cast<int>(t.X.cols()), c.n_params);
-      const int k_new = k_cur + q;
-      if (!s.fit.full_rank || s.fit.rss >= rss_cur) {
-        last[static_cast<std::size_t>(t.candidate)] = s;
-        continue;
-      }
-      const NestedTest nt = E.nested(rss_cur, s.fit.rss, q, k_new, std::max(s.fit.n_eff, 10.0));
-      s.rss = s.fit.rss;
-      s.n_eff = s.fit.n_eff;
-      s.f_stat = nt.f_stat;
-      s.p = nt.p_value;
-      s.p_adj = std::min(1.0, nt.p_value * std::max(1.0, c.trials) * remaining);
-      s.dbic = rss_cur + fr > 0.0 ? ne_ref * std::log((s.rss + fr) / (rss_cur + fr)) + q * std::log(ne_ref) : 0.0;
-      s.ok = s.p_adj < opt.alpha && s.dbic < 0.0;
-      last[static_cast<std::size_t>(t.candidate)] = s;
-      if (s.ok && (best < 0 || s.dbic < last[static_cast<std::size_t>(best)].dbic)) best = t.candidate;
-    }
-    if (best < 0 || step == max_steps) break;
-    const StepFit& s = last[static_cast<std::size_t>(best)];
-    // Alternatives: as good by BIC (within 6, "strong" evidence) with a signature
-    // alike (what either adds to the fit so far, off the nuisance: |cos| > 0.9).
-    {
-      const Eigen::VectorXd ub = E.project_off_nuisance(s.fit.residual) ;
-      const Eigen::VectorXd gain_best = E.project_off_nuisance(E.problem().y) - ub;
-      for (const Term& t : terms) {
-        if (t.candidate == best || std::find(chosen.begin(), chosen.end(), t.candidate) != chosen.end()) continue;
-        const StepFit& o = last[static_cast<std::size_t>(t.candidate)];
-        if (!o.ok || o.dbic - s.dbic > 6.0) continue;
-        const Eigen::VectorXd gain_o = E.project_off_nuisance(E.problem().y) - E.project_off_nuisance(o.fit.residual);
-        const double den = gain_best.norm() * gain_o.norm();
-        if (den > 0.0 && std::fabs(gain_best.dot(gain_o)) / den > 0.9)
-          D.candidates[static_cast<std::size_t>(best)].alternatives.push_back(
-              D.candidates[static_cast<std::size_t>(t.candidate)].label());
-      }
-    }
-    at_choice[static_cast<std::size_t>(best)] = s;
-    chosen.push_back(best);
-    for (const Term& t : terms)
-      if (t.candidate == best) {
-        if (t.base) {
-          base_in = true;
-          k_cur += E.base_rank_beyond_nuisance();
-        } else {
-          XS = hstack(XS, t.X);
-          k_cur += std::max(static_cast<int>(t.X.cols()), D.candidates[static_cast<std::size_t>(best)].n_params);
-        }
-      }
-    rss_cur = s.rss;
-  }
+  s.rss = s.fit.rss;
+  s.n_eff = s.fit.n_eff;
+  s.f_stat = nt.f_stat;
+  s.p = nt.p_value;
+  s.p_adj = look_elsewhere(nt.p_value, c.trials, family);
+  s.dbic = S.rss + fr > 0.0 ? bic_change(ne_ref, s.rss, S.rss, fr, q) : 0.0;
+  s.ok = s.p_adj < opt.alpha && s.dbic < 0.0;
+  return s;
+}
 
-  // The statistics every column shows: at the step an effect was chosen, or,
-  // for the others, on top of everything chosen.
+// Every term not chosen tried on top of the state (their statistics kept in
+// sel.last); the candidate with the lowest BIC change among those that pass, or -1.
+int best_next_term(const Diagnosis& D, const Engine& E, const DiagnoseOptions& opt, const std::vector<Term>& terms,
+                   Selection& sel) {
+  // The family: every candidate of the library on every axis that has not been
+  // chosen, whether or not the data can show it (those held at a bound were
+  // looked at too).
+  const double remaining = static_cast<double>(D.candidates.size() - sel.state.chosen.size());
+  int best = -1;
+  for (const Term& t : terms) {
+    if (sel.state.has(t.candidate)) continue;
+    const auto j = static_cast<std::size_t>(t.candidate);
+    sel.last[j] = step_fit(E, opt, t, D.candidates[j], sel.state, remaining);
+    if (sel.last[j].ok && (best < 0 || sel.last[j].dbic < sel.last[static_cast<std::size_t>(best)].dbic))
+      best = t.candidate;
+  }
+  return best;
+}
+
+// The effects that explain the data as well as the one chosen (`best`) at this step.
+void name_alternatives(Diagnosis& D, const Engine& E, const std::vector<Term>& terms, const Selection& sel,
+                       int best) {
+  const StepFit& s = sel.last[static_cast<std::size_t>(best)];
+  const Eigen::VectorXd y_off = E.project_off_nuisance(E.problem().y);
+  const Eigen::VectorXd gain_best = y_off - E.project_off_nuisance(s.fit.residual);
+  for (const Term& t : terms) {
+    if (t.candidate == best || sel.state.has(t.candidate)) continue;
+    const StepFit& o = sel.last[static_cast<std::size_t>(t.candidate)];
+    if (!o.ok || o.dbic - s.dbic > kAlternativeBic) continue;
+    const Eigen::VectorXd gain_o = y_off - E.project_off_nuisance(o.fit.residual);
+    const double den = gain_best.norm() * gain_o.norm();
+    if (den > 0.0 && std::fabs(gain_best.dot(gain_o)) / den > kAlternativeCos)
+      D.candidates[static_cast<std::size_t>(best)].alternatives.push_back(
+          D.candidates[static_cast<std::size_t>(t.candidate)].label());
+  }
+}
+
+// The statistics every column shows: at the step an effect was chosen, or,
+// for the others, on top of everything chosen.
+void set_column_statistics(Diagnosis& D, const Selection& sel) {
   for (std::size_t j = 0; j < D.candidates.size(); ++j) {
     CandidateResult& c = D.candidates[j];
-    if (c.effect == "actuation_delay") continue;
-    const bool is_chosen = std::find(chosen.begin(), chosen.end(), static_cast<int>(j)) != chosen.end();
-    const StepFit& s = is_chosen ? at_choice[j] : last[j];
+    if (is_alignment(c.effect)) continue;
+    const bool is_chosen = sel.state.has(static_cast<int>(j));
+    const StepFit& s = is_chosen ? sel.at_choice[j] : sel.last[j];
     c.significant = is_chosen;
     if (s.rss > 0.0) {
       c.f_stat = s.f_stat;
@@ -153,7 +114,11 @@ void select_motion_effects(Diagnosis& D, const Engine& E, const DiagnoseOptions&
     }
     c.score = c.delta_bic;
   }
-  // Ranking: the chosen in the order chosen, then the rest by the same statistic.
+}
+
+// Ranking: the chosen in the order chosen, then the rest by the same statistic;
+// the verdict is the first chosen, `also` the others.
+void rank_by_selection(Diagnosis& D, const std::vector<int>& chosen) {
   std::vector<int> order(D.candidates.size());
   for (std::size_t j = 0; j < order.size(); ++j) order[j] = static_cast<int>(j);
   auto pos = [&](int j) {
@@ -174,90 +139,95 @@ void select_motion_effects(Diagnosis& D, const Engine& E, const DiagnoseOptions&
   D.verdict = n_chosen > 0 ? 0 : -1;
   D.also.clear();
   for (int j = 1; j < n_chosen; ++j) D.also.push_back(j);
+}
 
-  // The residual after everything chosen, and what each chosen effect contributes to it.
-  const JointFit final_fit = E.fit(XS, base_in);
+// The residual after everything chosen, and what each chosen effect (the
+// first n_chosen of the ranking, in the order of the columns) contributes to it.
+void attribute_final_fit(Diagnosis& D, const Engine& E, const SelectionState& S) {
+  const JointFit final_fit = E.fit(S.XS, S.base_in);
+  const int n_chosen = static_cast<int>(S.chosen.size());
   D.residual_final = n_chosen > 0 ? final_fit.residual : E.base_fit().residual;
-  {
-    Eigen::Index at = 0;
-    for (int j = 0; j < n_chosen; ++j) {
-      CandidateResult& c = D.candidates[static_cast<std::size_t>(j)];
-      if (c.effect == "inertia_error") {
-        Eigen::VectorXd db = final_fit.base_delta;
-        for (std::size_t b = 0; b < E.problem().nuisance.size(); ++b)
-          if (E.problem().nuisance[b]) db(static_cast<Eigen::Index>(b)) = 0.0;
-        c.fitted = E.problem().B * db;
-        continue;
-      }
-      const Eigen::Index q = c.columns.cols();
-      c.fitted = c.columns * final_fit.beta.segment(at, q);
-      at += q;
+  Eigen::Index at = 0;
+  for (int j = 0; j < n_chosen; ++j) {
+    CandidateResult& c = D.candidates[static_cast<std::size_t>(j)];
+    if (is_base_refit(c.effect)) {
+      // The base change beyond the nuisance.
+      Eigen::VectorXd db = final_fit.base_delta;
+      for (std::size_t b = 0; b < E.problem().nuisance.size(); ++b)
+        if (E.problem().nuisance[b]) db(static_cast<Eigen::Index>(b)) = 0.0;
+      c.fitted = E.problem().B * db;
+      continue;
     }
+    const Eigen::Index q = c.columns.cols();
+    c.fitted = c.columns * final_fit.beta.segment(at, q);
+    at += q;
   }
+}
 
+}  // namespace
+
+double look_elsewhere(double p, double trials, double family) {
+  return std::min(1.0, p * std::max(1.0, trials) * family);
+}
+
+SelectionState::SelectionState(const Engine& E) : XS(E.rows(), 0), rss(E.rss_given()), k(E.nuisance_rank()) {}
+
+bool SelectionState::has(int candidate) const {
+  return std::find(chosen.begin(), chosen.end(), candidate) != chosen.end();
+}
+
+void SelectionState::take(const Term& t, const CandidateResult& c, const StepFit& s, const Engine& E) {
+  chosen.push_back(t.candidate);
+  if (t.base) base_in = true;
+  else XS = hstack(XS, t.X);
+  k += params_added(t, c, E);
+  rss = s.rss;
+}
+
+std::vector<Term> selection_terms(const Diagnosis& D, const Engine& E) {
+  std::vector<Term> terms;
+  for (std::size_t j = 0; j < D.candidates.size(); ++j) {
+    const CandidateResult& c = D.candidates[j];
+    if (!c.identifiable || is_alignment(c.effect)) continue;
+    if (!c.params.empty() && c.params[0].at_bound && c.params[0].value == 0.0) continue;
+    Term t;
+    t.candidate = static_cast<int>(j);
+    t.base = is_base_refit(c.effect);
+    if (!t.base) {
+      if (c.columns.cols() == 0) continue;
+      t.X = c.columns;
+    } else if (E.base_rank_beyond_nuisance() == 0) {
+      continue;
+    }
+    terms.push_back(std::move(t));
+  }
+  return terms;
+}
+
+Selection forward_selection(Diagnosis& D, const Engine& E, const DiagnoseOptions& opt) {
+  const std::vector<Term> terms = selection_terms(D, E);
+  Selection sel(E, D.candidates.size());
+  const int max_steps = std::max(1, opt.max_forward_steps);
+  for (int step = 0; step <= max_steps; ++step) {
+    const int best = best_next_term(D, E, opt, terms, sel);
+    if (best < 0 || step == max_steps) break;
+    name_alternatives(D, E, terms, sel, best);
+    const auto j = static_cast<std::size_t>(best);
+    sel.at_choice[j] = sel.last[j];
+    sel.state.take(term_of(terms, best), D.candidates[j], sel.last[j], E);
+  }
+  return sel;
+}
+
+void apply_selection(Diagnosis& D, const Engine& E, const Selection& sel) {
+  set_column_statistics(D, sel);
+  rank_by_selection(D, sel.state.chosen);
+  attribute_final_fit(D, E, sel.state);
+}
+
+void select_motion_effects(Diagnosis& D, const Engine& E, const DiagnoseOptions& opt) {
+  apply_selection(D, E, forward_selection(D, E, opt));
   verdict_text_motion(D);
-}
-
-std::string implausible(const CandidateResult& c) {
-  // Values no healthy machine of this size has: worth a second look before
-  // they go into a model (a sign error in the log, a wrong unit, a model far off).
-  if (c.params.empty()) return {};
-  const double v = c.params[0].value;
-  if (c.effect == "payload_mass" && v < 0.0) return "a negative payload: mass taken off the platform, or the model's masses too large";
-  if (c.effect == "force_gain" && std::fabs(v) > 0.3) return "a drive gain off by more than 30 %: check the torque constant and the units of the force column";
-  if (c.effect == "coulomb_friction" && v > 30.0) return "more than 30 N of dry friction (a quarter of the force limit)";
-  if (c.effect == "viscous_friction" && v > 200.0) return "more than 200 N s/m of viscous friction";
-  if (c.effect == "cogging" && v > 20.0) return "more than 20 N of cogging";
-  if (c.effect == "actuation_delay" && v > 0.02) return "a dead time of more than 20 ms";
-  return {};
-}
-
-void verdict_text_motion(Diagnosis& D) {
-  const std::vector<int> found = D.found();
-  if (found.empty()) {
-    D.ambiguous = false;
-    D.verdict_text = "none: no effect of the library explains a significant part of the residual "
-                     "(RMS " + amount(D.baseline_rms, D.units) + ", noise floor about " +
-                     amount(D.noise_floor, D.units) + ")";
-    return;
-  }
-  // Ambiguity: an effect chosen that another explains as well (alternatives),
-  // with the measurement that separates them where the confounding says it.
-  std::vector<std::string> alts;
-  D.ambiguous = false;
-  for (int j : found) {
-    const CandidateResult& v = D.candidates[static_cast<std::size_t>(j)];
-    for (const auto& a : v.alternatives) {
-      D.ambiguous = true;
-      std::string how;
-      for (const auto& cf : v.confounded)
-        if (cf.with == a) how = " (to separate: " + cf.separate_by + ")";
-      alts.push_back(v.label() + " from " + a + how);
-    }
-  }
-  std::ostringstream os;
-  os << "missing: ";
-  for (std::size_t j = 0; j < found.size(); ++j) {
-    const CandidateResult& v = D.candidates[static_cast<std::size_t>(found[j])];
-    os << (j ? "; " : "") << v.label();
-    for (const auto& a : v.alternatives) os << " or " << a;
-    os << " (";
-    for (std::size_t q = 0; q < v.params.size(); ++q)
-      os << (q ? ", " : "") << v.params[q].name << " = " << human_value(v.params[q]);
-    os << ")";
-    const std::string why = implausible(v);
-    if (!why.empty()) os << " [implausible: " << why << "]";
-  }
-  const int n_chosen = static_cast<int>(found.size());
-  os << ". " << (n_chosen > 1 ? "Together they bring" : "It brings") << " the residual from "
-     << amount(D.baseline_rms, D.units) << " to " << amount(Engine::rms(D.residual_final), D.units)
-     << " RMS (noise floor about " << amount(D.noise_floor, D.units) << ")";
-  if (D.ambiguous) {
-    os << ". These data cannot tell ";
-    for (std::size_t j = 0; j < alts.size(); ++j) os << (j ? "; nor " : "") << alts[j];
-    os << " apart";
-  }
-  D.verdict_text = os.str();
 }
 
 }  // namespace cpm::ident::detail

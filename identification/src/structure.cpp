@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <numbers>
+#include <optional>
 #include <sstream>
 
 #include "cpm/identification/stats.hpp"
@@ -62,143 +63,217 @@ void periodogram(const std::vector<double>& x, const std::vector<double>& y, dou
   }
 }
 
+namespace {
+
+// The residual of one axis as the checks see it.
+struct AxisResidual {
+  int axis = 0;
+  std::vector<double> y;  // per row (N)
+  double mean = 0.0, var = 0.0, sd = 0.0;
+  double infl = 1.0;      // variance inflation of a mean by the residual's autocorrelation
+  double tiny = 0.0;      // size below which a finding is not worth a sentence
+};
+
+// Axis i's residual, or none when it is constant.
+std::optional<AxisResidual> axis_residual(const Eigen::VectorXd& residual, int R, int i, const Vec3& axis_noise) {
+  AxisResidual A;
+  A.axis = i;
+  A.y.resize(R);
+  for (int r = 0; r < R; ++r) A.y[r] = residual(3 * r + i);
+  A.mean = mean(A.y);
+  for (double v : A.y) A.var += (v - A.mean) * (v - A.mean);
+  A.var /= R;
+  const double ne = effective_samples({A.y});
+  A.infl = static_cast<double>(R) / std::max(2.0, ne);
+  A.sd = std::sqrt(A.var);
+  if (!(A.sd > 0.0)) return std::nullopt;
+  // A third of the noise.
+  A.tiny = std::max(0.3 * axis_noise[i], 1e-12);
+  return A;
+}
+
+// 1. A difference between the two directions of motion of the axis.
+std::optional<StructureFinding> direction_finding(const MotionProblem& P, const AxisResidual& A) {
+  const int i = A.axis;
+  std::vector<double> pos, neg;
+  for (int r = 0; r < P.rows(); ++r) {
+    if (P.v[r][i] > 2e-3) pos.push_back(A.y[r]);
+    if (P.v[r][i] < -2e-3) neg.push_back(A.y[r]);
+  }
+  if (pos.size() <= 10 || neg.size() <= 10) return std::nullopt;
+  const double diff = mean(pos) - mean(neg);
+  const double se = A.sd * std::sqrt(A.infl * (1.0 / pos.size() + 1.0 / neg.size()));
+  const double z = diff / se;
+  if (!(std::fabs(z) > 5.0 && std::fabs(diff) > A.tiny)) return std::nullopt;
+  return StructureFinding{"direction", i, cat("v", i + 1), 0.0, diff, z,
+                          cat("axis ", i + 1, ": the residual differs by ", diff,
+                              " N between moving forward and backward (direction-dependent force)")};
+}
+
+// The strongest sine of a periodogram: its wavelength (or period), amplitude
+// and chi (~ chi^2 with 2 dof under noise), p corrected for `trials` x `places`.
+struct Peak {
+  double location = 0.0, amp = 0.0, chi = 0.0, p = 1.0;
+};
+
+std::optional<Peak> strongest_sine(const std::vector<double>& x, const AxisResidual& A, double lmin, double lmax,
+                                   double trials, double places) {
+  std::vector<double> wl, pw;
+  periodogram(x, A.y, lmin, lmax, wl, pw);
+  if (pw.empty()) return std::nullopt;
+  const auto it = std::max_element(pw.begin(), pw.end());
+  Peak k;
+  k.chi = *it / (A.var * A.infl);
+  k.p = std::min(1.0, std::exp(-0.5 * k.chi) * std::max(1.0, trials) * places);
+  k.amp = std::sqrt(2.0 * *it / static_cast<double>(A.y.size()));
+  k.location = wl[static_cast<std::size_t>(it - pw.begin())];
+  return k;
+}
+
+// 2. A force periodic in the position of axis j (wavelengths 2 mm .. 2/3 of the stroke covered).
+std::optional<StructureFinding> periodic_in_position(const MotionProblem& P, const AxisResidual& A, int j,
+                                                     double span) {
+  if (span < 0.01) return std::nullopt;
+  std::vector<double> x(P.rows());
+  for (int r = 0; r < P.rows(); ++r) x[r] = P.d[r][j];
+  const double trials = span * (1.0 / 2e-3 - 1.5 / span);
+  const auto k = strongest_sine(x, A, 2e-3, span / 1.5, trials, 9.0);
+  if (!k || !(k->p < 1e-4 && k->amp > A.tiny)) return std::nullopt;
+  const int i = A.axis;
+  return StructureFinding{"periodic", i, cat("d", j + 1), k->location, k->amp, std::sqrt(k->chi),
+                          cat("axis ", i + 1, ": a force periodic in the position of axis ", j + 1, ", wavelength ",
+                              k->location * 1e3, " mm, amplitude ", k->amp, " N")};
+}
+
+// 3. A force periodic in time (periods of 4 rows .. half the log).
+std::optional<StructureFinding> periodic_in_time(const std::vector<double>& t, const AxisResidual& A) {
+  const int R = static_cast<int>(t.size());
+  const double T = t.back() - t.front();
+  const double rowdt = R > 1 ? T / (R - 1) : 1.0;
+  const auto k = strongest_sine(t, A, 4.0 * rowdt, T / 2.0, T * (1.0 / (4.0 * rowdt)), 3.0);
+  if (!k || !(k->p < 1e-4 && k->amp > A.tiny)) return std::nullopt;
+  const double per = k->location;
+  return StructureFinding{"periodic_time", A.axis, "t", per, k->amp, std::sqrt(k->chi),
+                          cat("axis ", A.axis + 1, ": a force periodic in time, period ", per, " s (", 1.0 / per,
+                              " Hz), amplitude ", k->amp, " N")};
+}
+
+// 4. A trend in time.
+std::optional<StructureFinding> trend_in_time(const std::vector<double>& t, const AxisResidual& A) {
+  const int R = static_cast<int>(t.size());
+  const double tm = mean(t);
+  double stt = 0, sty = 0;
+  for (int r = 0; r < R; ++r) { stt += (t[r] - tm) * (t[r] - tm); sty += (t[r] - tm) * (A.y[r] - A.mean); }
+  if (!(stt > 0.0)) return std::nullopt;
+  const double slope = sty / stt;
+  const double z = slope / (A.sd * std::sqrt(A.infl / stt));
+  const double change = slope * (t.back() - t.front());
+  if (!(std::fabs(z) > 5.0 && std::fabs(change) > A.tiny)) return std::nullopt;
+  return StructureFinding{"trend", A.axis, "t", t.back(), change, z,
+                          cat("axis ", A.axis + 1, ": the residual drifts by ", change, " N over the ",
+                              t.back() - t.front(), " s of the log")};
+}
+
+// The rows in the order of the axis' own position, and the running sum of
+// the residual (less its mean) in that order.
+struct AlongPosition {
+  std::vector<int> idx;
+  std::vector<double> cum;  // cum[s]: sum over the first s rows
+};
+
+AlongPosition along_position(const MotionProblem& P, const AxisResidual& A) {
+  const int R = P.rows(), i = A.axis;
+  AlongPosition o;
+  o.idx.resize(R);
+  for (int r = 0; r < R; ++r) o.idx[r] = r;
+  std::sort(o.idx.begin(), o.idx.end(), [&](int a, int b) { return P.d[a][i] < P.d[b][i]; });
+  o.cum.assign(R + 1, 0.0);
+  for (int r = 0; r < R; ++r) o.cum[r + 1] = o.cum[r] + (A.y[o.idx[r]] - A.mean);
+  return o;
+}
+
+// 5a. A step along the axis' position: the split with the largest difference of means.
+std::optional<StructureFinding> step_finding(const MotionProblem& P, const AxisResidual& A, const AlongPosition& o) {
+  const int R = P.rows(), i = A.axis;
+  double best_z = 0.0, best_diff = 0.0, best_x = 0.0;
+  const int lo = std::max(10, R / 20), hi = R - lo;
+  for (int s = lo; s < hi; s += std::max(1, R / 200)) {
+    const double ml = o.cum[s] / s, mr = (o.cum[R] - o.cum[s]) / (R - s);
+    const double se = A.sd * std::sqrt(A.infl * (1.0 / s + 1.0 / (R - s)));
+    const double z = (mr - ml) / se;
+    if (std::fabs(z) > std::fabs(best_z)) {
+      best_z = z;
+      best_diff = mr - ml;
+      best_x = 0.5 * (P.d[o.idx[s - 1]][i] + P.d[o.idx[s]][i]);
+    }
+  }
+  if (!(std::fabs(best_z) > 6.0 && std::fabs(best_diff) > A.tiny)) return std::nullopt;
+  return StructureFinding{"step", i, cat("d", i + 1), best_x, best_diff, best_z,
+                          cat("axis ", i + 1, ": the residual changes by ", best_diff, " N across d", i + 1, " = ",
+                              best_x * 1e3, " mm")};
+}
+
+// 5b. A bump along the axis' position: the bin (of 20 of equal count) whose mean stands out most.
+std::optional<StructureFinding> bump_finding(const MotionProblem& P, const AxisResidual& A, const AlongPosition& o) {
+  const int R = P.rows(), i = A.axis, B = 20;
+  double bz = 0.0, bmean = 0.0, bx = 0.0, blo = 0.0, bhi = 0.0;
+  for (int b = 0; b < B; ++b) {
+    const int a0 = b * R / B, a1 = (b + 1) * R / B;
+    if (a1 - a0 < 5) continue;
+    const double m = (o.cum[a1] - o.cum[a0]) / (a1 - a0);
+    const double z = m / (A.sd * std::sqrt(A.infl / (a1 - a0)));
+    if (std::fabs(z) > std::fabs(bz)) {
+      bz = z;
+      bmean = m;
+      bx = P.d[o.idx[(a0 + a1) / 2]][i];
+      blo = P.d[o.idx[a0]][i];
+      bhi = P.d[o.idx[a1 - 1]][i];
+    }
+  }
+  if (!(std::fabs(bz) > 6.0 && std::fabs(bmean) > A.tiny)) return std::nullopt;
+  return StructureFinding{"bump", i, cat("d", i + 1), bx, bmean, bz,
+                          cat("axis ", i + 1, ": a local excess of ", bmean, " N around d", i + 1, " = ", bx * 1e3, " mm"),
+                          blo, bhi};
+}
+
+// Stroke covered by each axis (m).
+std::vector<double> spans(const MotionProblem& P) {
+  std::vector<double> span(3);
+  for (int j = 0; j < 3; ++j) {
+    double mn = 1e300, mx = -1e300;
+    for (int r = 0; r < P.rows(); ++r) { mn = std::min(mn, P.d[r][j]); mx = std::max(mx, P.d[r][j]); }
+    span[j] = mx - mn;
+  }
+  return span;
+}
+
+void add(std::vector<StructureFinding>& out, std::optional<StructureFinding> f) {
+  if (f) out.push_back(std::move(*f));
+}
+
+}  // namespace
+
 std::vector<StructureFinding> find_motion_structure(const MotionProblem& P,
                                                     const Eigen::VectorXd& residual,
                                                     const Vec3& axis_noise) {
   std::vector<StructureFinding> out;
   const int R = P.rows();
   if (R < 20) return out;
-  std::vector<double> span(3), tvec(R);
-  for (int r = 0; r < R; ++r) tvec[r] = P.t[r];
-  for (int j = 0; j < 3; ++j) {
-    double mn = 1e300, mx = -1e300;
-    for (int r = 0; r < R; ++r) { mn = std::min(mn, P.d[r][j]); mx = std::max(mx, P.d[r][j]); }
-    span[j] = mx - mn;
-  }
+  const std::vector<double> span = spans(P), tvec(P.t.begin(), P.t.begin() + R);
   for (int i = 0; i < 3; ++i) {
-    std::vector<double> y(R);
-    for (int r = 0; r < R; ++r) y[r] = residual(3 * r + i);
-    const double my = mean(y);
-    double var = 0.0;
-    for (double v : y) var += (v - my) * (v - my);
-    var /= R;
-    const double ne = effective_samples({y});
-    const double infl = static_cast<double>(R) / std::max(2.0, ne);
-    const double sd = std::sqrt(var);
-    if (!(sd > 0.0)) continue;
-    // Size below which a finding is not worth a sentence: a third of the noise.
-    const double tiny = std::max(0.3 * axis_noise[i], 1e-12);
-    // 1. direction of motion of this axis
-    {
-      std::vector<double> pos, neg;
-      for (int r = 0; r < R; ++r) {
-        if (P.v[r][i] > 2e-3) pos.push_back(y[r]);
-        if (P.v[r][i] < -2e-3) neg.push_back(y[r]);
-      }
-      if (pos.size() > 10 && neg.size() > 10) {
-        const double diff = mean(pos) - mean(neg);
-        const double se = sd * std::sqrt(infl * (1.0 / pos.size() + 1.0 / neg.size()));
-        const double z = diff / se;
-        if (std::fabs(z) > 5.0 && std::fabs(diff) > tiny)
-          out.push_back({"direction", i, cat("v", i + 1), 0.0, diff, z,
-                         cat("axis ", i + 1, ": the residual differs by ", diff, " N between moving forward and backward (direction-dependent force)")});
-      }
-    }
-    // 2. periodic against each axis' position
-    for (int j = 0; j < 3; ++j) {
-      if (span[j] < 0.01) continue;
-      std::vector<double> x(R), wl, pw;
-      for (int r = 0; r < R; ++r) x[r] = P.d[r][j];
-      periodogram(x, y, 2e-3, span[j] / 1.5, wl, pw);
-      if (pw.empty()) continue;
-      const auto it = std::max_element(pw.begin(), pw.end());
-      const double trials = span[j] * (1.0 / 2e-3 - 1.5 / span[j]);
-      const double chi = *it / (var * infl);  // ~ chi^2 with 2 dof under noise
-      const double p = std::min(1.0, std::exp(-0.5 * chi) * std::max(1.0, trials) * 9.0);
-      const double amp = std::sqrt(2.0 * *it / R);
-      if (p < 1e-4 && amp > tiny) {
-        const double lam = wl[static_cast<std::size_t>(it - pw.begin())];
-        out.push_back({"periodic", i, cat("d", j + 1), lam, amp, std::sqrt(chi),
-                       cat("axis ", i + 1, ": a force periodic in the position of axis ", j + 1, ", wavelength ", lam * 1e3, " mm, amplitude ", amp, " N")});
-      }
-    }
-    // 3. periodic in time
-    {
-      const double T = tvec.back() - tvec.front();
-      std::vector<double> wl, pw;
-      const double rowdt = R > 1 ? T / (R - 1) : 1.0;
-      periodogram(tvec, y, 4.0 * rowdt, T / 2.0, wl, pw);
-      if (!pw.empty()) {
-        const auto it = std::max_element(pw.begin(), pw.end());
-        const double chi = *it / (var * infl);
-        const double trials = T * (1.0 / (4.0 * rowdt));
-        const double p = std::min(1.0, std::exp(-0.5 * chi) * std::max(1.0, trials) * 3.0);
-        const double amp = std::sqrt(2.0 * *it / R);
-        if (p < 1e-4 && amp > tiny) {
-          const double per = wl[static_cast<std::size_t>(it - pw.begin())];
-          out.push_back({"periodic_time", i, "t", per, amp, std::sqrt(chi),
-                         cat("axis ", i + 1, ": a force periodic in time, period ", per, " s (", 1.0 / per, " Hz), amplitude ", amp, " N")});
-        }
-      }
-    }
-    // 4. trend in time
-    {
-      const double tm = mean(tvec);
-      double stt = 0, sty = 0;
-      for (int r = 0; r < R; ++r) { stt += (tvec[r] - tm) * (tvec[r] - tm); sty += (tvec[r] - tm) * (y[r] - my); }
-      if (stt > 0.0) {
-        const double slope = sty / stt;
-        const double z = slope / (sd * std::sqrt(infl / stt));
-        const double change = slope * (tvec.back() - tvec.front());
-        if (std::fabs(z) > 5.0 && std::fabs(change) > tiny)
-          out.push_back({"trend", i, "t", tvec.back(), change, z,
-                         cat("axis ", i + 1, ": the residual drifts by ", change, " N over the ", tvec.back() - tvec.front(), " s of the log")});
-      }
-    }
-    // 5. a step or a bump along this axis' position
-    if (span[i] >= 0.005) {
-      std::vector<int> idx(R);
-      for (int r = 0; r < R; ++r) idx[r] = r;
-      std::sort(idx.begin(), idx.end(), [&](int a, int b) { return P.d[a][i] < P.d[b][i]; });
-      std::vector<double> cum(R + 1, 0.0);
-      for (int r = 0; r < R; ++r) cum[r + 1] = cum[r] + (y[idx[r]] - my);
-      double best_z = 0.0, best_diff = 0.0, best_x = 0.0;
-      const int lo = std::max(10, R / 20), hi = R - lo;
-      for (int s = lo; s < hi; s += std::max(1, R / 200)) {
-        const double ml = cum[s] / s, mr = (cum[R] - cum[s]) / (R - s);
-        const double se = sd * std::sqrt(infl * (1.0 / s + 1.0 / (R - s)));
-        const double z = (mr - ml) / se;
-        if (std::fabs(z) > std::fabs(best_z)) {
-          best_z = z;
-          best_diff = mr - ml;
-          best_x = 0.5 * (P.d[idx[s - 1]][i] + P.d[idx[s]][i]);
-        }
-      }
-      if (std::fabs(best_z) > 6.0 && std::fabs(best_diff) > tiny)
-        out.push_back({"step", i, cat("d", i + 1), best_x, best_diff, best_z,
-                       cat("axis ", i + 1, ": the residual changes by ", best_diff, " N across d", i + 1, " = ", best_x * 1e3, " mm")});
-      // bump: 20 bins of equal count
-      const int B = 20;
-      double bz = 0.0, bmean = 0.0, bx = 0.0, blo = 0.0, bhi = 0.0;
-      for (int b = 0; b < B; ++b) {
-        const int a0 = b * R / B, a1 = (b + 1) * R / B;
-        if (a1 - a0 < 5) continue;
-        const double m = (cum[a1] - cum[a0]) / (a1 - a0);
-        const double z = m / (sd * std::sqrt(infl / (a1 - a0)));
-        if (std::fabs(z) > std::fabs(bz)) {
-          bz = z;
-          bmean = m;
-          bx = P.d[idx[(a0 + a1) / 2]][i];
-          blo = P.d[idx[a0]][i];
-          bhi = P.d[idx[a1 - 1]][i];
-        }
-      }
-      const bool near_step = !out.empty() && out.back().kind == "step" && out.back().axis == i;
-      if (std::fabs(bz) > 6.0 && std::fabs(bmean) > tiny && !near_step)
-        out.push_back({"bump", i, cat("d", i + 1), bx, bmean, bz,
-                       cat("axis ", i + 1, ": a local excess of ", bmean, " N around d", i + 1, " = ", bx * 1e3, " mm"),
-                       blo, bhi});
-    }
+    const std::optional<AxisResidual> A = axis_residual(residual, R, i, axis_noise);
+    if (!A) continue;
+    add(out, direction_finding(P, *A));
+    for (int j = 0; j < 3; ++j) add(out, periodic_in_position(P, *A, j, span[j]));
+    add(out, periodic_in_time(tvec, *A));
+    add(out, trend_in_time(tvec, *A));
+    if (span[i] < 0.005) continue;
+    const AlongPosition o = along_position(P, *A);
+    std::optional<StructureFinding> step = step_finding(P, *A, o);
+    // A bump is not reported beside a step on the same axis.
+    std::optional<StructureFinding> bump = step ? std::nullopt : bump_finding(P, *A, o);
+    add(out, std::move(step));
+    add(out, std::move(bump));
   }
   return out;
 }

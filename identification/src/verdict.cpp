@@ -1,0 +1,99 @@
+// Stage "verdict" of the motion diagnosis (internal.hpp): the sentence that
+// names every effect the selection chose, with its parameters, what the data
+// cannot tell it apart from, and values no healthy machine has.
+#include <cmath>
+#include <sstream>
+
+#include "internal.hpp"
+
+namespace cpm::ident::detail {
+namespace {
+
+// Values no healthy machine of this size has, per effect: worth a second look
+// before they go into a model (a sign error in the log, a wrong unit, a model
+// far off). `off` judges the first parameter.
+struct Implausible {
+  const char* effect;
+  bool (*off)(double);
+  const char* why;
+};
+
+constexpr Implausible kImplausible[] = {
+    {"payload_mass", [](double v) { return v < 0.0; },
+     "a negative payload: mass taken off the platform, or the model's masses too large"},
+    {"force_gain", [](double v) { return std::fabs(v) > 0.3; },
+     "a drive gain off by more than 30 %: check the torque constant and the units of the force column"},
+    {"coulomb_friction", [](double v) { return v > 30.0; },
+     "more than 30 N of dry friction (a quarter of the force limit)"},
+    {"viscous_friction", [](double v) { return v > 200.0; }, "more than 200 N s/m of viscous friction"},
+    {"cogging", [](double v) { return v > 20.0; }, "more than 20 N of cogging"},
+    {"actuation_delay", [](double v) { return v > 0.02; }, "a dead time of more than 20 ms"},
+};
+
+// Ambiguity: an effect chosen that another explains as well (alternatives),
+// with the measurement that separates them where the confounding says it.
+// "v from a (to separate: ...)" for each; sets D.ambiguous.
+std::vector<std::string> cannot_tell_apart(Diagnosis& D, const std::vector<int>& found) {
+  std::vector<std::string> alts;
+  D.ambiguous = false;
+  for (int j : found) {
+    const CandidateResult& v = D.candidates[static_cast<std::size_t>(j)];
+    for (const auto& a : v.alternatives) {
+      D.ambiguous = true;
+      std::string how;
+      for (const auto& cf : v.confounded)
+        if (cf.with == a) how = " (to separate: " + cf.separate_by + ")";
+      alts.push_back(v.label() + " from " + a + how);
+    }
+  }
+  return alts;
+}
+
+// "label or alternative (p = value ± se unit, ...) [implausible: ...]".
+void write_found_effect(std::ostringstream& os, const CandidateResult& v) {
+  os << v.label();
+  for (const auto& a : v.alternatives) os << " or " << a;
+  os << " (";
+  for (std::size_t q = 0; q < v.params.size(); ++q)
+    os << (q ? ", " : "") << v.params[q].name << " = " << human_value(v.params[q]);
+  os << ")";
+  const std::string why = implausible(v);
+  if (!why.empty()) os << " [implausible: " << why << "]";
+}
+
+}  // namespace
+
+std::string implausible(const CandidateResult& c) {
+  if (c.params.empty()) return {};
+  const double v = c.params[0].value;
+  for (const Implausible& i : kImplausible)
+    if (c.effect == i.effect && i.off(v)) return i.why;
+  return {};
+}
+
+void verdict_text_motion(Diagnosis& D) {
+  const std::vector<int> found = D.found();
+  if (found.empty()) {
+    D.ambiguous = false;
+    D.verdict_text = no_effect_text(D);
+    return;
+  }
+  const std::vector<std::string> alts = cannot_tell_apart(D, found);
+  std::ostringstream os;
+  os << "missing: ";
+  for (std::size_t j = 0; j < found.size(); ++j) {
+    if (j) os << "; ";
+    write_found_effect(os, D.candidates[static_cast<std::size_t>(found[j])]);
+  }
+  os << ". " << (found.size() > 1 ? "Together they bring" : "It brings") << " the residual from "
+     << amount(D.baseline_rms, D.units) << " to " << amount(Engine::rms(D.residual_final), D.units)
+     << " RMS (noise floor about " << amount(D.noise_floor, D.units) << ")";
+  if (D.ambiguous) {
+    os << ". These data cannot tell ";
+    for (std::size_t j = 0; j < alts.size(); ++j) os << (j ? "; nor " : "") << alts[j];
+    os << " apart";
+  }
+  D.verdict_text = os.str();
+}
+
+}  // namespace cpm::ident::detail
