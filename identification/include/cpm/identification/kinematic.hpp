@@ -20,6 +20,7 @@
 // effect set. Nonlinear parameters by search: lambda of cyclic_error by a
 // periodogram over 1..50 mm (capped at 2/3 of the stroke covered) refined by
 // golden section; tau of thermal_drift on a log grid over the time covered.
+// The stages as units, and the table of effects: kinematic_stages.hpp.
 #pragma once
 
 #include <array>

@@ -1,0 +1,130 @@
+// The stages of the kinematic diagnosis (kinematic.hpp) as units:
+//  1. read: the data and the model's residual (read_kinematic), the base
+//     calibrated at the model's own effects (prepare_kinematic);
+//  2. columns per effect: the effect table (kinematic_fitter), one entry per
+//     kinematic effect type of effects.md: how its columns are built from the
+//     residual's sensitivity to each axis' effective displacement, how its
+//     nonlinear parameter is searched (cyclic_error's wavelength,
+//     thermal_drift's time constant), what separates it from the base;
+//  3. base refit: the shared engine on kinematic_linear_problem;
+//  4. selection: every effect on every axis evaluated and scored
+//     (evaluate_kinematic_candidates), the actuator scales judged at the model
+//     as given;
+//  5. verdict: the noise floor (kinematic_noise_floor), ranking and decision
+//     (shared with the motion side);
+//  6. structure: what remains (find_kinematic_structure).
+// Adding a kinematic effect: its model in kinematics/ (kinematic_effects.hpp,
+// plane_model.cpp) and one entry of the table (kinematic_effects.cpp).
+//
+// Units: encoder readings d (m), time t (s), residual rows (m); wavenumbers
+// (1/m). Frames: the base's (ball-bar or machine), as in KinematicProblem.
+#pragma once
+
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+#include <Eigen/Dense>
+
+#include "cpm/identification/diagnose.hpp"
+#include "cpm/identification/engine.hpp"
+#include "cpm/identification/kinematic.hpp"
+#include "cpm/kinematics/kinematic_effects.hpp"
+
+namespace cpm::ident {
+
+// What the samples cover: each axis' range of encoder readings (m), the time
+// covered (s), and per axis how many samples were last approached forward
+// (dir > 0) and backward.
+struct KinematicSpan {
+  Vec3 lo = Vec3::Constant(1e300), hi = Vec3::Constant(-1e300);
+  double t0 = 1e300, t1 = -1e300;
+  std::array<int, 3> n_plus{}, n_minus{};
+};
+KinematicSpan span_of(const KinematicProblem& P);
+
+// Column of a change g(sample) of axis `axis`' effective displacement d~
+// (g in m): S_axis(row) * g(sample of the row), S = P.sensitivity.
+template <class G>
+Eigen::VectorXd displacement_column(const KinematicProblem& P, int axis, G&& g) {
+  Eigen::VectorXd c(P.rows());
+  for (int r = 0; r < P.rows(); ++r) c(r) = P.sensitivity(r, axis) * g(P.sample_of_row(r));
+  return c;
+}
+
+// cyclic_error's linear columns at wavenumber k (1/m): sin and cos of
+// 2 pi k d_axis as displacement columns (a sin(x + phi) = a cos phi sin x +
+// a sin phi cos x).
+Eigen::MatrixXd cyclic_error_columns(const KinematicProblem& P, int axis, double k);
+// thermal_drift's column at time constant tau (s): d_axis (1 - exp(-t / tau)).
+Eigen::VectorXd thermal_drift_column(const KinematicProblem& P, int axis, double tau);
+
+// The wavenumber (1/m) of cyclic_error on `axis` that leaves the least RSS on
+// E: a grid over [kmin, kmax] at spacing dk (a quarter cycle over the stroke),
+// its three lowest local minima refined by golden section.
+double search_cyclic_wavenumber(const KinematicProblem& P, const Engine& E, int axis, double kmin, double kmax,
+                                double dk);
+// The time constant (s) of thermal_drift on `axis` in [lo, hi] that leaves
+// the least RSS on E: a log grid of 16 points refined by golden section.
+double search_thermal_time_constant(const KinematicProblem& P, const Engine& E, int axis, double lo, double hi);
+
+// What a candidate's fitter works on.
+struct KinematicCandidateContext {
+  const KinematicProblem& P;
+  const Engine& E;                      // the base refit (kinematic_linear_problem)
+  int axis;                             // 0..2
+  const kin::KinematicEffectInfo& info; // parameters, units, bounds
+  KinematicSpan span;
+};
+
+// What an effect's signature depends on besides the poses: the advice on
+// separating two candidates compares these.
+struct KinematicSignature {
+  bool direction = false;  // the direction each axis last moved
+  bool time = false;       // the time of the sample
+  bool periodic = false;   // periodic in an axis' position
+};
+
+// The measurement that separates an effect from a base parameter it is
+// confounded with.
+enum class BaseSeparation : std::uint8_t {
+  both_directions,  // approach the poses from both directions
+  is_base_scale,    // the effect is (or is confounded with) a scale of the base
+  other_times,      // repeat the poses at other times
+  spread_poses,     // spread the poses (and a second bar radius)
+};
+
+// One entry of the kinematic effect table.
+struct KinematicEffectFitter {
+  kin::KinematicEffectType type;
+  // Columns, nonlinear search and fit of the effect on ctx.axis jointly with
+  // the base; fills c (columns, params, rss, residual_after, confounded,
+  // identifiable, note). The common refusals (data lacking dir or t, the
+  // effect already in the model) are checked before.
+  void (*evaluate)(const KinematicCandidateContext& ctx, CandidateResult& c);
+  // Its parameter values from a joint fit of several effects: the
+  // coefficients of its columns start at fit.beta(at), their covariance is
+  // cov; v (in kin::get_params order) and c.params are updated. Throws Error
+  // for a value it refuses (a negative backlash).
+  void (*joint_values)(const JointFit& fit, int at, const Eigen::MatrixXd& cov, CandidateResult& c,
+                       std::array<double, 3>& v);
+  KinematicSignature signature;
+  BaseSeparation separation;
+};
+
+// The table's entry for an effect type, nullptr when it has none.
+const KinematicEffectFitter* kinematic_fitter(kin::KinematicEffectType type) noexcept;
+
+// Stage 4: every effect of the library (or of options.effects) on every axis,
+// evaluated on E and scored against the base refit; the actuator scales
+// judged at the model as given. In table order, axis by axis.
+std::vector<CandidateResult> evaluate_kinematic_candidates(const KinematicProblem& P, const Engine& E,
+                                                           const DiagnoseOptions& options);
+
+// The noise floor (m): the instrument's declared sigma, else the residual
+// sigma (dof-corrected) of the best description among the base refit and the
+// identifiable candidates.
+double kinematic_noise_floor(const KinematicProblem& P, const Engine& E, const std::vector<CandidateResult>& candidates);
+
+}  // namespace cpm::ident
