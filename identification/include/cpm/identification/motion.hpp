@@ -24,6 +24,10 @@
 //
 // Rows of every vector and matrix below: 3 per kept sample, row 3 r + i for
 // axis i (0..2).
+//
+// prepare_motion runs it in stages (identification/src/motion_stages.hpp):
+// sampling and segments; noise and acceleration source; the per-sample state;
+// the kept rows; the base columns, the model force and the residual.
 #pragma once
 
 #include <array>
