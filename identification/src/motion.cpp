@@ -58,12 +58,14 @@ Eigen::VectorXd MotionProblem::force_gain_column(int axis) const {
   return c;
 }
 
-Eigen::VectorXd MotionProblem::force_delayed(double tau) const {
+Eigen::VectorXd MotionProblem::at_delay(const Eigen::MatrixXd& at_shift, double tau, double dt) {
   const double x = std::clamp(tau / dt, double(kShiftLo), double(kShiftHi)) - kShiftLo;
   const int n = std::min(static_cast<int>(std::floor(x)), kShiftHi - kShiftLo - 1);
   const double phi = x - n;
-  return (1.0 - phi) * force_at_shift.col(n) + phi * force_at_shift.col(n + 1);
+  return (1.0 - phi) * at_shift.col(n) + phi * at_shift.col(n + 1);
 }
+
+Eigen::VectorXd MotionProblem::force_delayed(double tau) const { return at_delay(force_at_shift, tau, dt); }
 
 Eigen::VectorXd MotionProblem::force_delay_slope(double tau) const {
   // Central over one period around tau: the piecewise-linear interpolation
