@@ -27,13 +27,6 @@ Alignment estimate_alignment(const MotionProblem& P, const Engine& E) {
   for (int q = 0; q < ns; ++q) Y.col(q) = P.force_at_shift.col(q) - P.model_force;
   const Eigen::MatrixXd e = E.project_off_base(Y);
   // RSS in the bracket [n, n+1]: |e_n + phi (e_n+1 - e_n)|^2, a parabola in phi.
-  auto rss_at = [&](double tau) {
-    const double x = std::clamp(tau / P.dt, double(MotionProblem::kShiftLo), double(MotionProblem::kShiftHi)) -
-                     MotionProblem::kShiftLo;
-    const int q = std::min(static_cast<int>(std::floor(x)), ns - 2);
-    const double phi = x - q;
-    return ((1.0 - phi) * e.col(q) + phi * e.col(q + 1)).squaredNorm();
-  };
   double best = 1e300, best_tau = 0.0, curvature = 0.0;
   for (int q = 0; q + 1 < ns; ++q) {
     const Eigen::VectorXd d = e.col(q + 1) - e.col(q);
@@ -50,18 +43,11 @@ Alignment estimate_alignment(const MotionProblem& P, const Engine& E) {
   A.tau = best_tau;
   A.rss_at_tau = best;
   A.reference = A.model_tau + std::clamp(A.tau - A.model_tau, -0.5 * P.dt, 0.5 * P.dt);
-  A.rss_at_reference = rss_at(A.reference);
+  A.rss_at_reference = MotionProblem::at_delay(e, A.reference, P.dt).squaredNorm();
   // Standard error from the parabola's curvature, with the residual's variance
   // per effective row (rows of a filtered residual are not independent).
   const double n = static_cast<double>(e.rows());
-  Eigen::VectorXd r_best = e.col(0);
-  {
-    const double xx = A.tau / P.dt - MotionProblem::kShiftLo;
-    const int q = std::min(static_cast<int>(std::floor(xx)), ns - 2);
-    const double phi = xx - q;
-    r_best = (1.0 - phi) * e.col(q) + phi * e.col(q + 1);
-  }
-  A.n_eff = E.effective_rows(r_best);
+  A.n_eff = E.effective_rows(MotionProblem::at_delay(e, A.tau, P.dt));
   const double k = E.base_rank() + 1;
   const double s2 = best / std::max(1.0, n - k) * (n / std::max(A.n_eff, 1.0));
   A.std_error = curvature > 0.0 ? P.dt * std::sqrt(s2 / curvature) : -1.0;

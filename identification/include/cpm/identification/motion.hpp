@@ -24,6 +24,10 @@
 //
 // Rows of every vector and matrix below: 3 per kept sample, row 3 r + i for
 // axis i (0..2).
+//
+// prepare_motion runs it in stages (identification/src/motion_stages.hpp):
+// sampling and segments; noise and acceleration source; the per-sample state;
+// the kept rows; the base columns, the model force and the residual.
 #pragma once
 
 #include <array>
@@ -120,6 +124,10 @@ struct MotionProblem {
   Eigen::MatrixXd force_at_shift; // 3R x (kShiftHi - kShiftLo + 1): g times the filtered force delayed n periods
   double delay = 0.0;             // s: the alignment the residual uses
   double delay_model = 0.0;       // s: the model's own actuation_delay
+  // A quantity given at every whole shift (columns kShiftLo..kShiftHi, as
+  // force_at_shift or anything linear in it) at tau (s): linear between whole
+  // periods dt (s), tau clamped to the range.
+  [[nodiscard]] static Eigen::VectorXd at_delay(const Eigen::MatrixXd& at_shift, double tau, double dt);
   // g F filtered and delayed by tau (s), 3 rows per kept row; and its derivative in tau (N/s).
   [[nodiscard]] Eigen::VectorXd force_delayed(double tau) const;
   [[nodiscard]] Eigen::VectorXd force_delay_slope(double tau) const;
