@@ -7,6 +7,7 @@
 #include <numbers>
 
 #include "candidates.hpp"
+#include "effect_search.hpp"
 #include "internal.hpp"
 
 namespace cpm::ident::detail {
@@ -86,27 +87,17 @@ Periodogram cogging_periodogram(const CandidateContext& ctx, double k_min, doubl
 }
 
 std::vector<int> periodogram_peaks(const std::vector<double>& power, std::size_t n) {
-  const int K = static_cast<int>(power.size());
-  std::vector<int> peaks;
-  for (int q = 0; q < K; ++q)
-    if ((q == 0 || power[q] >= power[q - 1]) && (q == K - 1 || power[q] >= power[q + 1])) peaks.push_back(q);
-  std::sort(peaks.begin(), peaks.end(), [&](int a, int b) { return power[a] > power[b]; });
-  if (peaks.size() > n) peaks.resize(n);
-  return peaks;
+  std::vector<double> negated(power.size());
+  for (std::size_t q = 0; q < power.size(); ++q) negated[q] = -power[q];
+  return lowest_local_minima(negated, n);
 }
 
 double refine_cogging_wavelength(const CandidateContext& ctx, const Periodogram& pg, const std::vector<int>& peaks,
                                  double k_max) {
   const double k_min = pg.k_min, dk = pg.dk;
-  double best = 1e300, blam = 1.0 / (k_min + (peaks.empty() ? 0 : peaks[0]) * dk);
-  for (int q : peaks) {
-    const double k0 = k_min + q * dk;
-    double fb = 0.0;
-    const double kk = golden([&](double kx) { return ctx.E.rss(cogging_columns(ctx, 1.0 / kx)); },
-                             std::max(k_min, k0 - dk), std::min(k_max, k0 + dk), 12, fb);
-    if (fb < best) { best = fb; blam = 1.0 / kk; }
-  }
-  return blam;
+  const double k = refine_grid_minima([&](double kx) { return ctx.E.rss(cogging_columns(ctx, 1.0 / kx)); }, peaks,
+                                      {}, k_min, dk, k_min, k_max, 12, k_min + (peaks.empty() ? 0 : peaks[0]) * dk);
+  return 1.0 / k;
 }
 
 // Wavenumbers 1/span apart give nearly independent columns.

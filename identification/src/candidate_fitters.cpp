@@ -6,6 +6,7 @@
 #include <cmath>
 
 #include "candidates.hpp"
+#include "effect_search.hpp"
 #include "internal.hpp"
 
 namespace cpm::ident::detail {
@@ -106,18 +107,7 @@ double search_stribeck_speed(const CandidateContext& ctx, double lo, double hi) 
     const JointFit f = ctx.E.fit(stribeck_column(ctx, std::exp(logvs)));
     return f.beta(0) >= 0.0 ? f.rss : ctx.E.rss_base();
   };
-  const int G = 16;
-  double best = 1e300, bx = std::log(lo);
-  const double step = (std::log(hi) - std::log(lo)) / (G - 1);
-  for (int g = 0; g < G; ++g) {
-    const double x = std::log(lo) + g * step;
-    const double v = cost(x);
-    if (v < best) { best = v; bx = x; }
-  }
-  double fb = 0.0;
-  const double xr = golden(cost, std::max(std::log(lo), bx - step), std::min(std::log(hi), bx + step), 12, fb);
-  if (fb < best) bx = xr;
-  return std::exp(bx);
+  return std::exp(grid_then_golden(cost, std::log(lo), std::log(hi), 16, 12, std::log(lo)));
 }
 
 // Speeds a factor of 3 apart give nearly independent columns.

@@ -2,6 +2,7 @@
 // to evaluate a candidate (evaluate_dynamic_candidate), and what the fitters
 // share: recording a fit, its confounding with the base, the excitation.
 #include "candidates.hpp"
+#include "effect_search.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -32,21 +33,13 @@ constexpr CandidateFitting kFitting[ctl::kDynamicEffectTypes] = {
     {T::actuation_delay,   K::alignment,      nullptr,           false, false},
 };
 
-// The base parameter whose column is most like column j of the candidate.
-const std::string& closest_base_parameter(const CandidateContext& ctx, const Eigen::MatrixXd& cosines,
-                                          Eigen::Index j) {
-  Eigen::Index bi = 0;
-  cosines.row(j).cwiseAbs().maxCoeff(&bi);
-  return ctx.P.base_params[static_cast<std::size_t>(bi)].name;
-}
-
 // Columns (nearly) in the span of the base: the candidate is the base itself in these data.
 void flag_inside_base(const CandidateContext& ctx, CandidateResult& c, const Eigen::MatrixXd& X,
                       const Eigen::MatrixXd& cosines) {
   c.identifiable = false;
   std::string with;
   if (cosines.cols())
-    for (Eigen::Index j = 0; j < X.cols(); ++j) with = closest_base_parameter(ctx, cosines, j);
+    for (Eigen::Index j = 0; j < X.cols(); ++j) with = most_alike_base(cosines, j, ctx.E.problem().base_names);
   c.note = "in these data it cannot be told apart from the base model" +
            (with.empty() ? std::string() : " (parameter " + with + ")");
 }
@@ -54,18 +47,12 @@ void flag_inside_base(const CandidateContext& ctx, CandidateResult& c, const Eig
 // The base parameters each column is confounded with (R^2 with the base >= 0.81).
 void add_base_confounders(const CandidateContext& ctx, CandidateResult& c, const Eigen::VectorXd& share,
                           const Eigen::MatrixXd& cosines) {
-  for (Eigen::Index j = 0; j < share.size(); ++j) {
-    if (share(j) < 0.81 || cosines.cols() == 0) continue;
-    Confounder cf;
-    cf.with = closest_base_parameter(ctx, cosines, j);
-    cf.correlation = std::sqrt(share(j));
-    cf.separate_by = ctx.effect.depends_on.direction && ctx.axis >= 0 && ctx.ex.one_way[ctx.axis]
-                         ? "move axis " + std::to_string(ctx.axis + 1) + " in both directions"
-                         : "vary the accelerations, speeds and poses more widely";
-    bool dup = false;
-    for (const auto& o : c.confounded) dup |= o.with == cf.with;
-    if (!dup) c.confounded.push_back(cf);
-  }
+  const std::string advice = ctx.effect.depends_on.direction && ctx.axis >= 0 && ctx.ex.one_way[ctx.axis]
+                                 ? "move axis " + std::to_string(ctx.axis + 1) + " in both directions"
+                                 : "vary the accelerations, speeds and poses more widely";
+  for (Confounder& cf : base_confounders(share, cosines, ctx.E.problem().base_names,
+                                         [&](const std::string&) { return advice; }))
+    c.confounded.push_back(std::move(cf));
 }
 
 bool already_in_model(const ctl::MachineModel& model, const ctl::DynamicEffectInfo& in, int axis) {
@@ -123,20 +110,6 @@ AxisExcitation excitation(const MotionProblem& P) {
     x.one_way[i] = plus + minus > 0 && std::min(plus, minus) < 0.02 * (plus + minus);
   }
   return x;
-}
-
-Eigen::MatrixXd hcat(std::initializer_list<Eigen::VectorXd> cols) {
-  Eigen::MatrixXd X(cols.begin()->size(), static_cast<Eigen::Index>(cols.size()));
-  Eigen::Index j = 0;
-  for (const auto& c : cols) X.col(j++) = c;
-  return X;
-}
-
-std::string fmt(double v, int prec) {
-  std::ostringstream os;
-  os.precision(prec);
-  os << v;
-  return os.str();
 }
 
 void set_not_identifiable(const CandidateContext& ctx, CandidateResult& c, const std::string& why) {

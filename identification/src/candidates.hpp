@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "cpm/identification/diagnose.hpp"
+#include "internal.hpp"
 
 namespace cpm::ident::detail {
 
@@ -101,10 +102,6 @@ void record_base_after(const CandidateContext& ctx, CandidateResult& c, const Jo
 // with the base.
 void record_fit(const CandidateContext& ctx, CandidateResult& c, const Eigen::MatrixXd& X, const JointFit& f,
                 const Eigen::MatrixXd& jac, const std::vector<double>& values, bool with_base);
-// Columns side by side.
-Eigen::MatrixXd hcat(std::initializer_list<Eigen::VectorXd> cols);
-// A number for a note ("0.123").
-std::string fmt(double v, int prec = 3);
 
 // One column fitted with the base refitted, its coefficient held within
 // [lower, upper]: at a bound the column is fixed there and only the base is

@@ -10,15 +10,6 @@
 #include "internal.hpp"
 
 namespace cpm::ident::detail {
-namespace {
-std::string fmt(double v, int prec = 3) {
-  std::ostringstream os;
-  os.precision(prec);
-  os << v;
-  return os.str();
-}
-}  // namespace
-
 std::string amount(double v, const std::string& units) {
   if (units == "m") return fmt(v * 1e6, 3) + " µm";
   return fmt(v, 3) + " " + units;

@@ -1,9 +1,8 @@
 // Pieces of a candidate effect's evaluation that do not depend on the kind of
 // data (not a public header): the searches of a nonlinear parameter (a
 // wavelength, a time constant, a speed) and the base parameters a candidate's
-// columns are confounded with. The kinematic side uses them; the motion side
-// (diagnose.cpp: the cogging wavelength, the Stribeck speed, its confounders)
-// holds the same logic written out and could call these.
+// columns are confounded with. Both sides use them: the kinematic effects and
+// the motion side's cogging wavelength and Stribeck speed (candidate_*.cpp).
 #pragma once
 
 #include <algorithm>
@@ -16,14 +15,6 @@
 #include "internal.hpp"
 
 namespace cpm::ident::detail {
-
-// Columns side by side.
-inline Eigen::MatrixXd hcat(std::initializer_list<Eigen::VectorXd> cols) {
-  Eigen::MatrixXd X(cols.begin()->size(), static_cast<Eigen::Index>(cols.size()));
-  Eigen::Index j = 0;
-  for (const auto& c : cols) X.col(j++) = c;
-  return X;
-}
 
 // Indices of the local minima of v (each no higher than its neighbours), the
 // lowest first, at most n of them.

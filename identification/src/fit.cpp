@@ -93,9 +93,9 @@ ctl::MachineModel take_out_requested(const ctl::MachineModel& model, const std::
   ctl::MachineModel work = model;
   for (const auto& r : requests) {
     check_effect_for_kind(r.effect, "motion");
-    const bool before = work.effects.size();
+    const std::size_t before = work.effects.size();
     work = without(work, r);
-    if (before && work.effects.size() < model.effects.size())
+    if (work.effects.size() < before)
       notes.push_back(r.effect + (r.axis >= 0 ? "[axis " + std::to_string(r.axis + 1) + "]" : "") +
                       " was in the model: refitted from scratch");
   }

@@ -4,12 +4,30 @@
 #include <algorithm>
 #include <cmath>
 #include <functional>
+#include <initializer_list>
+#include <sstream>
 #include <string>
 
 #include "cpm/identification/diagnose.hpp"
 #include "cpm/identification/stats.hpp"
 
 namespace cpm::ident::detail {
+
+// Columns side by side.
+inline Eigen::MatrixXd hcat(std::initializer_list<Eigen::VectorXd> cols) {
+  Eigen::MatrixXd X(cols.begin()->size(), static_cast<Eigen::Index>(cols.size()));
+  Eigen::Index j = 0;
+  for (const auto& c : cols) X.col(j++) = c;
+  return X;
+}
+
+// A number for a note or a verdict ("0.123").
+inline std::string fmt(double v, int prec = 3) {
+  std::ostringstream os;
+  os.precision(prec);
+  os << v;
+  return os.str();
+}
 
 // Golden-section minimum of f on [a, b] (f unimodal there, or close to it).
 template <class F>

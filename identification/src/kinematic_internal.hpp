@@ -10,15 +10,11 @@
 #include <vector>
 
 #include "cpm/identification/kinematic_stages.hpp"
+#include "internal.hpp"
 
 namespace cpm::ident::kinematic_detail {
 
-inline std::string fmt(double v, int prec = 3) {
-  std::ostringstream os;
-  os.precision(prec);
-  os << v;
-  return os.str();
-}
+using detail::fmt;
 
 // "file:line" of sample j (or "file (sample j+1)").
 std::string where(const KinematicProblem& P, int j);
