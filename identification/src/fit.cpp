@@ -93,7 +93,7 @@ ctl::MachineModel take_out_requested(const ctl::MachineModel& model, const std::
   ctl::MachineModel work = model;
   for (const auto& r : requests) {
     check_effect_for_kind(r.effect, "motion");
-    const std::size_t before = work.effects.size();
+    const auto before = work.effects.size();
     work = without(work, r);
     if (work.effects.size() < before)
       notes.push_back(r.effect + (r.axis >= 0 ? "[axis " + std::to_string(r.axis + 1) + "]" : "") +
