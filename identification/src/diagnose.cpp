@@ -350,7 +350,8 @@ void select_effects(Diagnosis& D, const Engine& E, const ctl::MachineModel& mode
 // Stage "outside the library" (outside.cpp): strong structure left leads the
 // verdict, and the selection is redone with it fitted beside the library.
 // Rescanned after each reselection (a narrow bump leaves some of itself
-// beside the bin that describes it), three rounds at most.
+// beside the bin that describes it), three rounds at most; then only the
+// findings that stay strong with the others fitted are kept.
 void look_outside_library(Diagnosis& D, const Engine& E, const ctl::MachineModel& model, const DiagnoseOptions& opt) {
   std::optional<Engine> Es;
   for (int round = 0; round < 3; ++round) {
@@ -360,6 +361,15 @@ void look_outside_library(Diagnosis& D, const Engine& E, const ctl::MachineModel
     Es.emplace(detail::with_structure(E.problem(), D.outside_library, D.motion));
     for (auto& c : D.candidates) c.alternatives.clear();
     select_effects(D, *Es, model, opt);
+  }
+  if (Es) {
+    std::vector<StructureFinding> kept = detail::confirmed_outside_library(D, E, opt);
+    if (kept.size() < D.outside_library.size()) {
+      D.outside_library = std::move(kept);
+      Es.emplace(detail::with_structure(E.problem(), D.outside_library, D.motion));
+      for (auto& c : D.candidates) c.alternatives.clear();
+      select_effects(D, *Es, model, opt);
+    }
   }
   detail::lead_with_outside_library(D);
 }

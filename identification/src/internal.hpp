@@ -58,6 +58,8 @@ inline bool is_base_refit(const std::string& effect) { return effect == "inertia
 // A base direction: its signature lies in the span of the rigid-body base, so
 // it is judged against the model as given (off the nuisance only), where the
 // base does not absorb the others.
+// A drive's gain on one axis (force_gain).
+inline bool is_drive_gain(const std::string& effect) { return effect == "force_gain"; }
 inline bool is_base_direction(const std::string& effect) {
   return effect == "payload_mass" || is_base_refit(effect);
 }
@@ -107,6 +109,11 @@ std::string implausible(const CandidateResult& c);
 std::vector<StructureFinding> strong_structure(const Diagnosis& D, const MotionProblem& P, const DiagnoseOptions& opt);
 LinearProblem with_structure(const LinearProblem& L, const std::vector<StructureFinding>& S, const MotionProblem& P);
 void lead_with_outside_library(Diagnosis& D);
+// Of D.outside_library, the findings that the scan still finds strong when the
+// others are fitted beside the effects chosen: a large finding leaks into the
+// nuisance fit (a bump on z tilts the planes) and shows as structure
+// elsewhere, which is gone once the finding itself is fitted.
+std::vector<StructureFinding> confirmed_outside_library(const Diagnosis& D, const Engine& E, const DiagnoseOptions& opt);
 
 // The measurement that would separate two candidates.
 using SeparateAdvice = std::function<std::string(const CandidateResult&, const CandidateResult&)>;

@@ -82,6 +82,51 @@ LinearProblem with_structure(const LinearProblem& L, const std::vector<Structure
   return out;
 }
 
+namespace {
+
+// The same structure found again: same axis and kind, at the same place (a
+// bump or step within its width, a period within 10 %).
+bool same_finding(const StructureFinding& a, const StructureFinding& b) {
+  if (a.axis != b.axis || a.kind != b.kind || a.coordinate != b.coordinate) return false;
+  const double width = std::max({a.hi - a.lo, b.hi - b.lo, 1e-3});
+  if (a.kind == "bump" || a.kind == "step") return std::fabs(a.location - b.location) <= width;
+  if (a.kind == "periodic" || a.kind == "periodic_time")
+    return std::fabs(a.location - b.location) <= 0.1 * std::max(std::fabs(a.location), std::fabs(b.location));
+  return true;
+}
+
+// The residual of the effects chosen, fitted on E.
+Eigen::VectorXd residual_of_chosen(const Diagnosis& D, const Engine& E) {
+  Eigen::MatrixXd XS(E.rows(), 0);
+  bool base_in = false;
+  for (int j : D.found()) {
+    const CandidateResult& c = D.candidates[static_cast<std::size_t>(j)];
+    if (is_base_refit(c.effect)) base_in = true;
+    else if (!is_alignment(c.effect) && c.columns.rows() == E.rows()) XS = hstack(XS, c.columns);
+  }
+  return E.fit(XS, base_in).residual;
+}
+
+}  // namespace
+
+std::vector<StructureFinding> confirmed_outside_library(const Diagnosis& D, const Engine& E, const DiagnoseOptions& opt) {
+  const auto& all = D.outside_library;
+  if (all.size() < 2) return all;
+  std::vector<StructureFinding> kept;
+  for (std::size_t k = 0; k < all.size(); ++k) {
+    std::vector<StructureFinding> others;
+    for (std::size_t o = 0; o < all.size(); ++o)
+      if (o != k) others.push_back(all[o]);
+    Diagnosis probe;
+    probe.axis_noise = D.axis_noise;
+    probe.residual_final = residual_of_chosen(D, Engine(with_structure(E.problem(), others, D.motion)));
+    const std::vector<StructureFinding> again = strong_structure(probe, D.motion, opt);
+    if (std::any_of(again.begin(), again.end(), [&](const StructureFinding& f) { return same_finding(f, all[k]); }))
+      kept.push_back(all[k]);
+  }
+  return kept;
+}
+
 void lead_with_outside_library(Diagnosis& D) {
   if (D.outside_library.empty()) return;
   std::ostringstream os;

@@ -12,6 +12,7 @@
 // chosen: what a refit would absorb (a payload, a drive gain on z, a mass
 // error) is then a finding of its own instead of vanishing into it.
 #include <algorithm>
+#include <array>
 #include <cmath>
 
 #include "selection.hpp"
@@ -56,6 +57,23 @@ StepFit step_fit(const Engine& E, const DiagnoseOptions& opt, const Term& t, con
   return s;
 }
 
+// A drive gain on every axis with the base refitted is a scale of the whole
+// equation (g F = J^T (M p_dd + G p_dot + K) is homogeneous in the three gains
+// and A..E together): a fit along it shrinks the noise with the residual, and
+// nothing in motion data fixes it but a mass known beforehand. Such a term is
+// not tried.
+bool scales_whole_equation(const Diagnosis& D, const SelectionState& S, const Term& t) {
+  if (!(S.base_in || t.base)) return false;
+  std::array<bool, 3> gain{};
+  auto count = [&](int candidate) {
+    const CandidateResult& c = D.candidates[static_cast<std::size_t>(candidate)];
+    if (is_drive_gain(c.effect) && c.axis >= 0) gain[static_cast<std::size_t>(c.axis)] = true;
+  };
+  for (int j : S.chosen) count(j);
+  count(t.candidate);
+  return gain[0] && gain[1] && gain[2];
+}
+
 // Every term not chosen tried on top of the state (their statistics kept in
 // sel.last); the candidate with the lowest BIC change among those that pass, or -1.
 int best_next_term(const Diagnosis& D, const Engine& E, const DiagnoseOptions& opt, const std::vector<Term>& terms,
@@ -68,6 +86,10 @@ int best_next_term(const Diagnosis& D, const Engine& E, const DiagnoseOptions& o
   for (const Term& t : terms) {
     if (sel.state.has(t.candidate)) continue;
     const auto j = static_cast<std::size_t>(t.candidate);
+    if (scales_whole_equation(D, sel.state, t)) {
+      sel.last[j] = StepFit{};
+      continue;
+    }
     sel.last[j] = step_fit(E, opt, t, D.candidates[j], sel.state, remaining);
     if (sel.last[j].ok && (best < 0 || sel.last[j].dbic < sel.last[static_cast<std::size_t>(best)].dbic))
       best = t.candidate;

@@ -101,12 +101,13 @@ struct MotionProblem {
   int past_gap = 0;                // samples between the earlier ones and the row's sample
   int future_gap = 0;              // samples between the row's sample and the later ones
   // Acceleration for the regressor columns (base, nuisance): the same
-  // estimate over a 4x longer kernel. The residual carries -M times the
+  // estimate over a 6x longer kernel. The residual carries -M times the
   // noise of `a`; a column built on `a` would carry the same noise and bias
   // (attenuate) the inertia it fits, and a clean column correlated with the
   // acceleration (the force, a spring on an axis that moves sinusoidally)
   // would then look significant in its place. The long estimate's noise
-  // shares ~(1/4)^3 of that covariance; for motion below a few Hz its
+  // shares ~(1/6)^3 of that covariance (of a disturbance in the plant, real
+  // acceleration both estimates average, about 1/6); for motion below a few Hz its
   // signal is the same.
   std::vector<Vec3> a_columns;    // m/s^2
   std::vector<Vec3> platform_force;  // model's M p_dd + G p_dot + K at the row, with a_columns (N)
