@@ -5,16 +5,30 @@
 //   cpm_robustness [--seeds N] [--first-seed K] [--rates 250,1000,4000] [--timings sampled,zoh,delay1,delay1_5]
 //                  [--noise plant,command] [--effects viscous_friction,...|none] [--multiples 3,10]
 //                  [--no-null] [--duration S] [--threads N] [--json FILE] [--write-logs DIR]
-//                  [--quick] [--check] [--estimate] [--quiet]
+//                  [--combos 2,3] [--quick] [--quick-combos] [--check] [--estimate] [--quiet]
 //
 // --quick   the reduced matrix of the ctest identification.robustness_quick:
 //           one seed, 1000 and 250 Hz, every timing and noise placement,
 //           null + viscous, Coulomb and force gain at 10x, 15 s logs
 //           (options after --quick override it).
+// --combos N,...  combination logs instead: per seed, cell and size N one log
+//           with N effects planted at once (a separable combination chosen
+//           from the seed, matrix.cpp kInseparable), at --multiples (default
+//           10); scored on all planted named and phantoms, then the loop
+//           (ident::run_loop) from the nominal model: its waterfall, and
+//           whether it ends within 20 % of the noise floor.
+// --quick-combos  the reduced matrix of the ctest
+//           identification.robustness_combos_quick: one seed, 1000 and 250 Hz,
+//           zoh and delay1, both noise placements, combos 2 and 3 at 10x,
+//           15 s logs (options after it override it).
 // --check   exit 1 unless every planted effect is named, every null log is
-//           clean and phantoms stay <= 1 in 50 logs in every cell.
+//           clean and phantoms stay <= 1 in 50 logs in every cell; with
+//           --combos, unless in every cell all planted are named and the loop
+//           ends within 20 % of the floor in >= 95 % of the logs and phantoms
+//           stay <= 1 in 50 named.
 // --estimate  time one log (generate + diagnose) at each selected rate and
 //           print how long the selected matrix would take; run nothing else.
+#include <array>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
@@ -51,12 +65,13 @@ int usage(const char* msg) {
                "%s\nusage: cpm_robustness [--seeds N] [--first-seed K] [--rates 250,1000,4000] "
                "[--timings sampled,zoh,delay1,delay1_5] [--noise plant,command] [--effects NAME,...|none] "
                "[--multiples 3,10] [--no-null] [--duration S] [--threads N] [--json FILE] [--write-logs DIR] "
-               "[--quick] [--check] [--estimate] [--quiet]\n",
+               "[--combos 2,3] [--quick] [--quick-combos] [--check] [--estimate] [--quiet]\n",
                msg);
   return 2;
 }
 
 int logs_per_cell(const MatrixOptions& o) {
+  if (!o.combos.empty()) return static_cast<int>(o.combos.size() * o.multiples.size());
   const std::size_t ne = o.effects.empty() ? dynamic_library().size() : o.effects.size();
   return (o.nulls ? 1 : 0) + static_cast<int>(ne * o.multiples.size());
 }
@@ -96,58 +111,146 @@ void estimate(const MatrixOptions& o) {
   }
   std::printf("\nestimated wall time of the selected matrix: %.1f min (%d seeds, %.0f s logs)\n", total / 60.0,
               o.seeds, o.duration);
+  if (!o.combos.empty())
+    std::printf("combination logs also run the loop: about N + 1 more diagnoses and N fits each (not included)\n");
+}
+
+// What the command line asks beyond the matrix itself.
+struct Flags {
+  std::string json_path;
+  bool check = false, estimate = false, quiet = false, help = false;
+  bool multiples_given = false;
+};
+
+// The presets: options given after them override them.
+void quick(MatrixOptions& o) {
+  o.seeds = 1;
+  o.rates = {1000.0, 250.0};
+  o.effects = {"viscous_friction", "coulomb_friction", "force_gain"};
+  o.multiples = {10.0};
+  o.duration = 15.0;  // keeps the ctest under 3 min on one core
+}
+void quick_combos(MatrixOptions& o) {
+  o.seeds = 1;
+  o.rates = {1000.0, 250.0};
+  o.timings = {Timing::zoh, Timing::delay1};
+  o.combos = {2, 3};
+  o.duration = 15.0;  // keeps the ctest at about 2 min on one core
+}
+
+// One option (and its value) at argv[i]; false when it is unknown.
+bool parse_option(int argc, char** argv, int& i, MatrixOptions& o, Flags& f) {
+  const std::string a = argv[i];
+  auto value = [&]() -> std::string {
+    if (i + 1 >= argc) throw cpm::Error(a + " needs a value");
+    return argv[++i];
+  };
+  if (a == "--seeds") o.seeds = std::stoi(value());
+  else if (a == "--first-seed") o.first_seed = std::stoi(value());
+  else if (a == "--rates") o.rates = numbers(value());
+  else if (a == "--timings") {
+    o.timings.clear();
+    for (const std::string& s : split(value())) o.timings.push_back(timing_from_name(s));
+  } else if (a == "--noise") {
+    o.noises.clear();
+    for (const std::string& s : split(value())) o.noises.push_back(noise_from_name(s));
+  } else if (a == "--effects") {
+    const std::string v = value();
+    o.effects = v == "none" ? std::vector<std::string>{"__none__"} : split(v);
+  } else if (a == "--multiples") o.multiples = numbers(value()), f.multiples_given = true;
+  else if (a == "--combos") {
+    o.combos.clear();
+    for (double n : numbers(value())) o.combos.push_back(static_cast<int>(n));
+  } else if (a == "--no-null") o.nulls = false;
+  else if (a == "--duration") o.duration = std::stod(value());
+  else if (a == "--threads") o.threads = std::stoi(value());
+  else if (a == "--json") f.json_path = value();
+  else if (a == "--write-logs") o.write_logs = value();
+  else if (a == "--quick") quick(o);
+  else if (a == "--quick-combos") quick_combos(o);
+  else if (a == "--check") f.check = true;
+  else if (a == "--estimate") f.estimate = true;
+  else if (a == "--quiet") f.quiet = true;
+  else if (a == "--help" || a == "-h") f.help = true;
+  else return false;
+  return true;
+}
+
+// The options after the command line: "" or what is wrong with them.
+std::string finish_options(MatrixOptions& o, const Flags& f) {
+  if (!o.combos.empty() && !f.multiples_given) o.multiples = {10.0};  // combinations: 10x unless asked
+  if (o.effects.size() == 1 && o.effects[0] == "__none__") {
+    o.effects.clear();
+    o.multiples.clear();
+  }
+  for (int n : o.combos)
+    if (n < 2) return "--combos takes sizes >= 2";
+  if (o.seeds < 1 || o.threads < 1 || !(o.duration > 0.0)) return "seeds, threads and duration must be > 0";
+  return "";
+}
+
+void print_progress(const LogResult& l, int done, int total) {
+  if (l.is_combo()) {
+    std::fprintf(stderr, "[%d/%d] %s (%.1f + %.1f + loop %.1f s)\n", done, total, combo_log_text(l).c_str(),
+                 l.generate_s, l.diagnose_s, l.loop_s);
+    return;
+  }
+  std::string named;
+  for (const NamedEffect& n : l.named) named += (named.empty() ? "" : ", ") + n.label();
+  std::fprintf(stderr, "[%d/%d] %s %s %.0f Hz seed %d %s%s%s: named {%s}%s%s (%.1f + %.1f s)\n", done, total,
+               timing_name(l.timing), noise_name(l.noise), l.rate, l.seed, l.planted.empty() ? "null" : l.planted.c_str(),
+               l.axis >= 0 ? ("[axis " + std::to_string(l.axis + 1) + "]").c_str() : "",
+               l.multiple > 0 ? (" x" + std::to_string(static_cast<int>(l.multiple))).c_str() : "", named.c_str(),
+               l.planted.empty() ? "" : (l.hit ? " HIT" : " MISS"), l.error.empty() ? "" : (" ERROR " + l.error).c_str(),
+               l.generate_s, l.diagnose_s);
+}
+
+// The table, each combination log's waterfall, the time per log.
+void print_report(const MatrixResult& r) {
+  std::printf("%s", markdown_table(r).c_str());
+  if (!r.options.combos.empty()) {
+    std::printf("\nwaterfalls (residual RMS of the model as given, then after each effect the loop added):\n");
+    for (const LogResult& l : r.logs) std::printf("  %s\n", combo_log_text(l).c_str());
+  }
+  std::map<double, std::array<double, 4>> t;  // rate -> generate, diagnose, loop, logs
+  for (const LogResult& l : r.logs) {
+    auto& x = t[l.rate];
+    x[0] += l.generate_s, x[1] += l.diagnose_s, x[2] += l.loop_s, x[3] += 1.0;
+  }
+  std::printf("\nper log (mean): ");
+  for (const auto& [rate, x] : t) {
+    std::printf("%.0f Hz generate %.2f s + diagnose %.2f s", rate, x[0] / x[3], x[1] / x[3]);
+    if (!r.options.combos.empty()) std::printf(" + loop %.2f s", x[2] / x[3]);
+    std::printf("; ");
+  }
+  std::printf("\nwall time %.1f s\n", r.wall_s);
+}
+
+int check_thresholds(const MatrixResult& r) {
+  const auto fails = threshold_failures(r);
+  if (fails.empty()) {
+    std::printf("\nPASS: every cell meets the thresholds\n");
+    return 0;
+  }
+  std::printf("\nFAIL: %zu of %zu cells miss the thresholds (%s):\n", fails.size(), r.cells.size(),
+              r.options.combos.empty() ? "planted named, null clean, phantoms <= 1 in 50"
+                                       : "all planted named and loop within 20 % of the floor in >= 95 % of the logs, "
+                                         "phantoms <= 1 in 50 named");
+  for (const std::string& s : fails) std::printf("  %s\n", s.c_str());
+  return 1;
 }
 
 }  // namespace
 
 int main(int argc, char** argv) {
   MatrixOptions o;
-  std::string json_path;
-  bool check = false, do_estimate = false, quiet = false;
+  Flags f;
   try {
-    for (int i = 1; i < argc; ++i) {
-      const std::string a = argv[i];
-      auto value = [&]() -> std::string {
-        if (i + 1 >= argc) throw cpm::Error(a + " needs a value");
-        return argv[++i];
-      };
-      if (a == "--seeds") o.seeds = std::stoi(value());
-      else if (a == "--first-seed") o.first_seed = std::stoi(value());
-      else if (a == "--rates") o.rates = numbers(value());
-      else if (a == "--timings") {
-        o.timings.clear();
-        for (const std::string& s : split(value())) o.timings.push_back(timing_from_name(s));
-      } else if (a == "--noise") {
-        o.noises.clear();
-        for (const std::string& s : split(value())) o.noises.push_back(noise_from_name(s));
-      } else if (a == "--effects") {
-        const std::string v = value();
-        o.effects = v == "none" ? std::vector<std::string>{"__none__"} : split(v);
-      } else if (a == "--multiples") o.multiples = numbers(value());
-      else if (a == "--no-null") o.nulls = false;
-      else if (a == "--duration") o.duration = std::stod(value());
-      else if (a == "--threads") o.threads = std::stoi(value());
-      else if (a == "--json") json_path = value();
-      else if (a == "--write-logs") o.write_logs = value();
-      else if (a == "--quick") {
-        o.seeds = 1;
-        o.rates = {1000.0, 250.0};
-        o.effects = {"viscous_friction", "coulomb_friction", "force_gain"};
-        o.multiples = {10.0};
-        o.duration = 15.0;  // keeps the ctest under 3 min on one core
-      } else if (a == "--check") check = true;
-      else if (a == "--estimate") do_estimate = true;
-      else if (a == "--quiet") quiet = true;
-      else if (a == "--help" || a == "-h") return usage("");
-      else return usage(("unknown option " + a).c_str());
-    }
-    if (o.effects.size() == 1 && o.effects[0] == "__none__") {
-      o.effects.clear();
-      o.multiples.clear();
-    }
-    if (o.seeds < 1 || o.threads < 1 || !(o.duration > 0.0)) return usage("seeds, threads and duration must be > 0");
-
-    if (do_estimate) {
+    for (int i = 1; i < argc; ++i)
+      if (!parse_option(argc, argv, i, o, f)) return usage(("unknown option " + std::string(argv[i])).c_str());
+    if (f.help) return usage("");
+    if (const std::string bad = finish_options(o, f); !bad.empty()) return usage(bad.c_str());
+    if (f.estimate) {
       estimate(o);
       return 0;
     }
@@ -156,45 +259,15 @@ int main(int argc, char** argv) {
                  o.rates.size(), o.timings.size(), o.noises.size(), logs_per_cell(o), o.seeds, o.seeds > 1 ? "s" : "",
                  o.duration, o.threads, o.threads > 1 ? "s" : "");
     const MatrixResult r = run_matrix(o, [&](const LogResult& l, int done, int total) {
-      if (quiet) return;
-      std::string named;
-      for (const NamedEffect& n : l.named) named += (named.empty() ? "" : ", ") + n.label();
-      std::fprintf(stderr, "[%d/%d] %s %s %.0f Hz seed %d %s%s%s: named {%s}%s%s (%.1f + %.1f s)\n", done, total,
-                   timing_name(l.timing), noise_name(l.noise), l.rate, l.seed,
-                   l.planted.empty() ? "null" : l.planted.c_str(),
-                   l.axis >= 0 ? ("[axis " + std::to_string(l.axis + 1) + "]").c_str() : "",
-                   l.multiple > 0 ? (" x" + std::to_string(static_cast<int>(l.multiple))).c_str() : "", named.c_str(),
-                   l.planted.empty() ? "" : (l.hit ? " HIT" : " MISS"), l.error.empty() ? "" : (" ERROR " + l.error).c_str(),
-                   l.generate_s, l.diagnose_s);
+      if (!f.quiet) print_progress(l, done, total);
     });
-    std::printf("%s", markdown_table(r).c_str());
-    // Per-log time at each rate, as measured in this run.
-    std::map<double, std::pair<double, int>> gen, diag;
-    for (const LogResult& l : r.logs) {
-      gen[l.rate].first += l.generate_s, ++gen[l.rate].second;
-      diag[l.rate].first += l.diagnose_s, ++diag[l.rate].second;
+    print_report(r);
+    if (!f.json_path.empty()) {
+      std::ofstream out(f.json_path);
+      out << to_json(r);
+      if (!out) throw cpm::Error("cannot write " + f.json_path);
     }
-    std::printf("\nper log (mean): ");
-    for (const auto& [rate, g] : gen)
-      std::printf("%.0f Hz generate %.2f s + diagnose %.2f s; ", rate, g.first / g.second,
-                  diag[rate].first / diag[rate].second);
-    std::printf("\nwall time %.1f s\n", r.wall_s);
-    if (!json_path.empty()) {
-      std::ofstream f(json_path);
-      f << to_json(r);
-      if (!f) throw cpm::Error("cannot write " + json_path);
-    }
-    if (check) {
-      const auto fails = threshold_failures(r);
-      if (!fails.empty()) {
-        std::printf("\nFAIL: %zu of %zu cells miss the thresholds (planted named, null clean, phantoms <= 1 in 50):\n",
-                    fails.size(), r.cells.size());
-        for (const std::string& s : fails) std::printf("  %s\n", s.c_str());
-        return 1;
-      }
-      std::printf("\nPASS: every cell meets the thresholds\n");
-    }
-    return 0;
+    return f.check ? check_thresholds(r) : 0;
   } catch (const std::exception& e) {
     std::fprintf(stderr, "cpm_robustness: %s\n", e.what());
     return 2;
