@@ -65,7 +65,7 @@ double motion_rms(const io::MotionData& data, const ctl::MachineModel& model, co
   MotionProblem P = prepare_motion(data, m, o);
   // The model as given may take the alignment within half a period of its own delay (align.hpp).
   P.set_delay(align_motion(data, m, o).reference);
-  return Engine::rms(P.residual);
+  return Engine::rms(Engine(nuisance_only(motion_linear_problem(P))).base_fit().residual);
 }
 
 namespace {
