@@ -81,10 +81,14 @@ std::vector<NamedEffect> named_effects(const ident::Diagnosis& D) {
     n.axis = c.axis;
     if (c.effect == "actuation_delay" && !c.params.empty()) n.tau = c.params[0].value;
     n.alternatives = c.alternatives;
+    for (const auto& q : c.params) {
+      n.values.push_back(q.value);
+      n.std_errors.push_back(q.std_error);
+    }
     out.push_back(std::move(n));
   };
   // Structure no library effect describes is a claim too (verdict.missing = "outside_library").
-  if (!D.outside_library.empty()) out.push_back({"outside_library", D.outside_library.front().axis, {}, {}});
+  if (!D.outside_library.empty()) out.push_back({"outside_library", D.outside_library.front().axis, {}, {}, {}, {}});
   if (D.verdict >= 0) take(D.verdict);
   for (int i : D.also) take(i);
   return out;
@@ -286,6 +290,23 @@ void score(LogResult& r, double period) {
   r.hit = !planted.empty() && r.planted_named == static_cast<int>(planted.size());
 }
 
+// amplitude_z of a single-effect log (LogResult).
+void record_amplitude_z(LogResult& r) {
+  if (r.planted.empty() || r.is_combo()) return;
+  const auto& lib = dynamic_library();
+  const auto e = std::find_if(lib.begin(), lib.end(), [&](const EffectShape& s) { return s.name == r.planted; });
+  if (e == lib.end()) return;
+  const std::vector<double> truth = planted_values(*e, r.amplitude);
+  std::size_t j = 0;
+  if (e->amp_index >= 0) j = static_cast<std::size_t>(e->amp_index);
+  else
+    for (std::size_t k = 1; k < e->shape.size(); ++k)
+      if (std::fabs(e->shape[k]) > std::fabs(e->shape[j])) j = k;
+  for (const NamedEffect& n : r.named)
+    if (n.effect == r.planted && n.axis == r.axis && j < n.values.size() && n.std_errors[j] > 0.0)
+      r.amplitude_z = (n.values[j] - truth[j]) / n.std_errors[j];
+}
+
 }  // namespace
 
 double LogResult::final_over_floor() const {
@@ -458,6 +479,7 @@ LogResult run_job(const Job& job, const MatrixOptions& o, const Context& ctx) {
     r.diagnose_s = seconds_since(t0);
     r.named = named_effects(D);
     score(r, 1.0 / r.rate);
+    record_amplitude_z(r);
     if (r.is_combo()) run_loop_on(r, g.log, o);
   } catch (const std::exception& ex) {
     r.error = ex.what();
@@ -671,6 +693,25 @@ std::vector<CellSummary> summarise(const std::vector<LogResult>& logs, const Mat
   return cells;
 }
 
+std::string amplitude_bias_table(const MatrixResult& r) {
+  std::map<std::pair<int, std::string>, std::vector<double>> z;  // (noise, effect) -> z of the logs
+  for (const LogResult& l : r.logs)
+    if (std::isfinite(l.amplitude_z)) z[{static_cast<int>(l.noise), l.planted}].push_back(l.amplitude_z);
+  std::ostringstream os;
+  os.precision(2);
+  os << std::fixed << "| noise | effect | logs | mean z | sd z | mean z / its s.e. |\n|---|---|---|---|---|---|\n";
+  for (const auto& [key, v] : z) {
+    const double n = static_cast<double>(v.size());
+    double m = 0.0, s2 = 0.0;
+    for (double x : v) m += x / n;
+    for (double x : v) s2 += (x - m) * (x - m) / std::max(1.0, n - 1.0);
+    const double sd = std::sqrt(s2), se = n > 1 ? sd / std::sqrt(n) : 0.0;
+    os << "| " << noise_name(static_cast<NoisePlacement>(key.first)) << " | " << key.second << " | " << v.size()
+       << " | " << m << " | " << sd << " | " << (se > 0.0 ? m / se : 0.0) << " |\n";
+  }
+  return os.str();
+}
+
 std::string markdown_table(const MatrixResult& r) {
   return r.options.combos.empty() ? single_table(r) : combo_table(r);
 }
@@ -746,7 +787,8 @@ std::string log_json(const LogResult& l) {
                  (std::isfinite(n.tau) ? ", \"tau\": " + json_num(n.tau) : std::string()) + "}";
         });
   os << ", \"hit\": " << (l.hit ? "true" : "false") << ", \"phantoms\": " << json_list(l.phantoms, json_str)
-     << ", \"tau_error_periods\": " << json_num(l.tau_error_periods) << ", \"error\": " << json_str(l.error)
+     << ", \"tau_error_periods\": " << json_num(l.tau_error_periods) << ", \"amplitude_z\": " << json_num(l.amplitude_z)
+     << ", \"error\": " << json_str(l.error)
      << ", \"generate_s\": " << json_num(l.generate_s) << ", \"diagnose_s\": " << json_num(l.diagnose_s);
   if (l.is_combo()) os << combo_json(l);
   return os.str() + "}";

@@ -40,6 +40,9 @@ struct NamedEffect {
   // Effects the verdict names beside it as explaining these data as well
   // (an ambiguous verdict); labels as label() writes them.
   std::vector<std::string> alternatives;
+  // Its parameters as the diagnosis gives them (effects.md order, SI) and
+  // their standard errors (< 0: not determined).
+  std::vector<double> values, std_errors;
   [[nodiscard]] std::string label() const;  // "viscous_friction[axis 2]" (axis 1-based), "payload_mass"
 };
 
@@ -112,6 +115,10 @@ struct LogResult {
   bool hit = false;
   std::vector<std::string> phantoms;  // labels of named effects that were not planted
   double tau_error_periods = std::numeric_limits<double>::quiet_NaN();  // |tau - true| / T when named
+  // The planted amplitude as the diagnosis estimates it, where the planted
+  // effect itself was named: (estimate - planted) / its standard error. NaN
+  // otherwise. (inertia_error, whose parameters scale together: its largest, dC.)
+  double amplitude_z = std::numeric_limits<double>::quiet_NaN();
   std::string error;             // the generator or the diagnosis threw
   double generate_s = 0.0, diagnose_s = 0.0;
   // A combination log: every effect planted (`planted` stays ""), how many of
@@ -174,6 +181,11 @@ std::string markdown_table(const MatrixResult& r);  // the combination table whe
 // One line for a combination log: planted, named, the waterfall and the floor.
 std::string combo_log_text(const LogResult& r);
 std::string to_json(const MatrixResult& r);
+// Per noise placement and effect, over the logs where the planted effect was
+// named: how many, the mean and spread of amplitude_z, and the mean's own
+// standard error: an unbiased estimate with honest standard errors has mean
+// z within ~2 of its standard error of 0 and spread ~1.
+std::string amplitude_bias_table(const MatrixResult& r);
 
 // The thresholds: every planted effect named, every null log clean,
 // phantoms <= 1 in 50 logs; in combination cells all planted named and the

@@ -208,6 +208,9 @@ void print_progress(const LogResult& l, int done, int total) {
 // The table, each combination log's waterfall, the time per log.
 void print_report(const MatrixResult& r) {
   std::printf("%s", markdown_table(r).c_str());
+  if (r.options.combos.empty())
+    std::printf("\nthe planted amplitude as estimated, z = (estimate - planted) / standard error, where named:\n%s",
+                amplitude_bias_table(r).c_str());
   if (!r.options.combos.empty()) {
     std::printf("\nwaterfalls (residual RMS of the model as given, then after each effect the loop added):\n");
     for (const LogResult& l : r.logs) std::printf("  %s\n", combo_log_text(l).c_str());
