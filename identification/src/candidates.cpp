@@ -21,16 +21,16 @@ using K = CandidateKind;
 // ctl::DynamicEffectType. A new effect type without its row here fails
 // candidate_fitting (and tests/identification/test_candidates.cpp).
 constexpr CandidateFitting kFitting[ctl::kDynamicEffectTypes] = {
-    // type                kind               fitter             in_alignment_columns  steady_on_one_way_axis
-    {T::viscous_friction,  K::column,         fit_linear_column, true,  false},
-    {T::coulomb_friction,  K::column,         fit_linear_column, true,  true},
-    {T::stribeck_friction, K::column,         fit_stribeck,      false, false},
-    {T::cogging,           K::column,         fit_cogging,       false, false},
-    {T::spring,            K::column,         fit_spring,        false, true},
-    {T::force_gain,        K::column,         fit_linear_column, false, true},
-    {T::payload_mass,      K::base_direction, fit_payload,       false, false},
-    {T::inertia_error,     K::base_refit,     fit_base_refit,    false, false},
-    {T::actuation_delay,   K::alignment,      nullptr,           false, false},
+    // type                kind               fitter             in_alignment_columns  steady_on_one_way_axis  drive_gain
+    {T::viscous_friction,  K::column,         fit_linear_column, true,  false, false},
+    {T::coulomb_friction,  K::column,         fit_linear_column, true,  true, false},
+    {T::stribeck_friction, K::column,         fit_stribeck,      false, false, false},
+    {T::cogging,           K::column,         fit_cogging,       false, false, false},
+    {T::spring,            K::column,         fit_spring,        false, true, false},
+    {T::force_gain,        K::column,         fit_linear_column, false, true, true},
+    {T::payload_mass,      K::base_direction, fit_payload,       false, false, false},
+    {T::inertia_error,     K::base_refit,     fit_base_refit,    false, false, false},
+    {T::actuation_delay,   K::alignment,      nullptr,           false, false, false},
 };
 
 // Columns (nearly) in the span of the base: the candidate is the base itself in these data.
@@ -78,6 +78,30 @@ const ctl::DynamicEffectInfo& library_row(const std::string& effect) {
 }
 
 const CandidateFitting& candidate_fitting(const std::string& effect) { return candidate_fitting(library_row(effect).type); }
+
+namespace {
+const CandidateFitting* fitting_or_null(const std::string& effect) {
+  const auto t = ctl::dynamic_effect_from_name(effect);
+  return t ? &candidate_fitting(*t) : nullptr;
+}
+}  // namespace
+
+bool is_alignment(const std::string& effect) {
+  const auto* f = fitting_or_null(effect);
+  return f && f->kind == K::alignment;
+}
+bool is_base_refit(const std::string& effect) {
+  const auto* f = fitting_or_null(effect);
+  return f && f->kind == K::base_refit;
+}
+bool is_base_direction(const std::string& effect) {
+  const auto* f = fitting_or_null(effect);
+  return f && (f->kind == K::base_direction || f->kind == K::base_refit);
+}
+bool is_drive_gain(const std::string& effect) {
+  const auto* f = fitting_or_null(effect);
+  return f && f->drive_gain;
+}
 
 ctl::DynamicEffect CandidateContext::with(std::array<double, 4> p) const {
   ctl::DynamicEffect e;

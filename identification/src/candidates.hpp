@@ -67,6 +67,9 @@ struct CandidateFitting {
   // On an axis that moved one way only its force is a steady force, what a
   // tilted plane's share of the weight is too: such data cannot name it.
   bool steady_on_one_way_axis;
+  // A scale of the drive's force on its axis: on every axis, with the base
+  // refitted, a scale of the whole equation (select.cpp never fits that).
+  bool drive_gain;
 };
 
 // The library row of a dynamic effect's name (Error for a name outside the library).

@@ -50,19 +50,19 @@ double golden(F&& f, double a, double b, int iters, double& fbest) {
 
 // The roles effects of the library play in the stages, said once: an effect
 // that takes one of these roles is added here, not at every stage that asks.
+// They read the fitter table (candidates.cpp); false for a name outside the library.
 // The alignment itself (align.hpp): estimated with it, never a column of the selection.
-inline bool is_alignment(const std::string& effect) { return effect == "actuation_delay"; }
+bool is_alignment(const std::string& effect);
 // The base refit itself (A, B, C, E changed): no columns of its own; choosing
 // it in the selection refits the base.
-inline bool is_base_refit(const std::string& effect) { return effect == "inertia_error"; }
+bool is_base_refit(const std::string& effect);
 // A base direction: its signature lies in the span of the rigid-body base, so
 // it is judged against the model as given (off the nuisance only), where the
 // base does not absorb the others.
-// A drive's gain on one axis (force_gain).
-inline bool is_drive_gain(const std::string& effect) { return effect == "force_gain"; }
-inline bool is_base_direction(const std::string& effect) {
-  return effect == "payload_mass" || is_base_refit(effect);
-}
+bool is_base_direction(const std::string& effect);
+// A scale of the drive's force on its axis (force_gain): on every axis
+// together with the base refitted, a scale of the whole equation.
+bool is_drive_gain(const std::string& effect);
 
 // [a, b]: the columns of a and then of b (either may have none).
 inline Eigen::MatrixXd hstack(const Eigen::MatrixXd& a, const Eigen::MatrixXd& b) {
