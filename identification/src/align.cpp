@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstdio>
 
+#include "candidates.hpp"
 #include "cpm/identification/diagnose.hpp"
 
 namespace cpm::ident {
@@ -83,8 +84,11 @@ LinearProblem alignment_linear_problem(const MotionProblem& Pa) {
   // missing: a delay's signature (the force's slope) is the motion's jerk,
   // which on a sinusoidal axis is minus its velocity times omega^2; 1 N of
   // Coulomb friction left out moved the estimate by two periods.
+  // Which: the fitter table's in_alignment_columns (candidates.cpp).
   for (int i = 0; i < 3; ++i)
-    for (auto type : {ctl::DynamicEffectType::viscous_friction, ctl::DynamicEffectType::coulomb_friction}) {
+    for (int t = 0; t < ctl::kDynamicEffectTypes; ++t) {
+      const auto type = static_cast<ctl::DynamicEffectType>(t);
+      if (!detail::candidate_fitting(type).in_alignment_columns) continue;
       ctl::DynamicEffect e;
       e.type = type;
       e.axis = static_cast<std::int8_t>(i);
