@@ -71,6 +71,10 @@ std::string effect_label(const std::string& effect, int axis) {
 
 std::string NamedEffect::label() const { return effect_label(effect, axis); }
 
+bool names_planted(const NamedEffect& n, const std::string& planted) {
+  return n.label() == planted || std::find(n.alternatives.begin(), n.alternatives.end(), planted) != n.alternatives.end();
+}
+
 std::vector<NamedEffect> named_effects(const ident::Diagnosis& D) {
   std::vector<NamedEffect> out;
   auto take = [&](int i) {
@@ -265,11 +269,6 @@ std::vector<std::string> planted_labels(const LogResult& r) {
   return out;
 }
 
-// The planted effect named, or named as the alternative of an ambiguous verdict.
-bool names(const NamedEffect& n, const std::string& planted) {
-  return n.label() == planted || std::find(n.alternatives.begin(), n.alternatives.end(), planted) != n.alternatives.end();
-}
-
 // Score one diagnosed log against what was planted and the cell's convention:
 // each planted effect named or not, anything else named a phantom.
 void score(LogResult& r, double period) {
@@ -283,7 +282,7 @@ void score(LogResult& r, double period) {
     }
     bool any = false;
     for (std::size_t k = 0; k < planted.size(); ++k)
-      if (names(n, planted[k])) named[k] = any = true;
+      if (names_planted(n, planted[k])) named[k] = any = true;
     if (!any) r.phantoms.push_back(n.label());
   }
   r.planted_named = static_cast<int>(std::count(named.begin(), named.end(), true));

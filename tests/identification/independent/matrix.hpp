@@ -50,6 +50,9 @@ struct NamedEffect {
 // (D.candidates[D.verdict] when D.verdict >= 0) then D.candidates[i] for i
 // in D.also. Change only this when the Diagnosis API changes.
 std::vector<NamedEffect> named_effects(const ident::Diagnosis& D);
+// Whether n names the planted effect (its label): as itself, or as the
+// alternative of an ambiguous verdict.
+bool names_planted(const NamedEffect& n, const std::string& planted);
 
 // An effect of the dynamic library with its shape at unit amplitude.
 struct EffectShape {
