@@ -1,5 +1,5 @@
-// cpmd: the motion controller daemon. See docs/daemon.md.
-//   cpmd --config FILE [--check] [--duration S] [--stats-json FILE] [--loop-cpu N]
+// cpmd: the motion controller daemon. See docs/daemon.md and docs/security.md.
+//   cpmd --config FILE [--check] [--duration S] [--stats-json FILE] [--loop-cpu N] [--operators DIR]
 #include <fcntl.h>
 #include <signal.h>
 #include <unistd.h>
@@ -27,12 +27,14 @@ using namespace cpm::daemon;
 
 void usage() {
   std::fprintf(stderr,
-               "usage: cpmd --config FILE [--check] [--duration S] [--stats-json FILE] [--loop-cpu N]\n"
+               "usage: cpmd --config FILE [--check] [--duration S] [--stats-json FILE] [--loop-cpu N] [--operators DIR]\n"
                "  --config FILE      the daemon's YAML configuration (config/sim.yaml)\n"
                "  --check            validate the configuration and the model files, then exit\n"
                "  --duration S       run S seconds, then shut down (latency runs)\n"
                "  --stats-json FILE  at exit, write the loop statistics as JSON\n"
-               "  --loop-cpu N       pin the real-time loop to CPU N (-1: any), instead of loop.cpu\n");
+               "  --loop-cpu N       pin the real-time loop to CPU N (-1: any), instead of loop.cpu\n"
+               "  --operators DIR    the operators' keys and roles (docs/security.md), instead of\n"
+               "                     security.operators_dir; re-read on SIGHUP and when it changes\n");
 }
 
 // `fine`: the wake-up latency in 1 us bins (ControlLoop::fine_latency_histogram),
@@ -110,6 +112,7 @@ int run(int argc, char** argv) {
   std::string config_path, stats_path;
   double duration = -1;
   std::optional<int> loop_cpu;
+  std::optional<std::string> operators_dir;
   bool check = false;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -122,6 +125,7 @@ int run(int argc, char** argv) {
     else if (a == "--duration") duration = std::stod(value());
     else if (a == "--check") check = true;
     else if (a == "--loop-cpu") loop_cpu = parse_cpu(value());
+    else if (a == "--operators") operators_dir = value();
     else if (a == "--help" || a == "-h") { usage(); return 0; }
     else { usage(); throw Error("unknown option '" + a + "'"); }
   }
@@ -130,6 +134,7 @@ int run(int argc, char** argv) {
   const DaemonConfig cfg = [&] {
     DaemonConfig c = load_config(config_path);
     if (loop_cpu) c.loop.cpu = *loop_cpu;
+    if (operators_dir) c.security.operators_dir = *operators_dir;
     return c;
   }();
   ctl::MachineModel model = load_model(cfg.model_file);
@@ -148,21 +153,55 @@ int run(int argc, char** argv) {
     std::fprintf(stderr, "cpmd: CAN %s: %s\n", cfg.canopen.interface.c_str(), cfg.canopen.load.describe().c_str());
   }
   if (check) {
+    try {
+      const auto t = load_operators(cfg.security.operators_dir);
+      for (const auto& p : t->problems) std::printf("warning: operators: %s\n", p.c_str());
+      std::printf("%s: %zu operators may command\n", cfg.security.operators_dir.c_str(), t->operators.size());
+    } catch (const Error& e) {
+      std::printf("warning: operators: %s: nobody could command this cpmd but stop\n", e.what());
+    }
     std::printf("%s: configuration and model files are valid\n", config_path.c_str());
     return 0;
   }
+  // One daemon per bus: a second would take the same commands and publish a
+  // second state (docs/security.md). Heard before anything is powered.
+  if (bus_has_another_daemon(cfg.lcm, cfg.loop.rate_hz))
+    throw Error("another cpmd is already publishing on " + cfg.lcm.state_channel + " at " + cfg.lcm.url +
+                ": two daemons on one bus would both take the same commands; stop the other one, or give this one "
+                "its own LCM URL or channels");
   const double period = 1.0 / cfg.loop.rate_hz;
   backend->start(period);
 
-  // Block the termination signals in every thread; the main thread waits for them.
+  // Block the termination signals in every thread; the main thread waits for
+  // them. SIGHUP: re-read the operators directory.
   sigset_t sigs;
   sigemptyset(&sigs);
   sigaddset(&sigs, SIGINT);
   sigaddset(&sigs, SIGTERM);
+  sigaddset(&sigs, SIGHUP);
   pthread_sigmask(SIG_BLOCK, &sigs, nullptr);
 
   auto loop = std::make_unique<ControlLoop>(cfg, *backend, models->current(), controller);
   Server server(cfg, *loop, *models);  // LCM up before the loop runs
+  // Keys and roles: loaded here and on every change, outside the loop and
+  // outside the LCM thread, and handed to the server whole.
+  OperatorsWatch watch(cfg.security.operators_dir);
+  auto reload_operators = [&](const char* why) {
+    try {
+      const auto t = load_operators(cfg.security.operators_dir);
+      for (const auto& p : t->problems) std::fprintf(stderr, "cpmd: operators: %s\n", p.c_str());
+      server.set_operators(t);
+      std::fprintf(stderr, "cpmd: operators: %zu may command (%s, %s)\n", t->operators.size(),
+                   cfg.security.operators_dir.c_str(), why);
+    } catch (const Error& e) {
+      server.note_reload_failure();
+      std::fprintf(stderr, "cpmd: operators: %s; %s\n", e.what(),
+                   server.operators() ? "the operators loaded before stay"
+                                      : "nobody can command this cpmd but stop (docs/security.md)");
+    }
+    watch.rearm();
+  };
+  reload_operators("at start");
   RtThread rt(*loop, cfg.loop);
   rt.start();
   for (const auto& w : rt.setup().warnings) std::fprintf(stderr, "cpmd: warning: %s\n", w.c_str());
@@ -194,6 +233,8 @@ int run(int argc, char** argv) {
       std::fprintf(stderr, "cpmd: %s: disabling the drives and stopping\n", strsignal(sig));
       break;
     }
+    if (sig == SIGHUP) reload_operators("SIGHUP");
+    else if (watch.changed()) reload_operators("the directory changed");
     const std::int64_t c = loop->cycles_done();
     if (c != last_cycles && rt.running()) sd_notify("WATCHDOG=1");
     last_cycles = c;
