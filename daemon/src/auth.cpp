@@ -272,6 +272,36 @@ const Operator* OperatorTable::find(std::string_view name) const {
   return it == operators.end() ? nullptr : &it->second;
 }
 
+std::map<std::string, Role> parse_roles(const std::string& text, const std::string& where,
+                                       std::vector<std::string>& problems) {
+  std::map<std::string, Role> roles;
+  YAML::Node root;
+  try {
+    root = YAML::Load(text);
+  } catch (const YAML::Exception& e) {
+    throw Error(where + ":" + std::to_string(e.mark.line + 1) + ": not valid YAML: " + e.msg);
+  }
+  if (!root || root.IsNull() || (root.IsScalar() && root.Scalar().empty())) return roles;
+  if (!root.IsMap()) throw Error(where + ": expected lines of 'NAME: ROLE'");
+  for (const auto& kv : root) {
+    const std::string at = where + ":" + std::to_string(kv.first.Mark().line + 1);
+    if (!kv.first.IsScalar() || !valid_operator_name(kv.first.Scalar())) {
+      problems.push_back(at + ": not a valid operator name (1 to 31 of A-Z a-z 0-9 _ . -)");
+      continue;
+    }
+    const auto role = kv.second.IsScalar() ? role_from_name(kv.second.Scalar()) : std::nullopt;
+    if (!role) {
+      problems.push_back(at + ": " + kv.first.Scalar() + ": the role must be observer, operator or engineer");
+      continue;
+    }
+    if (!roles.emplace(kv.first.Scalar(), *role).second) {
+      problems.push_back(at + ": " + kv.first.Scalar() + " is given twice: neither role is taken");
+      roles.erase(kv.first.Scalar());
+    }
+  }
+  return roles;
+}
+
 std::shared_ptr<const OperatorTable> load_operators(const std::string& dir) {
   auto t = std::make_shared<OperatorTable>();
   t->dir = dir;
@@ -293,29 +323,7 @@ std::shared_ptr<const OperatorTable> load_operators(const std::string& dir) {
       throw Error(where + ": owned by uid " + std::to_string(rs.st_uid) + ", neither root nor the user reading it");
     if (rs.st_mode & 022)
       throw Error(where + ": permissions " + octal_mode(rs.st_mode) + " let group or others change roles (chmod go-w)");
-    const std::string text = read_fd(r.fd, kMaxRolesFileBytes, where);
-    YAML::Node root;
-    try {
-      root = YAML::Load(text);
-    } catch (const YAML::Exception& e) {
-      throw Error(where + ":" + std::to_string(e.mark.line + 1) + ": not valid YAML: " + e.msg);
-    }
-    if (root && !root.IsNull()) {
-      if (!root.IsMap()) throw Error(where + ": expected lines of 'NAME: ROLE'");
-      for (const auto& kv : root) {
-        const std::string at = where + ":" + std::to_string(kv.first.Mark().line + 1);
-        if (!kv.first.IsScalar() || !valid_operator_name(kv.first.Scalar())) {
-          t->problems.push_back(at + ": not a valid operator name (1 to 31 of A-Z a-z 0-9 _ . -)");
-          continue;
-        }
-        const auto role = kv.second.IsScalar() ? role_from_name(kv.second.Scalar()) : std::nullopt;
-        if (!role) {
-          t->problems.push_back(at + ": " + kv.first.Scalar() + ": the role must be observer, operator or engineer");
-          continue;
-        }
-        roles[kv.first.Scalar()] = *role;
-      }
-    }
+    roles = parse_roles(read_fd(r.fd, kMaxRolesFileBytes, where), where, t->problems);
   }
 
   std::unique_ptr<DIR, int (*)(DIR*)> ls(::fdopendir(::dup(d.fd)), ::closedir);

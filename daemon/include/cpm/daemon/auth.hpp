@@ -119,6 +119,12 @@ struct OperatorTable {
   [[nodiscard]] const Operator* find(std::string_view name) const;
 };
 
+// roles.yaml's text: "NAME: ROLE" lines. A bad line is skipped and noted in
+// `problems` (a name given twice keeps neither role); Error when the text is
+// not YAML or not a mapping.
+std::map<std::string, Role> parse_roles(const std::string& text, const std::string& where,
+                                       std::vector<std::string>& problems);
+
 // Load `dir`: every NAME.key (read_key_file's rules) with its role from
 // dir/roles.yaml ("NAME: observer|operator|engineer"). A key without a
 // role, or a role without a key, is skipped and noted in `problems`. Throws
