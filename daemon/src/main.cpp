@@ -1,6 +1,7 @@
 // cpmd: the motion controller daemon. See docs/daemon.md and docs/security.md.
 //   cpmd --config FILE [--check] [--duration S] [--stats-json FILE] [--loop-cpu N] [--operators DIR]
 #include <fcntl.h>
+#include <malloc.h>
 #include <signal.h>
 #include <unistd.h>
 #include <time.h>
@@ -266,6 +267,11 @@ int run(int argc, char** argv) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  // Big blocks (a stranger's oversized LCM message, reassembled by LCM's
+  // thread) are mapped and unmapped on their own, never kept in the heap:
+  // glibc would otherwise raise this threshold after the first one and keep
+  // every later one resident (docs/security.md). The loop allocates nothing.
+  mallopt(M_MMAP_THRESHOLD, 256 * 1024);
   try {
     return run(argc, argv);
   } catch (const std::exception& e) {
