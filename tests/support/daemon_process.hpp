@@ -192,8 +192,8 @@ inline std::string sim_config(const std::string& dir, const std::string& name, c
                             "udpm://239.255.76.67:" + std::to_string(lcm_port()));
   text = std::regex_replace(text, std::regex(" machine\\.yaml"), std::string(" ") + CPM_SOURCE_DIR + "/config/machine.yaml");
   text = std::regex_replace(text, std::regex("max_consecutive_overruns: 5"), "max_consecutive_overruns: 100000");
-  text = std::regex_replace(text, std::regex("operators_dir: [^ ]+"), "operators_dir: " + operators_dir);
-  text = std::regex_replace(text, std::regex("model_dir: [^ ]+"), "model_dir: " + model_dir);
+  text = std::regex_replace(text, std::regex("operators_dir: [^ \\n]+"), "operators_dir: " + operators_dir);
+  text = std::regex_replace(text, std::regex("model_dir: [^ \\n]+"), "model_dir: " + model_dir);
   for (const auto& [from, to] : edits) text = std::regex_replace(text, std::regex(from), to);
   const std::string path = dir + "/" + name;
   std::ofstream(path) << text;
