@@ -180,15 +180,18 @@ void Client::on_security_msg(const lcm::ReceiveBuffer*, const std::string&, cons
   last_security_ = *m;
 }
 
-std::optional<cpm_msgs::security_t> Client::security(double timeout_s) {
-  last_security_.reset();
+template <class M>
+std::optional<M> Client::next(std::optional<M>& slot, double timeout_s, int poll_ms) {
+  slot.reset();
   const auto end = Clock::now() + std::chrono::duration<double>(timeout_s);
-  while (!last_security_ && Clock::now() < end) {
+  while (!slot && Clock::now() < end) {
     keep_alive();
-    lcm_->handleTimeout(50);
+    lcm_->handleTimeout(poll_ms);
   }
-  return last_security_;
+  return slot;
 }
+
+std::optional<cpm_msgs::security_t> Client::security(double timeout_s) { return next(last_security_, timeout_s, 50); }
 
 int Client::handle(double timeout_s) {
   const auto end = Clock::now() + std::chrono::duration<double>(timeout_s);
@@ -266,24 +269,8 @@ cpm_msgs::ack_t Client::trajectory(cpm_msgs::trajectory_command_t cmd, double ti
   return wait_ack(send_trajectory(cmd), timeout_s);
 }
 
-std::optional<cpm_msgs::state_t> Client::state(double timeout_s) {
-  last_state_.reset();
-  const auto end = Clock::now() + std::chrono::duration<double>(timeout_s);
-  while (!last_state_ && Clock::now() < end) {
-    keep_alive();
-    lcm_->handleTimeout(20);
-  }
-  return last_state_;
-}
+std::optional<cpm_msgs::state_t> Client::state(double timeout_s) { return next(last_state_, timeout_s, 20); }
 
-std::optional<cpm_msgs::loop_stats_t> Client::stats(double timeout_s) {
-  last_stats_.reset();
-  const auto end = Clock::now() + std::chrono::duration<double>(timeout_s);
-  while (!last_stats_ && Clock::now() < end) {
-    keep_alive();
-    lcm_->handleTimeout(50);
-  }
-  return last_stats_;
-}
+std::optional<cpm_msgs::loop_stats_t> Client::stats(double timeout_s) { return next(last_stats_, timeout_s, 50); }
 
 }  // namespace cpm::daemon

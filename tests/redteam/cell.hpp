@@ -19,22 +19,7 @@
 
 namespace cpm::redteam {
 
-using cpm_msgs::ack_t;
-using cpm_msgs::control_command_t;
-using cpm_msgs::state_t;
-using cpm_msgs::trajectory_command_t;
-using daemon::Credentials;
-using Bytes = std::vector<std::uint8_t>;
-using C = control_command_t;
-
 inline const Vec3 kP1(0.600, 0.425, 0.300);
-
-template <class M>
-Bytes encode(const M& m) {
-  Bytes b(static_cast<std::size_t>(m.getEncodedSize()));
-  m.encode(b.data(), 0, static_cast<int>(b.size()));
-  return b;
-}
 
 struct Cell {
   daemon::test::LoopHarness h;

@@ -13,7 +13,30 @@
 #include <string>
 #include <vector>
 
+#include <cpm_msgs/ack_t.hpp>
+#include <cpm_msgs/control_command_t.hpp>
+#include <cpm_msgs/state_t.hpp>
+#include <cpm_msgs/trajectory_command_t.hpp>
+
+#include "cpm/daemon/auth.hpp"
+
 namespace cpm::redteam {
+
+using cpm_msgs::ack_t;
+using cpm_msgs::control_command_t;
+using cpm_msgs::state_t;
+using cpm_msgs::trajectory_command_t;
+using daemon::Credentials;
+using Bytes = std::vector<std::uint8_t>;
+using C = control_command_t;
+
+// A message's bytes as it goes on the bus.
+template <class M>
+Bytes encode(const M& m) {
+  Bytes b(static_cast<std::size_t>(m.getEncodedSize()));
+  m.encode(b.data(), 0, static_cast<int>(b.size()));
+  return b;
+}
 
 inline constexpr std::size_t kMaxEcho = 80;
 

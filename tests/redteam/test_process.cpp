@@ -26,25 +26,11 @@
 namespace cpm::redteam {
 namespace {
 
-using cpm_msgs::ack_t;
-using cpm_msgs::control_command_t;
-using cpm_msgs::state_t;
-using cpm_msgs::trajectory_command_t;
 using daemon::Client;
-using daemon::Credentials;
 using daemon::Role;
-using Bytes = std::vector<std::uint8_t>;
-using C = control_command_t;
 using Clock = std::chrono::steady_clock;
 
 const auto* const kEchoReport = ::testing::AddGlobalTestEnvironment(new EchoReport);
-
-template <class M>
-Bytes encode(const M& m) {
-  Bytes b(static_cast<std::size_t>(m.getEncodedSize()));
-  m.encode(b.data(), 0, static_cast<int>(b.size()));
-  return b;
-}
 
 trajectory_command_t move_to(double x, double y, double z, double v) {
   trajectory_command_t m{};
@@ -641,34 +627,24 @@ TEST(Files, AFullOrReadOnlyFileSystemLeavesTheOldFileWhole) {
     }
   };
   const std::string new_text = old_text + std::string(8192, '#') + "\n";
-  try {
-    io::write_file_atomically(model, new_text);
-    ADD_FAILURE() << "a write into a full file system succeeded";
-  } catch (const Error& e) {
-    std::printf("  full file system: %s\n", e.what());
-  }
-  {
-    const auto d = cpm::test::start_cpmd(r.config, r.dir / "stats2.log", {"--duration", "0.5", "--stats-json", stats});
+  // Both writers into the file system as it is now: each fails, says why, and leaves the old file.
+  auto rewrite = [&](const std::string& how, int run) {
+    try {
+      io::write_file_atomically(model, new_text);
+      ADD_FAILURE() << "a write into a " << how << " file system succeeded";
+    } catch (const Error& e) {
+      std::printf("  %s file system: %s\n", how.c_str(), e.what());
+    }
+    const auto d = cpm::test::start_cpmd(r.config, r.dir / ("stats" + std::to_string(run) + ".log"),
+                                         {"--duration", "0.5", "--stats-json", stats});
     EXPECT_EQ(d->wait_exit(), 0);
     EXPECT_NE(d->log().find("cannot write"), std::string::npos) << d->log();
-  }
-  expect_whole("full");
-  // Read-only.
-  ::unlink((fs + "/filler").c_str());
+    expect_whole(how);
+  };
+  rewrite("full", 2);
+  ::unlink((fs + "/filler").c_str());  // room again, but read-only (expect_whole allows the filler's absence)
   ASSERT_EQ(::mount(nullptr, fs.c_str(), nullptr, MS_REMOUNT | MS_RDONLY, nullptr), 0) << std::strerror(errno);
-  try {
-    io::write_file_atomically(model, new_text);
-    ADD_FAILURE() << "a write into a read-only file system succeeded";
-  } catch (const Error& e) {
-    std::printf("  read-only file system: %s\n", e.what());
-  }
-  {
-    const auto d = cpm::test::start_cpmd(r.config, r.dir / "stats3.log", {"--duration", "0.5", "--stats-json", stats});
-    EXPECT_EQ(d->wait_exit(), 0);
-    EXPECT_NE(d->log().find("cannot write"), std::string::npos) << d->log();
-  }
-  // (the filler is gone; expect_whole ignores its absence)
-  expect_whole("read-only");
+  rewrite("read-only", 3);
   ::umount2(fs.c_str(), MNT_DETACH);
 }
 

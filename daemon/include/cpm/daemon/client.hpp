@@ -80,6 +80,9 @@ class Client {
   template <class M>
   void stamp(M& m);
   void need_key(std::int8_t command) const;  // throws Error without credentials
+  // The next message into `slot` (reset first), keeping the session alive meanwhile.
+  template <class M>
+  std::optional<M> next(std::optional<M>& slot, double timeout_s, int poll_ms);
   void keep_alive();  // a ping when the holder has been silent for 0.25 s
   static bool lost_session(const cpm_msgs::ack_t& a) noexcept;
 
