@@ -5,6 +5,7 @@
 #include <chrono>
 #include <lcm/lcm-cpp.hpp>
 #include <algorithm>
+#include <cstring>
 #include <random>
 
 #include "cpm/daemon/loop.hpp"
@@ -46,6 +47,8 @@ std::optional<cpm_msgs::ack_t> decode_ack(const void* data, std::size_t size) {
   const auto len = static_cast<std::int32_t>((std::uint32_t{p[0]} << 24) | (std::uint32_t{p[1]} << 16) |
                                              (std::uint32_t{p[2]} << 8) | std::uint32_t{p[3]});
   if (len < 1 || static_cast<std::size_t>(len) != size - kHead - 4 - kTail) return std::nullopt;
+  // A string LCM wrote ends in its only NUL.
+  if (std::memchr(p + 4, 0, static_cast<std::size_t>(len)) != p + 4 + len - 1) return std::nullopt;
   cpm_msgs::ack_t a;
   if (a.decode(data, 0, static_cast<int>(size)) != static_cast<int>(size)) return std::nullopt;
   return a;

@@ -109,7 +109,8 @@ const char* mode_text(std::int8_t mode) noexcept;
 std::string fault_text(std::int32_t mask);
 
 // An ack_t as received: decoded only when its string's length accounts for
-// the message exactly (nullopt otherwise).
+// the message exactly and the string's only NUL is its last byte (nullopt
+// otherwise).
 std::optional<cpm_msgs::ack_t> decode_ack(const void* data, std::size_t size);
 
 }  // namespace cpm::daemon
