@@ -146,6 +146,9 @@ TEST(Stranger, CannotEnableMoveLoadAModelOrChangeGains) {
       const auto a = s.send(r.cfg.lcm.control_channel, m, who);
       ASSERT_TRUE(a) << "no answer to command " << int(cmd);
       EXPECT_EQ(a->reason, ack_t::REASON_NOT_AUTHORIZED) << int(cmd) << ": " << a->message;
+      const Bytes sent_bytes = encode(m);
+      expect_no_echo(a->message, std::string(sent_bytes.begin(), sent_bytes.end()), "a stranger's command");
+      expect_no_echo(a->message, m.model_path, "a stranger's model path");
       words.insert(a->message);
     }
     const auto a = s.send(r.cfg.lcm.trajectory_channel, move_to(0.45, 0.40, 0.35, 0.1), who);
