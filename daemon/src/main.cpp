@@ -1,6 +1,7 @@
 // cpmd: the motion controller daemon. See docs/daemon.md and docs/security.md.
 //   cpmd --config FILE [--check] [--duration S] [--stats-json FILE] [--loop-cpu N] [--operators DIR]
 #include <fcntl.h>
+#include <sched.h>
 #include <malloc.h>
 #include <signal.h>
 #include <unistd.h>
@@ -93,6 +94,20 @@ void write_atomically(const std::string& path, const std::string& text) {
   std::fprintf(stderr, "cpmd: cannot write %s: %s\n", path.c_str(), std::strerror(errno));
 }
 
+// With the loop pinned, every other thread of cpmd (this one and all it
+// starts: LCM's receive thread, the server, the housekeeping) stays off the
+// loop's CPU, so a flood of datagrams is received and refused elsewhere.
+// The loop's thread pins itself to its CPU (RtThread).
+void keep_off_the_loops_cpu(int loop_cpu) {
+  if (loop_cpu < 0) return;
+  cpu_set_t set;
+  CPU_ZERO(&set);
+  if (sched_getaffinity(0, sizeof set, &set) != 0 || !CPU_ISSET(loop_cpu, &set) || CPU_COUNT(&set) < 2) return;
+  CPU_CLR(loop_cpu, &set);
+  if (sched_setaffinity(0, sizeof set, &set) != 0)
+    std::fprintf(stderr, "cpmd: warning: cannot keep the other threads off CPU %d: %s\n", loop_cpu, std::strerror(errno));
+}
+
 // --loop-cpu: a CPU this machine has, or -1 (any); the loop.cpu key, for one run.
 int parse_cpu(const std::string& text) {
   std::size_t used = 0;
@@ -138,6 +153,7 @@ int run(int argc, char** argv) {
     if (operators_dir) c.security.operators_dir = *operators_dir;
     return c;
   }();
+  keep_off_the_loops_cpu(cfg.loop.cpu);  // before any thread exists: they inherit it
   ctl::MachineModel model = load_model(cfg.model_file);
   model.force_limit = std::min(model.force_limit, cfg.limits.force);
   auto models = std::make_unique<ModelStore>(std::make_unique<ctl::Machine>(model));

@@ -214,17 +214,27 @@ TEST(Stranger, CanStopTheMachine) {
 // 20 000 hostile messages in 10 s (2 kHz, twice the loop rate) while the
 // machine runs a circle: no cycle missed for the flood (the daemon's own
 // overrun counter), no growth of its resident memory, the operator still
-// served, every message counted. As deployed (loop.cpu): the loop on the
-// last CPU, the flood sent from CPU 0.
+// served, the messages counted. As deployed (loop.cpu): the loop alone on
+// the last CPU (cpmd keeps its other threads off it), the network's kernel
+// work on another (here: the flood is sent from CPU 0).
 //
 // A shared or virtual host stalls a 1 kHz loop now and then with no flood
 // at all (0.1 to 0.7 overruns a second measured on the 2-core CI machine
 // under other work: a vCPU descheduled for a millisecond). So the flood's
-// 10 s are compared with 10 s just before it without the flood: with a
-// quiet host both are 0; otherwise the flood window may not exceed what the
-// host's own rate explains (a Poisson bound, q + 3 sqrt(2q + 1) + 3 for q
-// quiet overruns). A flood that cost cycles (a lock, an allocation, work
-// on the loop's CPU) overruns in every window and fails this.
+// 10 s are compared with 5 s without it just before and 5 s just after: with
+// a quiet host all are 0; otherwise the flood window's overruns must be what
+// the host's own rate explains: of the n overruns in all 20 s, the flood's
+// share is binomial (n, 1/2) when the flood costs nothing, and a share
+// that chance gives less than once in a thousand fails (a flood that cost
+// even one cycle a second fails whenever the host is reasonably quiet).
+double share_at_least(std::int64_t k, std::int64_t n, double p) {
+  double tail = 0.0;
+  for (std::int64_t i = k; i <= n; ++i)
+    tail += std::exp(std::lgamma(n + 1.0) - std::lgamma(i + 1.0) - std::lgamma(n - i + 1.0) + i * std::log(p) +
+                     (n - i) * std::log1p(-p));
+  return std::min(1.0, tail);
+}
+
 TEST(Flood, TwentyThousandMessagesInTenSecondsMissNoCycleAndGrowNoMemory) {
   Rig r("flood");
   const long cpus = ::sysconf(_SC_NPROCESSORS_ONLN);
@@ -235,11 +245,11 @@ TEST(Flood, TwentyThousandMessagesInTenSecondsMissNoCycleAndGrowNoMemory) {
   for (int i = 0; i < 50 && !(st && st->mode == state_t::MODE_HOLDING); ++i) st = alice.state(0.2);
   const char* scale_env0 = std::getenv("CPM_FLOOD_SCALE");
   const double motion = 14.0 + 10.0 * (scale_env0 ? std::max(1, std::atoi(scale_env0)) : 1);
-  ASSERT_TRUE(alice.trajectory(circle(motion)).accepted);  // 1 s settling, 10 s quiet, the flood, and more
+  ASSERT_TRUE(alice.trajectory(circle(motion)).accepted);  // 1 s settling, 5 s quiet, the flood, 5 s quiet
   alice.handle(1.0);                                     // settle, then measure
   const auto q0 = alice.state(1.0);
   ASSERT_TRUE(q0);
-  alice.handle(10.0);  // the quiet window
+  alice.handle(5.0);  // the quiet window before
   const auto s0 = alice.state(1.0);
   ASSERT_TRUE(s0);
   const long rss0 = cpm::test::rss_kb(r.cpmd->pid());
@@ -261,6 +271,9 @@ TEST(Flood, TwentyThousandMessagesInTenSecondsMissNoCycleAndGrowNoMemory) {
   const int kMessages = 20000 * scale;
   const double kSeconds = 10.0 * scale;
   std::thread flood([&] {
+    // Loopback does the receiving side's kernel work (softirq, no thread can
+    // preempt it) on the sender's CPU: keep it off the loop's, as a machine
+    // steers its network interrupts away from loop.cpu (docs/security.md).
     if (cpus >= 2) {
       cpu_set_t set;
       CPU_ZERO(&set);
@@ -324,16 +337,22 @@ TEST(Flood, TwentyThousandMessagesInTenSecondsMissNoCycleAndGrowNoMemory) {
   std::printf("flood: VmRSS every 5 s from the 5th: %s kB\n", rss_series.c_str());
   flood.join();
   const double flood_s = std::chrono::duration<double>(Clock::now() - t_flood).count();
-  alice.handle(1.5);
-  const auto s1 = alice.state(1.0);
-  ASSERT_TRUE(s1);
+  const auto s1 = alice.state(2.0);
+  ASSERT_TRUE(s1) << "no state after the flood; cpmd " << (r.cpmd->running() ? "runs" : "is gone") << ":\n"
+                  << r.cpmd->log();
+  alice.handle(5.0);  // the quiet window after
+  const auto q1 = alice.state(2.0);
+  ASSERT_TRUE(q1) << "no state 5 s after the flood; cpmd " << (r.cpmd->running() ? "runs" : "is gone") << ":\n"
+                  << r.cpmd->log();
   const long rss1 = cpm::test::rss_kb(r.cpmd->pid());
   const auto sec = r.security();
   ASSERT_TRUE(sec);
   const long long refused = sec->refused_no_operator + sec->refused_bad_mac + sec->refused_replay + sec->undecodable;
-  const std::int64_t quiet = s0->overruns - q0->overruns, flooded = s1->overruns - s0->overruns;
-  std::printf("flood: quiet 10 s before: %lld overruns, %lld skipped slots\n", static_cast<long long>(quiet),
-              static_cast<long long>(s0->skipped - q0->skipped));
+  const std::int64_t quiet = (s0->overruns - q0->overruns) + (q1->overruns - s1->overruns),
+                     flooded = s1->overruns - s0->overruns;
+  std::printf("flood: quiet 5 s before and 5 s after: %lld overruns, %lld skipped slots\n",
+              static_cast<long long>(quiet),
+              static_cast<long long>((s0->skipped - q0->skipped) + (q1->skipped - s1->skipped)));
   std::printf("flood: %d messages in %.1f s; overruns %lld -> %lld, skipped slots %lld -> %lld, cycles %lld -> %lld; "
               "VmRSS %ld -> %ld kB (after 1 s %ld, 5 s %ld); counted %lld (no operator %lld, wrong MAC %lld, replay %lld, undecodable "
               "%lld), %lld refusals unanswered; mode %s, faults %d\n",
@@ -345,13 +364,15 @@ TEST(Flood, TwentyThousandMessagesInTenSecondsMissNoCycleAndGrowNoMemory) {
               static_cast<long long>(sec->refusals_unanswered), daemon::mode_text(s1->mode), s1->faults);
   EXPECT_EQ(sent.load(), kMessages);
   if (quiet == 0 && flooded == 0) std::printf("flood: 0 missed cycles, with and without the flood\n");
-  const double expected = static_cast<double>(quiet) * scale;  // the quiet rate over the flood's length
-  const double bound = expected + 3.0 * std::sqrt(2.0 * expected + 1.0) + 3.0;
-  EXPECT_LE(static_cast<double>(flooded), bound)
-      << flooded << " overruns during the flood, " << quiet << " in the quiet 10 s before it";
+  const double chance = share_at_least(flooded, flooded + quiet, scale / (scale + 1.0));
+  std::printf("flood: the chance of a share this large without any cost of the flood: %.3g\n", chance);
+  EXPECT_GE(chance, 1e-3) << flooded << " overruns during the flood's " << kSeconds << " s, " << quiet
+                          << " in the quiet 10 s around it";
   EXPECT_EQ(s1->faults, 0);
   EXPECT_TRUE(ping.accepted) << "the operator was not served during the flood: " << ping.message;
-  EXPECT_GE(refused, kMessages * 9 / 10) << "most of the flood never reached the daemon";
+  // UDP may drop datagrams when the host is busy (the kernel's receive
+  // buffer, 208 kB by default, fills); the test counts only if most arrived.
+  EXPECT_GE(refused, kMessages * 3 / 4) << "most of the flood never reached the daemon";
   // No growth. Memory is locked as it is first touched, so the flood's
   // first seconds fault in what its paths use (LCM's receive buffers, the
   // heap's high-water mark): measured over a minute (CPM_FLOOD_SCALE=6), that
