@@ -17,8 +17,10 @@ if [ "$(id -u)" -eq 0 ] && [ -z "${CPMD_IN_NETNS:-}" ]; then
   exec unshare -n env CPMD_IN_NETNS=1 bash -c 'ip link set lo up; ip route add 224.0.0.0/4 dev lo; exec "$0" "$@"' "$0" "$@"
 fi
 out=$(mktemp -d)
-if [ -n "$J" ]; then trap 'rm -rf "$out"' EXIT; fi
-"$B/cpmd" --config config/sim.yaml "${cpu_opt[@]}" --duration "$T" --stats-json "$out/stats.json" 2>"$out/cpmd.log" &
+. tools/throwaway-operator.sh "$B"   # a key for this run's commands (docs/security.md)
+if [ -n "$J" ]; then trap 'rm -rf "$out" "$CPMD_THROWAWAY"' EXIT; else trap 'rm -rf "$CPMD_THROWAWAY"' EXIT; fi
+"$B/cpmd" --config config/sim.yaml --operators "$CPMD_OPERATORS" "${cpu_opt[@]}" --duration "$T" \
+  --stats-json "$out/stats.json" 2>"$out/cpmd.log" &
 pid=$!
 sleep 0.5
 "$B/cpm" enable >/dev/null

@@ -5,12 +5,14 @@
 // paper's circle, a move, a stream, a select-controller, a flood; a master
 // and drives brought up and enabled; SDO transfers of every kind.
 #include <cmath>
+#include <cstring>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
 #include <string>
 #include <vector>
 
+#include <cpm_msgs/ack_t.hpp>
 #include <cpm_msgs/control_command_t.hpp>
 #include <cpm_msgs/trajectory_command_t.hpp>
 
@@ -40,8 +42,16 @@ Bytes encode(const M& m) {
   return b;
 }
 
+// lcm_session signs as operator alice (fuzz/targets/lcm_session.cpp): the
+// name is in the seed, the MAC the target's.
+template <class M>
+void as_alice(M& m) {
+  std::memcpy(m.operator_name, "alice", 5);
+}
+
 trajectory_command_t move(double x, double y, double z, double v = 0.1) {
   trajectory_command_t m{};
+  as_alice(m);
   m.id = 100;
   m.kind = trajectory_command_t::KIND_MOVE;
   m.target[0] = x, m.target[1] = y, m.target[2] = z;
@@ -50,6 +60,7 @@ trajectory_command_t move(double x, double y, double z, double v = 0.1) {
 }
 trajectory_command_t circle() {  // Elkady's test circle from P1
   trajectory_command_t m{};
+  as_alice(m);
   m.id = 101;
   m.utime = 1;
   m.kind = trajectory_command_t::KIND_CIRCLE;
@@ -59,6 +70,7 @@ trajectory_command_t circle() {  // Elkady's test circle from P1
 }
 trajectory_command_t stream(double x0, double y0, double z0) {
   trajectory_command_t m{};
+  as_alice(m);
   m.id = 102;
   m.utime = 1;
   m.kind = trajectory_command_t::KIND_STREAM;
@@ -73,6 +85,7 @@ trajectory_command_t stream(double x0, double y0, double z0) {
 }
 control_command_t control(std::int8_t cmd, std::int64_t id) {
   control_command_t m{};
+  as_alice(m);
   m.id = id;
   m.command = cmd;
   return m;
@@ -179,6 +192,23 @@ int main(int argc, char** argv) {
     msg(s, 1, encode(stream(0.600, 0.425, 0.300)));
     cycles(s, 300);
     write("lcm_session", "controller-model-stream", s);
+  }
+
+  // ---- lcm_ack: acks as cpmd sends them (lcm_session's scripts are
+  // unsigned here: the target signs what it stamps).
+  {
+    cpm_msgs::ack_t a{};
+    a.id = 7;
+    a.source = 1;
+    a.command = control_command_t::CMD_ACQUIRE;
+    a.accepted = true;
+    a.session = 0x1234567;
+    write("lcm_ack", "acquire-accepted", encode(a));
+    a.accepted = false;
+    a.reason = cpm_msgs::ack_t::REASON_NOT_AUTHORIZED;
+    a.message = "not authorized (docs/security.md)";
+    a.session = 0;
+    write("lcm_ack", "not-authorized", encode(a));
   }
 
   // ---- can_master: enable all, run, then strangers' frames.

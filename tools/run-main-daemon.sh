@@ -2,7 +2,8 @@
 # The main job on the product: set up, build, start cpmd on its simulator
 # backend, run the paper's circle through `cpm`, print the tracking error, stop.
 # LCM stays on this machine: a private network namespace when root, else
-# loopback with ttl=0 (config/sim.yaml).
+# loopback with ttl=0 (config/sim.yaml). Commands are signed with a throw-away
+# operator key made for this run (tools/throwaway-operator.sh, docs/security.md).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 if [ -z "${CPMD_IN_NETNS:-}" ]; then
@@ -12,10 +13,11 @@ if [ -z "${CPMD_IN_NETNS:-}" ]; then
   fi
 fi
 B=${CPMD_BUILD_DIR:-build}/bin
+. tools/throwaway-operator.sh "$B"
 log=$(mktemp /tmp/cpmd.XXXXXX.log)
-"$B/cpmd" --config config/sim.yaml 2>"$log" &
+"$B/cpmd" --config config/sim.yaml --operators "$CPMD_OPERATORS" 2>"$log" &
 pid=$!
-trap 'kill $pid 2>/dev/null; wait $pid 2>/dev/null || true' EXIT
+trap 'kill $pid 2>/dev/null; wait $pid 2>/dev/null || true; rm -rf "$CPMD_THROWAWAY"' EXIT
 for _ in $(seq 50); do "$B/cpm" status >/dev/null 2>&1 && break; sleep 0.1; done
 "$B/cpm" status
 "$B/cpm" enable
@@ -27,4 +29,5 @@ wait $rec
 "$B/cpm" stats
 kill -TERM $pid; wait $pid || true
 trap - EXIT
+rm -rf "$CPMD_THROWAWAY"
 cat "$log"

@@ -5,6 +5,7 @@
 #include <chrono>
 #include <lcm/lcm-cpp.hpp>
 #include <algorithm>
+#include <cstring>
 #include <random>
 
 #include "cpm/daemon/loop.hpp"
@@ -38,7 +39,23 @@ std::string with_receive_buffer(const std::string& url) {
 }
 }  // namespace
 
-Client::Client(const LcmConfig& cfg) : cfg_(cfg) {
+std::optional<cpm_msgs::ack_t> decode_ack(const void* data, std::size_t size) {
+  // hash, utime, id (8 each), source, command, accepted (1), reason (2): then message.
+  constexpr std::size_t kHead = 8 + 8 + 8 + 1 + 1 + 1 + 2, kTail = 1 + 2 + 8;
+  if (size < kHead + 4 + 1 + kTail || size > (1u << 20)) return std::nullopt;
+  const auto* p = static_cast<const std::uint8_t*>(data) + kHead;
+  const auto len = static_cast<std::int32_t>((std::uint32_t{p[0]} << 24) | (std::uint32_t{p[1]} << 16) |
+                                             (std::uint32_t{p[2]} << 8) | std::uint32_t{p[3]});
+  if (len < 1 || static_cast<std::size_t>(len) != size - kHead - 4 - kTail) return std::nullopt;
+  // A string LCM wrote ends in its only NUL.
+  if (std::memchr(p + 4, 0, static_cast<std::size_t>(len)) != p + 4 + len - 1) return std::nullopt;
+  cpm_msgs::ack_t a;
+  if (a.decode(data, 0, static_cast<int>(size)) != static_cast<int>(size)) return std::nullopt;
+  return a;
+}
+
+Client::Client(const LcmConfig& cfg, std::optional<Credentials> operator_key)
+    : cfg_(cfg), creds_(std::move(operator_key)) {
   lcm_ = std::make_unique<lcm::LCM>(with_receive_buffer(cfg_.url));
   if (!lcm_->good()) throw Error("lcm: cannot open '" + cfg_.url + "'");
   // LCM queues at most 30 messages per subscription between its receive
@@ -50,6 +67,7 @@ Client::Client(const LcmConfig& cfg) : cfg_(cfg) {
   lcm_->subscribe(cfg_.ack_channel, &Client::on_ack, this)->setQueueCapacity(kQueuedMessages);
   lcm_->subscribe(cfg_.state_channel, &Client::on_state_msg, this)->setQueueCapacity(kQueuedMessages);
   lcm_->subscribe(cfg_.stats_channel, &Client::on_stats_msg, this)->setQueueCapacity(kQueuedMessages);
+  lcm_->subscribe(cfg_.security_channel, &Client::on_security_msg, this)->setQueueCapacity(100);
   std::random_device rd;
   next_id_ = (static_cast<std::int64_t>(rd() & 0x7fffffu) << 32) ^ (static_cast<std::int64_t>(::getpid()) << 8);
   nonce_ = static_cast<std::int64_t>(((std::uint64_t{rd()} << 32) ^ rd()) & 0x7FFFFFFFFFFFFFFFull) | 1;
@@ -81,7 +99,15 @@ void Client::stamp(M& m) {
   m.session = session_;
   m.seq = ++seq_;
   m.utime = wall_us();
+  if (creds_) sign(m, *creds_);
   last_sent_ = steady_now();
+}
+
+void Client::need_key(std::int8_t command) const {
+  if (creds_ || command == cpm_msgs::control_command_t::CMD_STOP) return;
+  throw Error(
+      "no operator key: only `stop` and reading the state need none. Give --key FILE, set CPM_KEY_FILE, or put the "
+      "key cpmd knows you by in ~/.config/cpm/operator.key (docs/security.md)");
 }
 
 bool Client::lost_session(const cpm_msgs::ack_t& a) noexcept {
@@ -89,11 +115,16 @@ bool Client::lost_session(const cpm_msgs::ack_t& a) noexcept {
 }
 
 void Client::acquire(double timeout_s) {
+  need_key(cpm_msgs::control_command_t::CMD_ACQUIRE);
   cpm_msgs::control_command_t c{};
   c.command = cpm_msgs::control_command_t::CMD_ACQUIRE;
   c.id = next_id();
   c.session = nonce_;
   c.utime = wall_us();
+  // The wall clock, rising: cpmd refuses an acquire that is old or not newer
+  // than the operator's last (a recorded one played back).
+  c.seq = last_acquire_seq_ = std::max(c.utime, last_acquire_seq_ + 1);
+  sign(c, *creds_);
   lcm_->publish(cfg_.control_channel, &c);
   const cpm_msgs::ack_t a = wait_ack(c.id, timeout_s);
   if (!a.accepted || a.session == 0) throw Error("cpmd refused to let this process command the machine: " + a.message);
@@ -129,7 +160,10 @@ void Client::keep_alive() {
 
 std::int64_t Client::next_id() { return ++next_id_; }
 
-void Client::on_ack(const lcm::ReceiveBuffer*, const std::string&, const cpm_msgs::ack_t* m) {
+void Client::on_ack(const lcm::ReceiveBuffer* rbuf, const std::string&) {
+  const auto a = decode_ack(rbuf->data, rbuf->data_size);
+  if (!a) return;  // not an ack: somebody else's bytes
+  const cpm_msgs::ack_t* m = &*a;
   if (pings_.erase(m->id)) {
     // A keep-alive refused: the session is gone (daemon restarted, or it
     // expired); the next command acquires a new one.
@@ -145,6 +179,22 @@ void Client::on_state_msg(const lcm::ReceiveBuffer*, const std::string&, const c
 void Client::on_stats_msg(const lcm::ReceiveBuffer*, const std::string&, const cpm_msgs::loop_stats_t* m) {
   last_stats_ = *m;
 }
+void Client::on_security_msg(const lcm::ReceiveBuffer*, const std::string&, const cpm_msgs::security_t* m) {
+  last_security_ = *m;
+}
+
+template <class M>
+std::optional<M> Client::next(std::optional<M>& slot, double timeout_s, int poll_ms) {
+  slot.reset();
+  const auto end = Clock::now() + std::chrono::duration<double>(timeout_s);
+  while (!slot && Clock::now() < end) {
+    keep_alive();
+    lcm_->handleTimeout(poll_ms);
+  }
+  return slot;
+}
+
+std::optional<cpm_msgs::security_t> Client::security(double timeout_s) { return next(last_security_, timeout_s, 50); }
 
 int Client::handle(double timeout_s) {
   const auto end = Clock::now() + std::chrono::duration<double>(timeout_s);
@@ -187,6 +237,7 @@ cpm_msgs::ack_t Client::control(cpm_msgs::control_command_t cmd, double timeout_
     return a;
   }
   const bool stop = cmd.command == C::CMD_STOP;
+  need_key(cmd.command);
   for (int attempt = 0;; ++attempt) {
     if (session_ == 0 && !stop) acquire(timeout_s);
     cmd.id = next_id();
@@ -206,6 +257,7 @@ cpm_msgs::ack_t Client::control(std::int8_t command, double timeout_s) {
 }
 
 std::int64_t Client::send_trajectory(cpm_msgs::trajectory_command_t cmd) {
+  need_key(0);
   if (session_ == 0) acquire();
   if (cmd.id == 0) cmd.id = next_id();
   stamp(cmd);
@@ -220,24 +272,8 @@ cpm_msgs::ack_t Client::trajectory(cpm_msgs::trajectory_command_t cmd, double ti
   return wait_ack(send_trajectory(cmd), timeout_s);
 }
 
-std::optional<cpm_msgs::state_t> Client::state(double timeout_s) {
-  last_state_.reset();
-  const auto end = Clock::now() + std::chrono::duration<double>(timeout_s);
-  while (!last_state_ && Clock::now() < end) {
-    keep_alive();
-    lcm_->handleTimeout(20);
-  }
-  return last_state_;
-}
+std::optional<cpm_msgs::state_t> Client::state(double timeout_s) { return next(last_state_, timeout_s, 20); }
 
-std::optional<cpm_msgs::loop_stats_t> Client::stats(double timeout_s) {
-  last_stats_.reset();
-  const auto end = Clock::now() + std::chrono::duration<double>(timeout_s);
-  while (!last_stats_ && Clock::now() < end) {
-    keep_alive();
-    lcm_->handleTimeout(50);
-  }
-  return last_stats_;
-}
+std::optional<cpm_msgs::loop_stats_t> Client::stats(double timeout_s) { return next(last_stats_, timeout_s, 50); }
 
 }  // namespace cpm::daemon

@@ -1,8 +1,15 @@
 #include "cpm/daemon/config.hpp"
 
+#include <fcntl.h>
+#include <linux/openat2.h>
+#include <sys/stat.h>
+#include <sys/syscall.h>
+#include <unistd.h>
 #include <yaml-cpp/yaml.h>
 
+#include <cerrno>
 #include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <set>
@@ -252,7 +259,7 @@ DaemonConfig parse_config_checked(const std::string& text, const std::string& na
   const Reader r(name);
   DaemonConfig c;
   c.source = name;
-  r.map(root, "", {"model_file", "backend", "loop", "controller", "limits", "lcm"}, {"sim", "canopen"});
+  r.map(root, "", {"model_file", "backend", "loop", "controller", "limits", "lcm"}, {"sim", "canopen", "security"});
 
   c.model_file = resolve(base_dir, r.text(root["model_file"], "model_file"));
   c.backend = r.text(root["backend"], "backend");
@@ -343,31 +350,174 @@ DaemonConfig parse_config_checked(const std::string& text, const std::string& na
       r.fail(n["session_timeout"], "lcm.session_timeout", "must be at least 0.5 s (clients ping every 0.25 s)");
   }
   if (n["channels"]) {
-    const auto ch = r.map(n["channels"], "lcm.channels", {}, {"state", "stats", "trajectory", "control", "ack"});
+    const auto ch =
+        r.map(n["channels"], "lcm.channels", {}, {"state", "stats", "trajectory", "control", "ack", "security"});
     if (ch["state"]) c.lcm.state_channel = r.text(ch["state"], "lcm.channels.state");
     if (ch["stats"]) c.lcm.stats_channel = r.text(ch["stats"], "lcm.channels.stats");
     if (ch["trajectory"]) c.lcm.trajectory_channel = r.text(ch["trajectory"], "lcm.channels.trajectory");
     if (ch["control"]) c.lcm.control_channel = r.text(ch["control"], "lcm.channels.control");
     if (ch["ack"]) c.lcm.ack_channel = r.text(ch["ack"], "lcm.channels.ack");
+    if (ch["security"]) c.lcm.security_channel = r.text(ch["security"], "lcm.channels.security");
+  }
+  if (root["security"]) {
+    const auto s = r.map(root["security"], "security", {},
+                         {"operators_dir", "model_dir", "acquire_window", "refusal_acks_per_second"});
+    if (s["operators_dir"])
+      c.security.operators_dir = resolve(base_dir, r.text(s["operators_dir"], "security.operators_dir"));
+    if (s["model_dir"]) c.security.model_dir = resolve(base_dir, r.text(s["model_dir"], "security.model_dir"));
+    if (s["acquire_window"])
+      c.security.acquire_window = r.positive(s["acquire_window"], "security.acquire_window", 3600.0, "s");
+    if (s["refusal_acks_per_second"])
+      c.security.refusal_acks_per_second =
+          r.number(s["refusal_acks_per_second"], "security.refusal_acks_per_second", 0.0, 10000.0, "1/s");
   }
   if (root["canopen"]) parse_canopen(r, root["canopen"], c.loop.rate_hz, c.loop.skip_late_slots, c.canopen);
   return c;
 }
 }  // namespace
 
+std::string read_regular_file(int fd, const std::string& path, long limit, const char* what) {
+  struct stat st {};
+  if (::fstat(fd, &st) != 0) throw Error(path + ": cannot read the " + what + ": " + std::strerror(errno));
+  if (S_ISDIR(st.st_mode)) throw Error(path + ": the " + std::string(what) + " is a directory, not a file");
+  if (!S_ISREG(st.st_mode)) throw Error(path + ": the " + std::string(what) + " is not a regular file");
+  if (st.st_size > limit)
+    throw Error(path + ": the " + std::string(what) + " is " + std::to_string(st.st_size) + " bytes, more than the " +
+                std::to_string(limit) + " it may be");
+  std::string text;
+  char buf[1 << 16];
+  for (;;) {
+    const ssize_t n = ::read(fd, buf, sizeof buf);
+    if (n < 0 && errno == EINTR) continue;
+    if (n < 0) throw Error(path + ": cannot read the " + std::string(what) + ": " + std::strerror(errno));
+    if (n == 0) break;
+    text.append(buf, static_cast<std::size_t>(n));
+    if (static_cast<long>(text.size()) > limit)
+      throw Error(path + ": the " + std::string(what) + " grew beyond " + std::to_string(limit) + " bytes while read");
+  }
+  return text;
+}
+
+namespace {
+// Opened non-blocking: a FIFO named as a file must not hang the start.
+std::string read_small_file(const std::string& path, long limit, const char* what) {
+  const int fd = ::open(path.c_str(), O_RDONLY | O_NONBLOCK | O_CLOEXEC | O_NOCTTY);
+  if (fd < 0) throw Error(path + ": cannot read the " + std::string(what) + ": " + std::strerror(errno));
+  try {
+    std::string text = read_regular_file(fd, path, limit, what);
+    ::close(fd);
+    return text;
+  } catch (...) {
+    ::close(fd);
+    throw;
+  }
+}
+}  // namespace
+
 DaemonConfig load_config(const std::string& path) {
-  std::ifstream f(path);
-  if (!f) throw Error(path + ": cannot read the configuration file");
-  std::stringstream ss;
-  ss << f.rdbuf();
+  const std::string text = read_small_file(path, kMaxConfigFileBytes, "configuration file");
   const std::string base = std::filesystem::path(path).parent_path().string();
-  return parse_config(ss.str(), path, base.empty() ? "." : base);
+  return parse_config(text, path, base.empty() ? "." : base);
+}
+
+namespace {
+
+// openat2(RESOLVE_BENEATH) where the kernel has it (Linux 5.6); otherwise the
+// canonical path must lie inside the canonical directory and the last
+// component must not be a symlink (a race with a writer of the directory
+// remains there: docs/security.md).
+int open_beneath(int dirfd, const std::string& dir, const std::string& rel) {
+  open_how how{};
+  how.flags = O_RDONLY | O_NONBLOCK | O_CLOEXEC | O_NOCTTY;
+  how.resolve = RESOLVE_BENEATH | RESOLVE_NO_MAGICLINKS;
+  const long fd = ::syscall(SYS_openat2, dirfd, rel.c_str(), &how, sizeof how);
+  if (fd >= 0 || errno != ENOSYS) return static_cast<int>(fd);
+  std::error_code ec;
+  const auto root = std::filesystem::canonical(dir, ec);
+  if (ec) return errno = ENOENT, -1;
+  const auto full = std::filesystem::weakly_canonical(root / rel, ec);
+  if (ec) return errno = ENOENT, -1;
+  const std::string r = root.string() + "/", f = full.string();
+  if (f.compare(0, r.size(), r) != 0) return errno = EXDEV, -1;
+  return ::openat(dirfd, rel.c_str(), O_RDONLY | O_NONBLOCK | O_CLOEXEC | O_NOCTTY | O_NOFOLLOW);
+}
+
+bool ends_with(const std::string& s, const char* tail) {
+  const std::size_t n = std::strlen(tail);
+  return s.size() >= n && s.compare(s.size() - n, n, tail) == 0;
+}
+
+}  // namespace
+
+ctl::MachineModel load_model_beneath(const std::string& model_dir, const std::string& request) {
+  auto refuse = [&](const std::string& why, const std::string& summary) -> ModelLoadError {
+    return ModelLoadError("load_model '" + request + "' (model directory " + model_dir + "): " + why, summary);
+  };
+  if (request == "builtin:elkady") return ctl::MachineModel::elkady();
+  if (request.empty()) throw refuse("no path", "no model path given");
+  if (request.size() > 4096 || request.find('\0') != std::string::npos) throw refuse("not a path", "not a valid path");
+  if (request.rfind("builtin:", 0) == 0) throw refuse("unknown builtin model", "the only builtin model is builtin:elkady");
+  std::string rel = request;
+  if (request.front() == '/') {
+    // Absolute: accepted when it names a place beneath the directory as configured.
+    const std::string base = std::filesystem::path(model_dir).lexically_normal().string();
+    const std::string prefix = base.back() == '/' ? base : base + "/";
+    const std::string req = std::filesystem::path(request).lexically_normal().string();
+    if (req.compare(0, prefix.size(), prefix) != 0 || req.size() == prefix.size())
+      throw refuse("outside the model directory", "the path is outside the model directory (security.model_dir)");
+    rel = req.substr(prefix.size());
+  }
+  if (!ends_with(rel, ".yaml") && !ends_with(rel, ".yml"))
+    throw refuse("not a .yaml or .yml file", "a model file's name ends in .yaml or .yml");
+  const int dfd = ::open(model_dir.c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+  if (dfd < 0)
+    throw refuse(std::string("cannot open the model directory: ") + std::strerror(errno),
+                 "cpmd cannot open its model directory (security.model_dir)");
+  const int fd = open_beneath(dfd, model_dir, rel);
+  const int e = errno;
+  ::close(dfd);
+  if (fd < 0) {
+    const std::string why = std::strerror(e);
+    if (e == EXDEV || e == ELOOP)
+      throw refuse(why, "the path leads outside the model directory (.. or a symlink out)");
+    if (e == ENOENT || e == ENOTDIR) throw refuse(why, "no such file in the model directory");
+    if (e == EACCES || e == EPERM) throw refuse(why, "cpmd may not read that file");
+    throw refuse(why, "the file cannot be opened");
+  }
+  std::string text;
+  try {
+    struct stat st {};
+    if (::fstat(fd, &st) != 0) throw refuse(std::strerror(errno), "the file cannot be read");
+    if (!S_ISREG(st.st_mode)) throw refuse("not a regular file", "not a regular file");
+    if (st.st_size > kMaxModelFileBytes)
+      throw refuse(std::to_string(st.st_size) + " bytes", "the file is bigger than a model file may be (16 MiB)");
+    try {
+      text = read_regular_file(fd, request, kMaxModelFileBytes, "model file");
+    } catch (const Error& err) {
+      throw refuse(err.what(), "the file cannot be read whole");
+    }
+  } catch (...) {
+    ::close(fd);
+    throw;
+  }
+  ::close(fd);
+#ifdef CPM_HAVE_IO
+  try {
+    return io::parse_model_file(text, request).model;
+  } catch (const io::ModelFileError& err) {
+    throw refuse(err.what(), (err.line > 0 ? "line " + std::to_string(err.line) + ": " : std::string()) + err.summary);
+  } catch (const Error& err) {
+    throw refuse(err.what(), "the model is not valid");
+  }
+#else
+  throw refuse("this build has no model-file loader (cpm_io)", "this cpmd loads builtin:elkady only");
+#endif
 }
 
 ctl::MachineModel load_model(const std::string& path) {
   if (path == "builtin:elkady") return ctl::MachineModel::elkady();
 #ifdef CPM_HAVE_IO
-  return io::load_model_file(path).model;
+  return io::parse_model_file(read_small_file(path, kMaxModelFileBytes, "model file"), path).model;
 #else
   throw Error(path + ": this build has no model-file loader (cpm_io); use builtin:elkady");
 #endif

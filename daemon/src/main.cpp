@@ -1,6 +1,8 @@
-// cpmd: the motion controller daemon. See docs/daemon.md.
-//   cpmd --config FILE [--check] [--duration S] [--stats-json FILE] [--loop-cpu N]
+// cpmd: the motion controller daemon. See docs/daemon.md and docs/security.md.
+//   cpmd --config FILE [--check] [--duration S] [--stats-json FILE] [--loop-cpu N] [--operators DIR]
 #include <fcntl.h>
+#include <sched.h>
+#include <malloc.h>
 #include <signal.h>
 #include <unistd.h>
 #include <time.h>
@@ -27,12 +29,14 @@ using namespace cpm::daemon;
 
 void usage() {
   std::fprintf(stderr,
-               "usage: cpmd --config FILE [--check] [--duration S] [--stats-json FILE] [--loop-cpu N]\n"
+               "usage: cpmd --config FILE [--check] [--duration S] [--stats-json FILE] [--loop-cpu N] [--operators DIR]\n"
                "  --config FILE      the daemon's YAML configuration (config/sim.yaml)\n"
                "  --check            validate the configuration and the model files, then exit\n"
                "  --duration S       run S seconds, then shut down (latency runs)\n"
                "  --stats-json FILE  at exit, write the loop statistics as JSON\n"
-               "  --loop-cpu N       pin the real-time loop to CPU N (-1: any), instead of loop.cpu\n");
+               "  --loop-cpu N       pin the real-time loop to CPU N (-1: any), instead of loop.cpu\n"
+               "  --operators DIR    the operators' keys and roles (docs/security.md), instead of\n"
+               "                     security.operators_dir; re-read on SIGHUP and when it changes\n");
 }
 
 // `fine`: the wake-up latency in 1 us bins (ControlLoop::fine_latency_histogram),
@@ -90,6 +94,20 @@ void write_atomically(const std::string& path, const std::string& text) {
   std::fprintf(stderr, "cpmd: cannot write %s: %s\n", path.c_str(), std::strerror(errno));
 }
 
+// With the loop pinned, every other thread of cpmd (this one and all it
+// starts: LCM's receive thread, the server, the housekeeping) stays off the
+// loop's CPU, so a flood of datagrams is received and refused elsewhere.
+// The loop's thread pins itself to its CPU (RtThread).
+void keep_off_the_loops_cpu(int loop_cpu) {
+  if (loop_cpu < 0) return;
+  cpu_set_t set;
+  CPU_ZERO(&set);
+  if (sched_getaffinity(0, sizeof set, &set) != 0 || !CPU_ISSET(loop_cpu, &set) || CPU_COUNT(&set) < 2) return;
+  CPU_CLR(loop_cpu, &set);
+  if (sched_setaffinity(0, sizeof set, &set) != 0)
+    std::fprintf(stderr, "cpmd: warning: cannot keep the other threads off CPU %d: %s\n", loop_cpu, std::strerror(errno));
+}
+
 // --loop-cpu: a CPU this machine has, or -1 (any); the loop.cpu key, for one run.
 int parse_cpu(const std::string& text) {
   std::size_t used = 0;
@@ -110,6 +128,7 @@ int run(int argc, char** argv) {
   std::string config_path, stats_path;
   double duration = -1;
   std::optional<int> loop_cpu;
+  std::optional<std::string> operators_dir;
   bool check = false;
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -122,6 +141,7 @@ int run(int argc, char** argv) {
     else if (a == "--duration") duration = std::stod(value());
     else if (a == "--check") check = true;
     else if (a == "--loop-cpu") loop_cpu = parse_cpu(value());
+    else if (a == "--operators") operators_dir = value();
     else if (a == "--help" || a == "-h") { usage(); return 0; }
     else { usage(); throw Error("unknown option '" + a + "'"); }
   }
@@ -130,8 +150,10 @@ int run(int argc, char** argv) {
   const DaemonConfig cfg = [&] {
     DaemonConfig c = load_config(config_path);
     if (loop_cpu) c.loop.cpu = *loop_cpu;
+    if (operators_dir) c.security.operators_dir = *operators_dir;
     return c;
   }();
+  keep_off_the_loops_cpu(cfg.loop.cpu);  // before any thread exists: they inherit it
   ctl::MachineModel model = load_model(cfg.model_file);
   model.force_limit = std::min(model.force_limit, cfg.limits.force);
   auto models = std::make_unique<ModelStore>(std::make_unique<ctl::Machine>(model));
@@ -148,21 +170,55 @@ int run(int argc, char** argv) {
     std::fprintf(stderr, "cpmd: CAN %s: %s\n", cfg.canopen.interface.c_str(), cfg.canopen.load.describe().c_str());
   }
   if (check) {
+    try {
+      const auto t = load_operators(cfg.security.operators_dir);
+      for (const auto& p : t->problems) std::printf("warning: operators: %s\n", p.c_str());
+      std::printf("%s: %zu operators may command\n", cfg.security.operators_dir.c_str(), t->operators.size());
+    } catch (const Error& e) {
+      std::printf("warning: operators: %s: nobody could command this cpmd but stop\n", e.what());
+    }
     std::printf("%s: configuration and model files are valid\n", config_path.c_str());
     return 0;
   }
+  // One daemon per bus: a second would take the same commands and publish a
+  // second state (docs/security.md). Heard before anything is powered.
+  if (bus_has_another_daemon(cfg.lcm, cfg.loop.rate_hz))
+    throw Error("another cpmd is already publishing on " + cfg.lcm.state_channel + " at " + cfg.lcm.url +
+                ": two daemons on one bus would both take the same commands; stop the other one, or give this one "
+                "its own LCM URL or channels");
   const double period = 1.0 / cfg.loop.rate_hz;
   backend->start(period);
 
-  // Block the termination signals in every thread; the main thread waits for them.
+  // Block the termination signals in every thread; the main thread waits for
+  // them. SIGHUP: re-read the operators directory.
   sigset_t sigs;
   sigemptyset(&sigs);
   sigaddset(&sigs, SIGINT);
   sigaddset(&sigs, SIGTERM);
+  sigaddset(&sigs, SIGHUP);
   pthread_sigmask(SIG_BLOCK, &sigs, nullptr);
 
   auto loop = std::make_unique<ControlLoop>(cfg, *backend, models->current(), controller);
   Server server(cfg, *loop, *models);  // LCM up before the loop runs
+  // Keys and roles: loaded here and on every change, outside the loop and
+  // outside the LCM thread, and handed to the server whole.
+  OperatorsWatch watch(cfg.security.operators_dir);
+  auto reload_operators = [&](const char* why) {
+    try {
+      const auto t = load_operators(cfg.security.operators_dir);
+      for (const auto& p : t->problems) std::fprintf(stderr, "cpmd: operators: %s\n", p.c_str());
+      server.set_operators(t);
+      std::fprintf(stderr, "cpmd: operators: %zu may command (%s, %s)\n", t->operators.size(),
+                   cfg.security.operators_dir.c_str(), why);
+    } catch (const Error& e) {
+      server.note_reload_failure();
+      std::fprintf(stderr, "cpmd: operators: %s; %s\n", e.what(),
+                   server.operators() ? "the operators loaded before stay"
+                                      : "nobody can command this cpmd but stop (docs/security.md)");
+    }
+    watch.rearm();
+  };
+  reload_operators("at start");
   RtThread rt(*loop, cfg.loop);
   rt.start();
   for (const auto& w : rt.setup().warnings) std::fprintf(stderr, "cpmd: warning: %s\n", w.c_str());
@@ -194,6 +250,8 @@ int run(int argc, char** argv) {
       std::fprintf(stderr, "cpmd: %s: disabling the drives and stopping\n", strsignal(sig));
       break;
     }
+    if (sig == SIGHUP) reload_operators("SIGHUP");
+    else if (watch.changed()) reload_operators("the directory changed");
     const std::int64_t c = loop->cycles_done();
     if (c != last_cycles && rt.running()) sd_notify("WATCHDOG=1");
     last_cycles = c;
@@ -225,6 +283,11 @@ int run(int argc, char** argv) {
 }  // namespace
 
 int main(int argc, char** argv) {
+  // Big blocks (a stranger's oversized LCM message, reassembled by LCM's
+  // thread) are mapped and unmapped on their own, never kept in the heap:
+  // glibc would otherwise raise this threshold after the first one and keep
+  // every later one resident (docs/security.md). The loop allocates nothing.
+  mallopt(M_MMAP_THRESHOLD, 256 * 1024);
   try {
     return run(argc, argv);
   } catch (const std::exception& e) {

@@ -36,7 +36,14 @@ __attribute__((noinline)) void prefault_stack(std::size_t bytes) {
 }  // namespace
 
 bool lock_memory(std::vector<std::string>& warnings, std::size_t stack_bytes) {
-  if (mlockall(MCL_CURRENT | MCL_FUTURE) != 0) {
+  // What is mapped now is locked and resident; what is mapped later is locked
+  // as it is touched (MCL_ONFAULT), not when it is mapped. Without ONFAULT a
+  // stranger's single LCM fragment announcing a 256 MB message made the LCM
+  // thread's reassembly buffer resident and locked at once (docs/security.md);
+  // everything the loop uses is built, and so touched, before it runs.
+  int rc = mlockall(MCL_CURRENT | MCL_FUTURE | MCL_ONFAULT);
+  if (rc != 0 && errno == EINVAL) rc = mlockall(MCL_CURRENT | MCL_FUTURE);  // a kernel before 4.4
+  if (rc != 0) {
     warnings.push_back(std::string("mlockall failed (") + std::strerror(errno) +
                        "): memory may be paged out; raise LimitMEMLOCK / ulimit -l");
     return false;

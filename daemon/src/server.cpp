@@ -1,7 +1,6 @@
 #include "cpm/daemon/server.hpp"
 
 #include <sys/socket.h>
-#include <sys/stat.h>
 #include <sys/un.h>
 #include <unistd.h>
 
@@ -42,8 +41,6 @@ void ModelStore::release(const ctl::Machine* m) {
 }
 
 namespace {
-
-constexpr off_t kMaxModelFileBytes = 16 << 20;
 
 std::string mm(const Vec3& p) {
   char b[96];
@@ -161,12 +158,53 @@ Validation validate_segment(const trajectory_command_t& c, const Vec3& start, co
   return out;
 }
 
+namespace {
+
+// "" when v is finite and zero or normal; else the field's name.
+bool bad(double v) noexcept { return !std::isfinite(v) || (v != 0.0 && !std::isnormal(v)); }
+template <std::size_t N>
+std::string bad_in(const double (&v)[N], const char* field) {
+  for (std::size_t i = 0; i < N; ++i)
+    if (bad(v[i])) return std::string(field) + "[" + std::to_string(i) + "]";
+  return {};
+}
+template <std::size_t N>
+std::string bad_in(const double (&v)[N][3], const char* field) {
+  for (std::size_t i = 0; i < N; ++i)
+    for (std::size_t j = 0; j < 3; ++j)
+      if (bad(v[i][j])) return std::string(field) + "[" + std::to_string(i) + "][" + std::to_string(j) + "]";
+  return {};
+}
+
+}  // namespace
+
+std::string bad_number(const trajectory_command_t& c) {
+  for (auto [v, name] : {std::pair{c.max_velocity, "max_velocity"}, {c.max_acceleration, "max_acceleration"},
+                         {c.max_jerk, "max_jerk"}, {c.radius, "radius"}, {c.angular_speed, "angular_speed"},
+                         {c.start_angle, "start_angle"}, {c.cruise_time, "cruise_time"}, {c.ramp_time, "ramp_time"}})
+    if (bad(v)) return name;
+  for (const std::string& b : {bad_in(c.target, "target"), bad_in(c.centre, "centre"), bad_in(c.time, "time"),
+                               bad_in(c.position, "position"), bad_in(c.velocity, "velocity")})
+    if (!b.empty()) return b;
+  return {};
+}
+
+std::string bad_number(const control_command_t& c) {
+  for (const std::string& b : {bad_in(c.kp, "kp"), bad_in(c.kd, "kd")})
+    if (!b.empty()) return b;
+  return {};
+}
+
 Server::Server(const DaemonConfig& cfg, ControlLoop& loop, ModelStore& models)
     : cfg_(cfg), loop_(loop), models_(models), law_(cfg.controller.law), gains_(cfg.controller.gains),
       scratch_(std::make_unique<Command>()) {
   now_ = [] {
     return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
   };
+  wall_now_ = [] {
+    return std::chrono::duration<double>(std::chrono::system_clock::now().time_since_epoch()).count();
+  };
+  refusal_tokens_ = cfg_.security.refusal_acks_per_second;
   std::random_device rd;
   session_salt_ = (std::uint64_t{rd()} << 32) ^ rd();
   lcm_ = std::make_unique<lcm::LCM>(cfg_.lcm.url);
@@ -182,19 +220,58 @@ void Server::on_raw(const lcm::ReceiveBuffer* rbuf, const std::string& channel) 
   receive(channel, rbuf->data, rbuf->data_size);
 }
 
+void Server::set_operators(std::shared_ptr<const OperatorTable> table) {
+  const std::lock_guard<std::mutex> lock(ops_mu_);
+  if (ops_) ++reloads_;
+  ops_ = std::move(table);
+  ops_loaded_utime_ = std::chrono::duration_cast<std::chrono::microseconds>(
+                          std::chrono::system_clock::now().time_since_epoch()).count();
+}
+
+void Server::note_reload_failure() {
+  const std::lock_guard<std::mutex> lock(ops_mu_);
+  ++reload_failures_;
+}
+
+std::shared_ptr<const OperatorTable> Server::operators() const {
+  const std::lock_guard<std::mutex> lock(ops_mu_);
+  return ops_;
+}
+
+cpm_msgs::security_t Server::security() const {
+  cpm_msgs::security_t s = counts_;
+  s.undecodable = undecodable_;
+  const std::lock_guard<std::mutex> lock(ops_mu_);
+  s.operators = ops_ ? static_cast<std::int32_t>(ops_->operators.size()) : 0;
+  s.operators_loaded_utime = ops_loaded_utime_;
+  s.reloads = reloads_;
+  s.reload_failures = reload_failures_;
+  return s;
+}
+
 namespace {
 
-// control_command_t's only string, model_path, is its last field: its int32
-// length prefix (which counts the NUL) sits 4 bytes before the end of a
-// well-formed message. A length below 1 makes the generated decoder call
-// std::string::assign with a negative size.
-bool control_string_length_ok(const void* data, std::size_t size) {
+std::int32_t be32(const std::uint8_t* p) {
+  return static_cast<std::int32_t>((std::uint32_t{p[0]} << 24) | (std::uint32_t{p[1]} << 16) |
+                                   (std::uint32_t{p[2]} << 8) | std::uint32_t{p[3]});
+}
+
+// control_command_t's only string, model_path, follows 91 fixed bytes; after
+// it come operator_name and mac (64 bytes). Its int32 length prefix counts the
+// NUL. A length below 1 makes the generated decoder call std::string::assign
+// with a negative size; any other length that does not account for the
+// message's exact size is not a message we sent (nor one the MAC covers).
+bool control_layout_ok(const void* data, std::size_t size) {
   constexpr std::size_t kFixed = 8 + 8 + 8 + 8 + 8 + 1 + 1 + 1 + 3 * 8 + 3 * 8;  // hash .. kd
-  if (size < kFixed + 4) return false;
-  const auto* p = static_cast<const std::uint8_t*>(data) + kFixed;
-  const std::int32_t len = static_cast<std::int32_t>((std::uint32_t{p[0]} << 24) | (std::uint32_t{p[1]} << 16) |
-                                                     (std::uint32_t{p[2]} << 8) | std::uint32_t{p[3]});
-  return len >= 1 && static_cast<std::size_t>(len) <= size - kFixed - 4;
+  constexpr std::size_t kTail = kOperatorNameBytes + kMacBytes;
+  if (size < kFixed + 4 + 1 + kTail) return false;
+  const std::int32_t len = be32(static_cast<const std::uint8_t*>(data) + kFixed);
+  return len >= 1 && static_cast<std::size_t>(len) == size - kFixed - 4 - kTail;
+}
+
+std::size_t trajectory_size() {
+  static const std::size_t n = static_cast<std::size_t>(trajectory_command_t{}.getEncodedSize());
+  return n;
 }
 
 }  // namespace
@@ -202,18 +279,20 @@ bool control_string_length_ok(const void* data, std::size_t size) {
 bool Server::receive(const std::string& channel, const void* data, std::size_t size) {
   if (size > static_cast<std::size_t>(INT32_MAX)) return ++undecodable_, false;
   const int n = static_cast<int>(size);
+  const auto* raw = static_cast<const std::uint8_t*>(data);
   try {
     if (channel == cfg_.lcm.control_channel) {
       control_command_t m;
-      if (!control_string_length_ok(data, size) || m.decode(data, 0, n) < 0) return ++undecodable_, false;
-      on_control(nullptr, channel, &m);
+      if (!control_layout_ok(data, size) || m.decode(data, 0, n) != n) return ++undecodable_, false;
+      on_control(raw, size, &m);
       return true;
     }
     if (channel == cfg_.lcm.trajectory_channel) {
       // Decoded on the heap: the message is about 5.6 kB.
+      if (size != trajectory_size()) return ++undecodable_, false;
       auto m = std::make_unique<trajectory_command_t>();
-      if (m->decode(data, 0, n) < 0) return ++undecodable_, false;
-      on_trajectory(nullptr, channel, m.get());
+      if (m->decode(data, 0, n) != n) return ++undecodable_, false;
+      on_trajectory(raw, size, m.get());
       return true;
     }
   } catch (const std::exception& e) {
@@ -265,40 +344,131 @@ std::string seconds(double s) {
 }
 }  // namespace
 
-bool Server::admit(std::int64_t id, std::int8_t source, std::int8_t code, std::int64_t session, std::int64_t seq) {
+namespace {
+
+// The name as the journal may print it (only valid names reach here, but
+// the journal is no place to trust that).
+std::string printable(std::string s, std::size_t max = 64) {
+  if (s.size() > max) s.resize(max);
+  for (char& c : s)
+    if (static_cast<unsigned char>(c) < 0x20 || static_cast<unsigned char>(c) > 0x7e) c = '?';
+  return s;
+}
+
+const char* control_name(std::int8_t c) {
+  switch (c) {
+    case control_command_t::CMD_ENABLE: return "enable";
+    case control_command_t::CMD_DISABLE: return "disable";
+    case control_command_t::CMD_STOP: return "stop";
+    case control_command_t::CMD_RESET: return "reset";
+    case control_command_t::CMD_SELECT_CONTROLLER: return "select a controller";
+    case control_command_t::CMD_LOAD_MODEL: return "load a model";
+    case control_command_t::CMD_PING: return "ping";
+    case control_command_t::CMD_ACQUIRE: return "acquire the session";
+    case control_command_t::CMD_RELEASE: return "release the session";
+    default: return "send this command";
+  }
+}
+
+// Said to whoever sent a command that does not prove its operator: the same
+// words for no name, an unknown name and a wrong MAC, so that a stranger
+// learns neither names nor whether a guess came close.
+constexpr const char* kNotAuthorized = "not authorized (docs/security.md)";
+
+}  // namespace
+
+void Server::refuse_limited(std::int64_t id, std::int8_t source, std::int8_t code, std::int16_t reason,
+                            const std::string& message) {
+  // Token bucket: a flood of strangers' commands earns no flood of answers.
+  const double now = now_();
+  const double rate = cfg_.security.refusal_acks_per_second;
+  refusal_tokens_ = std::min(rate, refusal_tokens_ + (now - refusal_tokens_at_) * rate);
+  refusal_tokens_at_ = now;
+  if (refusal_tokens_ < 1.0) {
+    ++counts_.refusals_unanswered;
+    return;
+  }
+  refusal_tokens_ -= 1.0;
+  publish_ack(id, source, code, false, reason, message, loop_.mode(), latest_.queue_depth);
+}
+
+const Operator* Server::authenticate(const OperatorTable* table, const std::uint8_t* raw, std::size_t size,
+                                     const std::uint8_t (&name)[kOperatorNameBytes], std::int64_t id,
+                                     std::int8_t source, std::int8_t code) {
+  const std::string who = operator_name_of(name);
+  const Operator* op = table && !who.empty() ? table->find(who) : nullptr;
+  if (!op) {
+    ++counts_.refused_no_operator;
+    last_stranger_ = who.empty() ? "(none)" : who;
+    refuse_limited(id, source, code, ack_t::REASON_NOT_AUTHORIZED, kNotAuthorized);
+    return nullptr;
+  }
+  if (!verify_encoded(raw, size, op->key)) {
+    ++counts_.refused_bad_mac;
+    last_stranger_ = who + " (wrong MAC)";
+    refuse_limited(id, source, code, ack_t::REASON_NOT_AUTHORIZED, kNotAuthorized);
+    return nullptr;
+  }
+  return op;
+}
+
+bool Server::admit(std::int64_t id, std::int8_t source, std::int8_t code, std::int64_t session, std::int64_t seq,
+                   const Operator& op) {
   const double now = now_();
   const std::int64_t held = this->session();
   auto refuse = [&](std::int16_t reason, const std::string& why) {
+    ++counts_.refused_not_holder;
     publish_ack(id, source, code, false, reason, why, loop_.mode(), latest_.queue_depth);
     return false;
   };
   if (held == 0) {
-    if (session_ != 0 && session == session_)
+    if (session_ != 0 && session == session_ && op.name == session_operator_)
       return refuse(ack_t::REASON_NOT_HOLDER, "the session expired: nothing heard from its holder for " +
                                                   seconds(now - last_heard_) + " (lcm.session_timeout " +
                                                   seconds(cfg_.lcm.session_timeout) + "); acquire it again");
     return refuse(ack_t::REASON_NOT_HOLDER,
                   "no session: acquire one with CMD_ACQUIRE before commanding (the cpm tools do)");
   }
-  if (session != held)
+  // The session is the operator's who acquired it: another operator who
+  // read its id off the bus cannot use it.
+  if (session != held || op.name != session_operator_)
     return refuse(ack_t::REASON_NOT_HOLDER,
                   "another commander holds the machine (last heard " + seconds(now - last_heard_) +
                       " ago; its session ends when it releases it or after " + seconds(cfg_.lcm.session_timeout) +
                       " of silence)");
-  if (seq <= last_seq_)
-    return refuse(ack_t::REASON_STALE_SEQ, "seq " + std::to_string(seq) + " is not above " +
-                                               std::to_string(last_seq_) +
-                                               ", the session's last accepted one: a replayed, duplicated or "
-                                               "reordered command is not played");
+  if (seq <= last_seq_) {
+    ++counts_.refused_replay;
+    refuse_limited(id, source, code, ack_t::REASON_STALE_SEQ,
+                   "seq " + std::to_string(seq) + " is not above " + std::to_string(last_seq_) +
+                       ", the session's last accepted one: a replayed, duplicated or reordered command is not played");
+    return false;
+  }
   last_seq_ = seq;
   last_heard_ = now;
   return true;
 }
 
-void Server::acquire(const control_command_t& m) {
+void Server::acquire(const control_command_t& m, const Operator& op) {
   const double now = now_();
+  // An acquire's seq is its sender's wall clock (us): fresh, and rising per
+  // operator, so a recorded acquire played back later takes nothing.
+  const double skew = static_cast<double>(m.seq) * 1e-6 - wall_now_();
+  auto& last = last_acquire_seq_[op.name];
+  if (!(std::abs(skew) <= cfg_.security.acquire_window) || m.seq <= last) {
+    ++counts_.refused_replay;
+    refuse_limited(m.id, 1, m.command, ack_t::REASON_STALE_SEQ,
+                   m.seq <= last ? "this acquire is not newer than operator " + op.name +
+                                       "'s last one: a replayed acquire is not played"
+                                 : "the acquire's seq (the sender's clock) is " + seconds(std::abs(skew)) +
+                                       " from cpmd's clock, more than security.acquire_window (" +
+                                       seconds(cfg_.security.acquire_window) +
+                                       "): a replayed acquire, or a clock to set right");
+    return;
+  }
+  last = m.seq;
   const std::int64_t held = session();
-  if (held != 0 && m.session != session_nonce_) {
+  if (held != 0 && (m.session != session_nonce_ || op.name != session_operator_)) {
+    ++counts_.refused_not_holder;
     publish_ack(m.id, 1, m.command, false, ack_t::REASON_NOT_HOLDER,
                 "another commander holds the machine (last heard " + seconds(now - last_heard_) +
                     " ago); it is free again when that commander releases it or after " +
@@ -307,8 +477,8 @@ void Server::acquire(const control_command_t& m) {
     return;
   }
   if (held == 0) {
-    // splitmix64 of salt, nonce and time: unguessable from outside the host
-    // only as far as the bus is private (docs/daemon.md).
+    // splitmix64 of salt, nonce and time: a name for the session, not a
+    // secret (it is on the bus; the MAC is what keeps others out).
     std::uint64_t z = session_salt_ ^ static_cast<std::uint64_t>(m.session) ^
                       (static_cast<std::uint64_t>(now * 1e9) * 0x9E3779B97F4A7C15ull);
     z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
@@ -317,6 +487,7 @@ void Server::acquire(const control_command_t& m) {
     session_ = static_cast<std::int64_t>(z & 0x7FFFFFFFFFFFFFFFull);
     if (session_ == 0) session_ = 1;
     session_nonce_ = m.session;
+    session_operator_ = op.name;
     last_seq_ = 0;
   }
   // else: the holder's acquire repeated (its ack was lost): the same session.
@@ -324,23 +495,41 @@ void Server::acquire(const control_command_t& m) {
   publish_ack(m.id, 1, m.command, true, ack_t::REASON_NONE, "", loop_.mode(), latest_.queue_depth, session_);
 }
 
-void Server::on_control(const lcm::ReceiveBuffer*, const std::string&, const control_command_t* m) {
-  if (m->command == control_command_t::CMD_ACQUIRE) return acquire(*m);
+void Server::on_control(const std::uint8_t* raw, std::size_t size, const control_command_t* m) {
+  const std::shared_ptr<const OperatorTable> table = operators();
   if (m->command == control_command_t::CMD_STOP) {
     // A stop is taken from anyone: it only brings the platform to rest, and
     // whoever sees a danger must be able to stop it. It does not take the
-    // session; from the holder it counts as a sign of life.
+    // session; from its holder, proven by the MAC, it counts as a sign of life.
     const std::int64_t held = session();
-    if (held != 0 && m->session == held && m->seq > last_seq_) {
+    const std::string who = operator_name_of(m->operator_name);
+    const Operator* op = table && !who.empty() ? table->find(who) : nullptr;
+    if (held != 0 && m->session == held && op && op->name == session_operator_ && m->seq > last_seq_ &&
+        verify_encoded(raw, size, op->key)) {
       last_seq_ = m->seq;
       last_heard_ = now_();
+    } else {
+      ++counts_.stops_from_anyone;
     }
-  } else if (!admit(m->id, 1, m->command, m->session, m->seq)) {
-    return;
+  } else {
+    const Operator* op = authenticate(table.get(), raw, size, m->operator_name, m->id, 1, m->command);
+    if (!op) return;
+    if (const auto need = role_needed(m->command); need && op->role < *need) {
+      // The sender proved who it is: it may learn what its role allows.
+      ++counts_.refused_role;
+      publish_ack(m->id, 1, m->command, false, ack_t::REASON_NOT_AUTHORIZED,
+                  std::string("operator ") + op->name + " (role " + role_name(op->role) + ") may not " +
+                      control_name(m->command) + ": that needs role " + role_name(*need),
+                  loop_.mode(), latest_.queue_depth);
+      return;
+    }
+    if (m->command == control_command_t::CMD_ACQUIRE) return acquire(*m, *op);
+    if (!admit(m->id, 1, m->command, m->session, m->seq, *op)) return;
   }
   if (m->command == control_command_t::CMD_RELEASE) {
     session_ = 0;
     session_nonce_ = 0;
+    session_operator_.clear();
     publish_ack(m->id, 1, m->command, true, ack_t::REASON_NONE, "", loop_.mode(), latest_.queue_depth);
     return;
   }
@@ -352,6 +541,10 @@ void Server::on_control(const lcm::ReceiveBuffer*, const std::string&, const con
   auto refuse = [&](std::int16_t reason, const std::string& why) {
     publish_ack(m->id, 1, m->command, false, reason, why, loop_.mode(), latest_.queue_depth);
   };
+  if (m->command != control_command_t::CMD_STOP) {
+    if (const std::string b = bad_number(*m); !b.empty())
+      return refuse(ack_t::REASON_INVALID, b + " is not a finite number, zero or normal");
+  }
   switch (m->command) {
     case control_command_t::CMD_ENABLE: c.kind = CommandKind::enable; break;
     case control_command_t::CMD_DISABLE: c.kind = CommandKind::disable; break;
@@ -377,24 +570,25 @@ void Server::on_control(const lcm::ReceiveBuffer*, const std::string&, const con
       break;
     }
     case control_command_t::CMD_LOAD_MODEL: {
-      // Only a regular file of sane size: /dev/zero would be read until
-      // memory runs out and a FIFO would block, and this thread is the one
-      // that must hear the next stop command.
-      if (m->model_path.rfind("builtin:", 0) != 0) {
-        struct stat st {};
-        if (::stat(m->model_path.c_str(), &st) == 0 && (!S_ISREG(st.st_mode) || st.st_size > kMaxModelFileBytes))
-          return refuse(ack_t::REASON_LOAD_FAILED, "load_model: " + m->model_path +
-                                                       ": not a regular file of at most 16 MiB");
-      }
+      // Only from the model directory, only a regular file of bounded size
+      // (this thread must hear the next stop: no FIFO, no /dev/zero). What
+      // goes back on the bus names the reason and the line, never the
+      // file's bytes; the whole story goes to the journal.
       try {
-        ctl::MachineModel model = load_model(m->model_path);
+        ctl::MachineModel model = load_model_beneath(cfg_.security.model_dir, m->model_path);
         model.force_limit = std::min(model.force_limit, cfg_.limits.force);
         auto machine = std::make_unique<ctl::Machine>(model);
         ctl::check_delay_fits(machine->actuation_delay(), cfg_.loop.rate_hz);
         c.controller.emplace(*machine, law_, gains_);
         c.machine = models_.add(std::move(machine));
+      } catch (const ModelLoadError& e) {
+        std::fprintf(stderr, "cpmd: operator %s: %s\n", printable(session_operator_).c_str(),
+                     printable(e.what(), 1024).c_str());
+        return refuse(ack_t::REASON_LOAD_FAILED, "load_model: " + e.summary);
       } catch (const std::exception& e) {
-        return refuse(ack_t::REASON_LOAD_FAILED, std::string("load_model: ") + e.what());
+        std::fprintf(stderr, "cpmd: operator %s: load_model: %s\n", printable(session_operator_).c_str(),
+                     printable(e.what(), 1024).c_str());
+        return refuse(ack_t::REASON_LOAD_FAILED, "load_model: the model cannot be used on this machine (cpmd's journal says why)");
       }
       c.kind = CommandKind::load_model;
       pending_models_[c.id] = c.machine;
@@ -409,8 +603,23 @@ void Server::on_control(const lcm::ReceiveBuffer*, const std::string&, const con
   }
 }
 
-void Server::on_trajectory(const lcm::ReceiveBuffer*, const std::string&, const trajectory_command_t* m) {
-  if (!admit(m->id, 2, m->kind, m->session, m->seq)) return;
+void Server::on_trajectory(const std::uint8_t* raw, std::size_t size, const trajectory_command_t* m) {
+  const std::shared_ptr<const OperatorTable> table = operators();
+  const Operator* op = authenticate(table.get(), raw, size, m->operator_name, m->id, 2, m->kind);
+  if (!op) return;
+  if (op->role < Role::operator_) {
+    ++counts_.refused_role;
+    publish_ack(m->id, 2, m->kind, false, ack_t::REASON_NOT_AUTHORIZED,
+                "operator " + op->name + " (role " + role_name(op->role) + ") may not move the machine: that needs role operator",
+                loop_.mode(), latest_.queue_depth);
+    return;
+  }
+  if (!admit(m->id, 2, m->kind, m->session, m->seq, *op)) return;
+  if (const std::string b = bad_number(*m); !b.empty()) {
+    publish_ack(m->id, 2, m->kind, false, ack_t::REASON_INVALID, b + " is not a finite number, zero or normal",
+                loop_.mode(), latest_.queue_depth);
+    return;
+  }
   Vec3 start;
   if (inflight_segments_ > 0) start = planned_end_;
   else if (ack_newer_than_state_ || !have_state_) start = ack_end_;
@@ -431,6 +640,36 @@ void Server::on_trajectory(const lcm::ReceiveBuffer*, const std::string&, const 
     inflight_segments_++;
     planned_end_ = v.segment.end;
   }
+}
+
+void Server::log_security(double now) {
+  // One journal line a second at most, with what changed since the last.
+  if (now - last_security_log_ < 1.0) return;
+  const cpm_msgs::security_t s = security();
+  const std::int64_t no_op = s.refused_no_operator - logged_.refused_no_operator,
+                     mac = s.refused_bad_mac - logged_.refused_bad_mac, role = s.refused_role - logged_.refused_role,
+                     replay = s.refused_replay - logged_.refused_replay,
+                     holder = s.refused_not_holder - logged_.refused_not_holder,
+                     junk = s.undecodable - logged_.undecodable,
+                     quiet = s.refusals_unanswered - logged_.refusals_unanswered;
+  if (no_op + mac + role + replay + holder + junk == 0) return;
+  std::fprintf(stderr,
+               "cpmd: security: refused %lld without an operator, %lld with a wrong MAC (last: %s), %lld beyond the "
+               "role, %lld replayed, %lld not from the holder; %lld undecodable; %lld refusals not answered (rate limit)\n",
+               static_cast<long long>(no_op), static_cast<long long>(mac), printable(last_stranger_).c_str(),
+               static_cast<long long>(role), static_cast<long long>(replay), static_cast<long long>(holder),
+               static_cast<long long>(junk), static_cast<long long>(quiet));
+  logged_ = s;
+  last_security_log_ = now;
+}
+
+void Server::publish_security(double now) {
+  if (now - last_security_publish_ < 1.0) return;
+  last_security_publish_ = now;
+  cpm_msgs::security_t s = security();
+  s.utime = std::chrono::duration_cast<std::chrono::microseconds>(
+                std::chrono::system_clock::now().time_since_epoch()).count();
+  lcm_->publish(cfg_.lcm.security_channel, &s);
 }
 
 int Server::drain() {
@@ -480,6 +719,9 @@ int Server::drain() {
     lcm_->publish(cfg_.lcm.stats_channel, &stats);
     ++n;
   }
+  const double now = now_();
+  publish_security(now);
+  log_security(now);
   return n;
 }
 
@@ -489,6 +731,23 @@ void Server::run(const std::atomic<bool>& stop) {
     drain();
   }
   drain();
+}
+
+bool bus_has_another_daemon(const LcmConfig& cfg, double rate_hz) {
+  lcm::LCM bus(cfg.url);
+  if (!bus.good()) return false;  // the server's own start says why
+  struct Heard {
+    int n = 0;
+    void on(const lcm::ReceiveBuffer*, const std::string&) { ++n; }
+  } heard;
+  for (const std::string* ch : {&cfg.state_channel, &cfg.stats_channel, &cfg.security_channel})
+    bus.subscribe(*ch, &Heard::on, &heard);
+  // Several state periods, at least 0.3 s; 1.2 s catches the 1 Hz statistics
+  // when the state is decimated that far.
+  const double listen = std::clamp(3.0 * cfg.state_decimation / rate_hz, 0.3, 1.2);
+  const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(listen);
+  while (heard.n == 0 && std::chrono::steady_clock::now() < end) bus.handleTimeout(20);
+  return heard.n > 0;
 }
 
 bool sd_notify(const std::string& message) {

@@ -14,13 +14,17 @@
 //   op % 4 == 1: trajectory_command_t bytes (u16 length, bytes)
 //   op % 4 == 2: run (next byte % 64) + 1 cycles
 //   op % 4 == 3: next byte: bit 0 e-stop open, bit 1 drive fault on axis 1
-// CMD_LOAD_MODEL paths are replaced by "builtin:elkady" or a missing file:
-// a fuzzer must not read the host's files.
-// The target acquires the session first and, unless bit 2 of the op is set,
-// writes it into the message (bytes 24..31); unless bit 3 is set, it writes
-// the next seq too (bytes 32..39): the fuzzer gets past the session check
-// and still reaches the refusals (wrong session, stale seq). The session
-// clock is the loop's cycle count, so expiry is deterministic.
+// CMD_LOAD_MODEL paths are replaced by "builtin:elkady" or a missing file
+// in a missing model directory: a fuzzer must not read the host's files.
+// The target acquires the session first (as operator alice, an engineer)
+// and, unless bit 2 of the op is set, writes it into the message (bytes
+// 24..31); unless bit 3 is set, it writes the next seq too (bytes 32..39);
+// unless bit 4 is set, it signs the message as alice (the MAC, the last 32
+// bytes, over the rest). So the fuzzer gets past authentication and the
+// session check and still reaches every refusal (no or a wrong MAC, another
+// operator, wrong session, stale seq). The session clock is the loop's cycle
+// count and the wall clock is 0 + that, so expiry and an acquire's freshness
+// (its seq in us) are deterministic.
 #include <cmath>
 #include <memory>
 #include <lcm/lcm-cpp.hpp>
@@ -28,6 +32,7 @@
 #include "cpm/daemon/server.hpp"
 #include "cpm/daemon/sim_backend.hpp"
 #include "fuzz_common.hpp"
+#include "support/test_operators.hpp"
 
 using namespace cpm;
 using namespace cpm::daemon;
@@ -41,6 +46,7 @@ DaemonConfig config() {
   c.loop.rate_hz = 250;  // a legal rate; 4x fewer samples per validated segment than 1 kHz
   c.loop.max_consecutive_overruns = 3;
   c.lcm.url = "memq://";  // in-process: nothing leaves the fuzzer
+  c.security.model_dir = "/nonexistent-fuzz-models";
   return c;
 }
 
@@ -60,7 +66,7 @@ std::vector<std::uint8_t> tame_control(const std::uint8_t* d, std::size_t n) {
     return out;
   }
   if (m.command != control_command_t::CMD_LOAD_MODEL) return out;
-  m.model_path = (m.model_path.size() % 2) ? "builtin:elkady" : "/nonexistent-fuzz/model.yaml";
+  m.model_path = (m.model_path.size() % 2) ? "builtin:elkady" : "nonexistent-fuzz-model.yaml";
   out.assign(static_cast<std::size_t>(m.getEncodedSize()), 0);
   m.encode(out.data(), 0, static_cast<int>(out.size()));
   return out;
@@ -92,14 +98,17 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   Server server(cfg, loop, models);
   std::int64_t k = 0;
   server.set_clock([&k, &cfg] { return static_cast<double>(k) / cfg.loop.rate_hz; });
+  server.set_wall_clock([&k, &cfg] { return static_cast<double>(k) / cfg.loop.rate_hz; });
+  server.set_operators(test::operator_table());
+  const Credentials alice = test::credentials("alice");
   AckTap tap;
   server.bus().subscribe(cfg.lcm.ack_channel, &AckTap::on, &tap);
   {
     control_command_t acq{};
     acq.command = control_command_t::CMD_ACQUIRE;
     acq.session = 1;  // nonce
-    std::vector<std::uint8_t> b(static_cast<std::size_t>(acq.getEncodedSize()));
-    acq.encode(b.data(), 0, static_cast<int>(b.size()));
+    acq.seq = 1;      // the wall clock in us, at 0 s
+    const std::vector<std::uint8_t> b = test::encode_signed(acq, alice);
     server.receive(cfg.lcm.control_channel, b.data(), b.size());
     while (server.bus().handleTimeout(0) > 0) {
     }
@@ -107,9 +116,10 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   }
   std::int64_t seq = 0;
   auto stamp = [&](std::vector<std::uint8_t>& b, std::uint8_t op) {
-    if (b.size() < 40) return;
+    if (b.size() < 40 + kMacBytes) return;
     if (!(op & 4)) put64(b, 24, tap.session);
     if (!(op & 8)) put64(b, 32, ++seq);
+    if (!(op & 16)) sign_encoded(b.data(), b.size(), alice.key);
   };
 
   const double force_limit = std::min(cfg.limits.force, models.current().model().force_limit);

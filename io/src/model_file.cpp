@@ -42,23 +42,35 @@ class Loader {
  public:
   explicit Loader(std::string file) : file_(std::move(file)) {}
 
-  [[noreturn]] void fail(const YAML::Node& n, const std::string& path, const std::string& why) const {
+  // `why` says what is wrong without a byte of the file (it may go over the
+  // network: ModelFileError::summary); `told` (default: `why`) may quote
+  // what was read, for the local user. `public_path` replaces `path` in the
+  // summary when the path itself holds a name from the file.
+  [[noreturn]] void fail(const YAML::Node& n, const std::string& path, const std::string& why,
+                         const std::string& told = "", const std::string* public_path = nullptr) const {
     std::string where = file_;
     const YAML::Mark m = n.Mark();
-    if (m.line >= 0) where += ":" + std::to_string(m.line + 1) + ":" + std::to_string(m.column + 1);
-    throw Error(where + ": " + (path.empty() ? "" : path + ": ") + why);
+    const int line = m.line >= 0 ? m.line + 1 : 0;
+    if (m.line >= 0) where += ":" + std::to_string(line) + ":" + std::to_string(m.column + 1);
+    const std::string& pp = public_path ? *public_path : path;
+    throw ModelFileError(where + ": " + (path.empty() ? "" : path + ": ") + (told.empty() ? why : told), line,
+                         (pp.empty() ? "" : pp + ": ") + why);
+  }
+  // "WHAT, got <what the node is>" locally; "WHAT" in the summary.
+  [[noreturn]] void fail_got(const YAML::Node& n, const std::string& path, const std::string& what) const {
+    fail(n, path, what, what + ", got " + describe_node(n));
   }
 
   double number(const YAML::Node& n, const std::string& path) const {
-    if (!n.IsScalar()) fail(n, path, "expected a number, got " + describe_node(n));
+    if (!n.IsScalar()) fail_got(n, path, "expected a number");
     const std::string& s = n.Scalar();
     double v;
     if (!detail::parse_double(detail::trim(s), v)) {
       if (s == ".inf" || s == "-.inf" || s == "+.inf" || s == ".nan" || s == ".NaN" || s == ".Inf")
-        fail(n, path, "'" + s + "' is not a finite number");
-      fail(n, path, "expected a number, got '" + s + "'");
+        fail(n, path, "not a finite number", "'" + s + "' is not a finite number");
+      fail(n, path, "expected a number", "expected a number, got '" + s + "'");
     }
-    if (!std::isfinite(v)) fail(n, path, "'" + s + "' is not a finite number");
+    if (!std::isfinite(v)) fail(n, path, "not a finite number", "'" + s + "' is not a finite number");
     return v;
   }
 
@@ -66,10 +78,12 @@ class Loader {
                    const char* unit, bool open_lo = false) const {
     const double v = number(n, path);
     if (v < lo || v > hi || (open_lo && v == lo)) {
-      std::ostringstream os;
-      os << v << " " << unit << " is out of range: must be " << (open_lo ? "> " : ">= ") << lo;
-      if (hi < 1e300) os << " and <= " << hi;
-      fail(n, path, os.str());
+      std::ostringstream range;
+      range << "out of range: must be " << (open_lo ? "> " : ">= ") << lo;
+      if (hi < 1e300) range << " and <= " << hi;
+      std::ostringstream told;
+      told << v << " " << unit << " is " << range.str();
+      fail(n, path, range.str() + (*unit ? std::string(" ") + unit : ""), told.str());
     }
     return v;
   }
@@ -77,20 +91,21 @@ class Loader {
   long integer(const YAML::Node& n, const std::string& path) const {
     const double v = number(n, path);
     if (v != std::floor(v) || std::abs(v) > 1e9)
-      fail(n, path, "expected an integer, got '" + n.Scalar() + "'");
+      fail(n, path, "expected an integer", "expected an integer, got '" + n.Scalar() + "'");
     return static_cast<long>(v);
   }
 
   std::string text(const YAML::Node& n, const std::string& path) const {
     if (n.IsNull()) return "";
-    if (!n.IsScalar()) fail(n, path, "expected a text, got " + describe_node(n));
+    if (!n.IsScalar()) fail_got(n, path, "expected a text");
     return n.Scalar();
   }
 
   Vec3 vec3(const YAML::Node& n, const std::string& path) const {
     if (!n.IsSequence() || n.size() != 3)
-      fail(n, path, "expected a list of 3 numbers [x, y, z], got " + describe_node(n) +
-                        (n.IsSequence() ? " of " + std::to_string(n.size()) : ""));
+      fail(n, path, "expected a list of 3 numbers [x, y, z]",
+           "expected a list of 3 numbers [x, y, z], got " + describe_node(n) +
+               (n.IsSequence() ? " of " + std::to_string(n.size()) : ""));
     static const char* axis[] = {"x", "y", "z"};
     Vec3 v;
     for (std::size_t i = 0; i < 3; ++i) v[static_cast<int>(i)] = number(n[i], join(path, axis[i]));
@@ -108,14 +123,15 @@ class Map {
  public:
   Map(const Loader& ld, const YAML::Node& n, std::string path, std::set<std::string> allowed)
       : ld_(ld), node_(n), path_(std::move(path)) {
-    if (!n.IsMap()) ld.fail(n, path_, "expected a mapping (key: value lines), got " + describe_node(n));
+    if (!n.IsMap()) ld.fail_got(n, path_, "expected a mapping (key: value lines)");
     for (auto it = n.begin(); it != n.end(); ++it) {
       if (!it->first.IsScalar()) ld.fail(it->first, path_, "a key must be a plain name");
       const std::string key = it->first.Scalar();
       if (!allowed.count(key)) {
         std::string list;
         for (const auto& a : allowed) list += (list.empty() ? "" : ", ") + a;
-        ld.fail(it->first, join(path_, key), "unknown key (expected one of: " + list + ")");
+        const std::string where = path_.empty() ? "(top level)" : path_;
+        ld.fail(it->first, join(path_, key), "unknown key (expected one of: " + list + ")", "", &where);
       }
       if (!items_.emplace(key, it->second).second)
         ld.fail(it->first, join(path_, key), "key given twice");
@@ -167,7 +183,7 @@ void load_limb(const Loader& ld, const Map& parent, int i, ctl::MachineModel& m)
   {
     const YAML::Node s = limb.get("stroke");
     if (!s.IsSequence() || s.size() != 2)
-      ld.fail(s, limb.path("stroke"), "expected [min, max] in m, got " + describe_node(s));
+      ld.fail_got(s, limb.path("stroke"), "expected [min, max] in m");
     m.strokes.min[i] = ld.number(s[0], limb.path("stroke") + ".min");
     m.strokes.max[i] = ld.number(s[1], limb.path("stroke") + ".max");
     if (!(m.strokes.max[i] > m.strokes.min[i]))
@@ -184,7 +200,7 @@ void load_limb(const Loader& ld, const Map& parent, int i, ctl::MachineModel& m)
       os << " (normalized: [" << detail::format_double(u.x()) << ", " << detail::format_double(u.y())
          << ", " << detail::format_double(u.z()) << "])";
     }
-    ld.fail(limb.get("normal"), limb.path("normal"), os.str());
+    ld.fail(limb.get("normal"), limb.path("normal"), "the plane normal must be a unit vector", os.str());
   }
   if (!(pl.normal[i] > 0.5))
     ld.fail(limb.get("normal"), limb.path("normal"),
@@ -222,7 +238,8 @@ ctl::DynamicEffect load_dynamic_effect(const Loader& ld, const YAML::Node& n, co
     std::string list;
     for (int t = 0; t < ctl::kDynamicEffectTypes; ++t)
       list += (t ? ", " : "") + std::string(ctl::info(static_cast<ctl::DynamicEffectType>(t)).name);
-    ld.fail(name_node, join(path, "effect"), "unknown dynamic effect '" + name + "' (one of: " + list + ")");
+    ld.fail(name_node, join(path, "effect"), "unknown dynamic effect (one of: " + list + ")",
+            "unknown dynamic effect '" + name + "' (one of: " + list + ")");
   }
   const ctl::DynamicEffectInfo& in = ctl::info(*type);
   std::set<std::string> allowed{"effect"};
@@ -262,9 +279,10 @@ ModelFile parse_model_file(const std::string& text, const std::string& name) {
     std::string where = name;
     if (e.mark.line >= 0)
       where += ":" + std::to_string(e.mark.line + 1) + ":" + std::to_string(e.mark.column + 1);
-    throw Error(where + ": not valid YAML: " + e.msg);
+    throw ModelFileError(where + ": not valid YAML: " + e.msg, e.mark.line >= 0 ? e.mark.line + 1 : 0,
+                         "not valid YAML: " + e.msg.substr(0, 60));
   }
-  if (!root || root.IsNull()) throw Error(name + ": empty model file");
+  if (!root || root.IsNull()) throw ModelFileError(name + ": empty model file", 0, "empty model file");
   const Map top(ld, root, "",
                 {"cpmd_model", "geometry", "masses", "force_limit", "kinematics", "dynamic_effects",
                  "fitted", "history"});
@@ -306,7 +324,7 @@ ModelFile parse_model_file(const std::string& text, const std::string& name) {
     const YAML::Node de = top.get("dynamic_effects");
     if (!de.IsNull()) {
       if (!de.IsSequence())
-        ld.fail(de, "dynamic_effects", "expected a list of effects, got " + describe_node(de));
+        ld.fail_got(de, "dynamic_effects", "expected a list of effects");
       if (de.size() > static_cast<std::size_t>(ctl::DynamicEffects::kCapacity))
         ld.fail(de, "dynamic_effects",
                 "at most " + std::to_string(ctl::DynamicEffects::kCapacity) + " dynamic effects");
@@ -316,7 +334,7 @@ ModelFile parse_model_file(const std::string& text, const std::string& name) {
   }
   if (top.has("fitted") && !top.get("fitted").IsNull()) {
     const YAML::Node fl = top.get("fitted");
-    if (!fl.IsSequence()) ld.fail(fl, "fitted", "expected a list, got " + describe_node(fl));
+    if (!fl.IsSequence()) ld.fail_got(fl, "fitted", "expected a list");
     for (std::size_t i = 0; i < fl.size(); ++i) {
       const Map f(ld, fl[i], "fitted[" + std::to_string(i) + "]",
                   {"name", "unit", "nominal", "value", "std_error"});
@@ -336,7 +354,7 @@ ModelFile parse_model_file(const std::string& text, const std::string& name) {
   }
   if (top.has("history") && !top.get("history").IsNull()) {
     const YAML::Node hl = top.get("history");
-    if (!hl.IsSequence()) ld.fail(hl, "history", "expected a list, got " + describe_node(hl));
+    if (!hl.IsSequence()) ld.fail_got(hl, "history", "expected a list");
     for (std::size_t i = 0; i < hl.size(); ++i) {
       const Map h(ld, hl[i], "history[" + std::to_string(i) + "]",
                   {"tool", "data_file", "data_sha256", "date", "note"});
@@ -361,7 +379,9 @@ ModelFile parse_model_file(const std::string& text, const std::string& name) {
     const ctl::Machine machine(m);
     (void)machine;
   } catch (const Error& e) {
-    throw Error(name + ": " + e.what());
+    // The model's own checks say what is inconsistent in numbers they derive,
+    // never the file's text.
+    throw ModelFileError(name + ": " + e.what(), 0, std::string(e.what()).substr(0, 160));
   }
   return out;
 }

@@ -6,30 +6,19 @@
 // rejected commands (outside the workspace, NaN, too fast, illegal in the
 // mode) were rejected with a reason and changed nothing.
 //
-// LCM stays on the machine: the test moves itself into a fresh network
-// namespace (loopback up, a multicast route on lo) when it may (root, as on
-// CI); otherwise it uses the host's loopback with ttl=0 and a private port.
-#include <fcntl.h>
+// LCM stays on the machine: the test runs in a fresh network namespace when
+// it may (support/daemon_process.hpp, the harness every process-level test
+// uses); commands are signed with a throw-away operator's key.
 #include <gtest/gtest.h>
-#include <sched.h>
-#include <signal.h>
-#include <spawn.h>
-#include <sys/wait.h>
-#include <unistd.h>
 
 #include <chrono>
 #include <cmath>
-#include <filesystem>
-#include <fstream>
-#include <regex>
-#include <sstream>
 #include <thread>
 #include <vector>
 
 #include "cpm/daemon/client.hpp"
 #include "cpm/sim/closed_loop.hpp"
-
-extern char** environ;
+#include "support/daemon_process.hpp"
 
 namespace cpm::daemon {
 namespace {
@@ -38,61 +27,7 @@ using cpm_msgs::ack_t;
 using cpm_msgs::control_command_t;
 using cpm_msgs::state_t;
 using cpm_msgs::trajectory_command_t;
-
-bool g_netns = false;
-
-class Daemon {
- public:
-  explicit Daemon(const std::string& config) {
-    const char* argv[] = {CPMD_EXE, "--config", config.c_str(), nullptr};
-    log_ = config + ".log";
-    posix_spawn_file_actions_t fa;
-    posix_spawn_file_actions_init(&fa);
-    posix_spawn_file_actions_addopen(&fa, 2, log_.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-    const int rc = posix_spawn(&pid_, CPMD_EXE, &fa, nullptr, const_cast<char**>(argv), environ);
-    posix_spawn_file_actions_destroy(&fa);
-    if (rc != 0) throw Error("cannot start " + std::string(CPMD_EXE));
-  }
-  ~Daemon() {
-    if (pid_ > 0) {
-      kill(pid_, SIGKILL);
-      waitpid(pid_, nullptr, 0);
-    }
-  }
-  int terminate() {
-    kill(pid_, SIGTERM);
-    int status = 0;
-    waitpid(pid_, &status, 0);
-    pid_ = -1;
-    return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
-  }
-  std::string log() const {
-    std::ifstream f(log_);
-    std::stringstream ss;
-    ss << f.rdbuf();
-    return ss.str();
-  }
-
- private:
-  pid_t pid_ = -1;
-  std::string log_;
-};
-
-std::string make_config(const std::string& dir, int port) {
-  std::ifstream f(std::string(CPM_SOURCE_DIR) + "/config/sim.yaml");
-  std::stringstream ss;
-  ss << f.rdbuf();
-  std::string text = ss.str();
-  text = std::regex_replace(text, std::regex("udpm://239.255.76.67:7667"),
-                            "udpm://239.255.76.67:" + std::to_string(port));
-  // The model files stay where the shipped config points.
-  text = std::regex_replace(text, std::regex(" machine\\.yaml"), std::string(" ") + CPM_SOURCE_DIR + "/config/machine.yaml");
-  // CI machines are noisy: a burst of late cycles must not fault the test.
-  text = std::regex_replace(text, std::regex("max_consecutive_overruns: 5"), "max_consecutive_overruns: 1000");
-  const std::string path = dir + "/sim.yaml";
-  std::ofstream(path) << text;
-  return path;
-}
+using cpm::test::g_netns;
 
 Vec3 v3(const double* v) { return Vec3(v[0], v[1], v[2]); }
 
@@ -138,19 +73,20 @@ void expect_refused(Client& c, const trajectory_command_t& m, std::int16_t reaso
 }
 
 TEST(DaemonEndToEnd, CircleMoveAndRejections) {
-  const std::string dir = std::filesystem::temp_directory_path() / ("cpmd-e2e-" + std::to_string(getpid()));
-  std::filesystem::create_directories(dir);
-  const int port = g_netns ? 7667 : 20000 + getpid() % 20000;
-  const std::string cfg_path = make_config(dir, port);
+  const cpm::test::TempDir dir("e2e");
+  cpm::test::OperatorsDir ops(dir / "operators.d");
+  const Credentials alice = ops.add("alice", Role::engineer);
+  // CI machines are noisy: a burst of late cycles must not fault the test.
+  const std::string cfg_path = cpm::test::sim_config(dir.path(), "sim.yaml", ops.path());
   const DaemonConfig cfg = load_config(cfg_path);
   std::printf("e2e: %s, LCM %s\n", g_netns ? "private network namespace" : "host loopback, ttl=0", cfg.lcm.url.c_str());
-  Daemon d(cfg_path);
-  Client c(cfg.lcm);
+  auto d = cpm::test::start_cpmd(cfg_path, dir / "cpmd.log");
+  Client c(cfg.lcm, alice);
 
   // Up and disabled, at the configured start.
   std::optional<state_t> s;
   for (int i = 0; i < 50 && !s; ++i) s = c.state(0.2);
-  ASSERT_TRUE(s) << "cpmd published no state:\n" << d.log();
+  ASSERT_TRUE(s) << "cpmd published no state:\n" << d->log();
   EXPECT_EQ(s->mode, state_t::MODE_DISABLED);
   const Vec3 p1(0.600, 0.425, 0.300);
   EXPECT_LT((v3(s->position) - p1).norm(), 1e-9);
@@ -236,19 +172,8 @@ TEST(DaemonEndToEnd, CircleMoveAndRejections) {
   a = c.control(control_command_t::CMD_DISABLE);
   EXPECT_TRUE(a.accepted) << a.message;
   EXPECT_EQ(a.mode, state_t::MODE_DISABLED);
-  EXPECT_EQ(d.terminate(), 0) << d.log();
-  std::filesystem::remove_all(dir);
+  EXPECT_EQ(d->terminate(), 0) << d->log();
 }
 
 }  // namespace
 }  // namespace cpm::daemon
-
-int main(int argc, char** argv) {
-  ::testing::InitGoogleTest(&argc, argv);
-  // A private network namespace for LCM, before any socket or thread exists.
-  if (geteuid() == 0 && unshare(CLONE_NEWNET) == 0) {
-    cpm::daemon::g_netns = std::system("ip link set lo up && ip route add 224.0.0.0/4 dev lo") == 0;
-    if (!cpm::daemon::g_netns) std::fprintf(stderr, "e2e: cannot set up lo in the new namespace\n");
-  }
-  return RUN_ALL_TESTS();
-}

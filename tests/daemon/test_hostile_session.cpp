@@ -11,6 +11,7 @@
 #include <unistd.h>
 
 #include <cmath>
+#include <filesystem>
 #include <limits>
 #include <lcm/lcm-cpp.hpp>
 #include <map>
@@ -18,6 +19,7 @@
 
 #include "cpm/daemon/server.hpp"
 #include "loop_fixture.hpp"
+#include "support/test_operators.hpp"
 
 namespace cpm::daemon {
 namespace {
@@ -39,31 +41,41 @@ struct Session {
     c.lcm.url = "memq://";
     return c;
   }
+  Credentials who = test::credentials("alice");  // an engineer
   Session() : h(config()) {
     server = std::make_unique<Server>(h.cfg, *h.loop, models);
+    server->set_wall_clock([] { return test::kWallClock; });
+    server->set_operators(test::operator_table());
     server->bus().subscribe(h.cfg.lcm.ack_channel, &Session::on_ack, this);
-    // Commands need the session (test_session_*.cpp tests that); this
-    // commander holds it and publish() stamps it on every well-formed command.
+    // Commands need the operator's MAC and the session (test_session.cpp,
+    // tests/redteam); this commander holds it and publish() stamps and signs
+    // every well-formed command.
     control_command_t acq{};
     acq.command = control_command_t::CMD_ACQUIRE;
     acq.session = 12345;  // nonce
+    acq.seq = test::acquire_seq();
     publish(h.cfg.lcm.control_channel, encode(acq));
     if (acks.size() == 1 && acks[0].accepted) sid = acks[0].session;
     acks.clear();
   }
   std::int64_t sid = 0, seq = 0;
   // Session and seq sit at bytes 24..39 of both command types (after the
-  // hash, utime and id); bytes with a wrong hash or too short stay as they are.
+  // hash, utime and id); the MAC is the last 32 bytes. Bytes with a wrong
+  // hash or too short stay as they are.
   void stamp(std::vector<std::uint8_t>& b) {
-    if (sid == 0 || b.size() < 40) return;
+    if (b.size() < 40 + kMacBytes) return;
     std::uint64_t hash = 0;
     for (int i = 0; i < 8; ++i) hash = (hash << 8) | b[static_cast<std::size_t>(i)];
     if (hash != static_cast<std::uint64_t>(control_command_t::getHash()) &&
         hash != static_cast<std::uint64_t>(trajectory_command_t::getHash()))
       return;
-    const std::uint64_t v[2] = {static_cast<std::uint64_t>(sid), static_cast<std::uint64_t>(++seq)};
-    for (int k = 0; k < 2; ++k)
-      for (int i = 0; i < 8; ++i) b[static_cast<std::size_t>(24 + 8 * k + i)] = static_cast<std::uint8_t>(v[k] >> (56 - 8 * i));
+    if (sid != 0) {
+      const std::uint64_t v[2] = {static_cast<std::uint64_t>(sid), static_cast<std::uint64_t>(++seq)};
+      for (int k = 0; k < 2; ++k)
+        for (int i = 0; i < 8; ++i)
+          b[static_cast<std::size_t>(24 + 8 * k + i)] = static_cast<std::uint8_t>(v[k] >> (56 - 8 * i));
+    }
+    sign_encoded(b.data(), b.size(), who.key);
   }
   void on_ack(const lcm::ReceiveBuffer*, const std::string&, const ack_t* a) { acks.push_back(*a); }
   void pump() {
@@ -75,8 +87,10 @@ struct Session {
     server->bus().publish(channel, bytes.data(), static_cast<unsigned>(bytes.size()));
     pump();  // the server's subscriptions decode and validate
   }
+  // Encoded with this commander's name in it (publish() signs).
   template <class M>
-  static std::vector<std::uint8_t> encode(const M& m) {
+  static std::vector<std::uint8_t> encode(M m) {
+    set_operator_name(m.operator_name, "alice");
     std::vector<std::uint8_t> b(static_cast<std::size_t>(m.getEncodedSize()));
     m.encode(b.data(), 0, static_cast<int>(b.size()));
     return b;
@@ -153,12 +167,12 @@ TEST(HostileSession, MalformedBytesAreDroppedAndTheDaemonGoesOn) {
   auto wrong_hash = good;
   wrong_hash[3] ^= 0x40;
   bad.push_back(wrong_hash);
-  // model_path's length prefix (the last string, 4 bytes before its bytes):
+  // model_path's length prefix (the only string, 4 bytes before its bytes):
   // 0, -1, INT32_MIN and beyond the message. lcm-gen's decoder would call
   // std::string::assign with a negative size for the first three.
   for (std::uint32_t len : {0u, 0xFFFFFFFFu, 0x80000000u, 0x7FFFFFFFu}) {
     auto b = good;
-    const std::size_t at = b.size() - 5;  // "" is encoded as length 1 + NUL
+    const std::size_t at = b.size() - 5 - kOperatorNameBytes - kMacBytes;  // "" is encoded as length 1 + NUL
     b[at] = static_cast<std::uint8_t>(len >> 24), b[at + 1] = static_cast<std::uint8_t>(len >> 16);
     b[at + 2] = static_cast<std::uint8_t>(len >> 8), b[at + 3] = static_cast<std::uint8_t>(len);
     bad.push_back(b);
@@ -180,13 +194,18 @@ TEST(HostileSession, MalformedBytesAreDroppedAndTheDaemonGoesOn) {
 TEST(HostileSession, LoadModelRefusesDevicesAndFifos) {
   // Read whole, /dev/zero would exhaust memory and a FIFO would block the
   // thread that has to hear the next stop. (Were they read, this test would
-  // not end.)
+  // not end.) Inside the model directory as well as outside it; the answer
+  // names the reason and never echoes the path.
   Session s;
-  const std::string fifo = testing::TempDir() + "cpmd-hostile-fifo";
-  ::unlink(fifo.c_str());
-  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+  const std::string dir = s.h.cfg.security.model_dir;
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir + "/sub.yaml");
+  ASSERT_EQ(::mkfifo((dir + "/fifo.yaml").c_str(), 0600), 0);
+  std::filesystem::create_symlink("/dev/zero", dir + "/zero.yaml");
   std::int64_t id = 40;
-  for (const std::string& path : {std::string("/dev/zero"), std::string("/dev/stdin"), fifo, std::string("/")}) {
+  for (const std::string& path : {std::string("/dev/zero"), std::string("/dev/stdin"), std::string("/"),
+                                  std::string("fifo.yaml"), dir + "/fifo.yaml", std::string("zero.yaml"),
+                                  std::string("sub.yaml")}) {
     control_command_t m{};
     m.command = control_command_t::CMD_LOAD_MODEL;
     m.id = id;
@@ -196,9 +215,10 @@ TEST(HostileSession, LoadModelRefusesDevicesAndFifos) {
     ASSERT_NE(a, nullptr) << path;
     EXPECT_FALSE(a->accepted) << path;
     EXPECT_EQ(a->reason, ack_t::REASON_LOAD_FAILED) << path;
-    EXPECT_NE(a->message.find(path), std::string::npos) << a->message;
+    EXPECT_EQ(a->message.find(path), std::string::npos) << a->message;
+    EXPECT_FALSE(a->message.empty());
   }
-  ::unlink(fifo.c_str());
+  std::filesystem::remove_all(dir);
 }
 
 TEST(HostileSession, ExtremeIdsAreEchoed) {

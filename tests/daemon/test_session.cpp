@@ -2,7 +2,8 @@
 // a time and the sequence numbers its commands carry (docs/daemon.md). The
 // server runs on memq:// (in-process LCM) with the loop on the simulator
 // backend, cycle by cycle; the session clock is a variable the test moves,
-// so expiry is tested without waiting.
+// so expiry is tested without waiting. Every command here is signed by an
+// operator (tests/redteam tests the ones that are not).
 #include <gtest/gtest.h>
 
 #include <lcm/lcm-cpp.hpp>
@@ -10,6 +11,7 @@
 
 #include "cpm/daemon/server.hpp"
 #include "loop_fixture.hpp"
+#include "support/test_operators.hpp"
 
 namespace cpm::daemon {
 namespace {
@@ -38,6 +40,8 @@ struct Cell {
   Cell() : h(config()) {
     server = std::make_unique<Server>(h.cfg, *h.loop, models);
     server->set_clock([this] { return now; });
+    server->set_wall_clock([] { return test::kWallClock; });
+    server->set_operators(test::operator_table());
     server->bus().subscribe(h.cfg.lcm.ack_channel, &Cell::on_ack, this);
     server->bus().subscribe(h.cfg.lcm.state_channel, &Cell::on_state, this);
   }
@@ -54,10 +58,12 @@ struct Cell {
       pump();
     }
   }
-  // Publish, run the loop until the command's ack is out, return it.
+  Credentials who = test::credentials("alice");
+  // Sign as `who`, publish, run the loop until the command's ack is out, return it.
   template <class M>
   ack_t send(const std::string& channel, const M& m) {
-    server->bus().publish(channel, &m);
+    const auto b = test::encode_signed(m, who);
+    server->bus().publish(channel, b.data(), static_cast<unsigned>(b.size()));
     pump();
     for (int i = 0; i < 5; ++i) {
       for (auto it = acks.rbegin(); it != acks.rend(); ++it)
@@ -76,7 +82,7 @@ struct Cell {
     return send(h.cfg.lcm.control_channel, m);
   }
   std::int64_t acquire(std::int64_t nonce) {
-    const ack_t a = control(C::CMD_ACQUIRE, nonce, 0);
+    const ack_t a = control(C::CMD_ACQUIRE, nonce, test::acquire_seq());
     return a.accepted ? a.session : 0;
   }
   trajectory_command_t move_by(const Vec3& d, std::int64_t session, std::int64_t seq) {
@@ -116,7 +122,7 @@ TEST(Session, ASecondCommanderIsRefusedWhileTheFirstHoldsTheSession) {
   const std::int64_t first = c.acquire(111);
   ASSERT_NE(first, 0);
   // Another nonce is another commander.
-  const ack_t refused = c.control(C::CMD_ACQUIRE, 222, 0);
+  const ack_t refused = c.control(C::CMD_ACQUIRE, 222, test::acquire_seq());
   EXPECT_FALSE(refused.accepted);
   EXPECT_EQ(refused.reason, ack_t::REASON_NOT_HOLDER);
   EXPECT_NE(refused.message.find("another commander holds the machine"), std::string::npos) << refused.message;

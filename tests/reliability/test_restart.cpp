@@ -8,10 +8,19 @@
 // (The canopen half — the drives stop on their own heartbeat consumer when
 // the master goes silent — is test_matrix_canopen's MatrixRestart and the
 // SIL test sil.reliability.)
-#include "reliability/process_rig.hpp"
+#include <gtest/gtest.h>
+
+#include <functional>
+#include <regex>
+
+#include "cpm/daemon/client.hpp"
+#include "support/daemon_process.hpp"
 
 namespace cpm::daemon::test {
 namespace {
+
+
+Vec3 vec(const double* v) { return Vec3(v[0], v[1], v[2]); }
 
 using cpm_msgs::ack_t;
 using cpm_msgs::control_command_t;
@@ -44,17 +53,19 @@ class KilledIn : public ::testing::TestWithParam<Case> {};
 
 TEST_P(KilledIn, RestartsDisabledAndNeverMovesOnItsOwn) {
   const Case cs = GetParam();
-  const std::string dir = tmp_dir(std::string("restart-") + cs.name);
+  const cpm::test::TempDir dir(std::string("restart-") + cs.name);
+  cpm::test::OperatorsDir ops(dir / "operators.d");
+  const Credentials bob = ops.add("bob", Role::operator_);
   std::vector<std::pair<std::string, std::string>> edits = {
       {"stop_deceleration: 2.0", "stop_deceleration: 0.05"}};  // a stop of 1 s at 50 mm/s
   if (cs.mode == state_t::MODE_ENABLING)
     edits.push_back({"enable_delay: 0.005", "enable_delay: 3.0"}), edits.push_back({"enable_timeout: 0.5", "enable_timeout: 10"});
   if (cs.mode == state_t::MODE_FAULT) edits.push_back({"following_error: 0.005", "following_error: 1.0e-7"});
-  const std::string cfg_path = sim_config(dir, "sim.yaml", edits);
+  const std::string cfg_path = cpm::test::sim_config(dir.path(), "sim.yaml", ops.path(), edits);
   const DaemonConfig cfg = load_config(cfg_path);
-  Client c(cfg.lcm);
+  Client c(cfg.lcm, bob);
 
-  auto a = std::make_unique<CpmdProcess>(cfg_path, dir + "/a.log");
+  auto a = cpm::test::start_cpmd(cfg_path, dir / "a.log");
   ASSERT_TRUE(wait_for(c, [](const state_t& s) { return s.mode == state_t::MODE_DISABLED; }, 20)) << a->log();
   // Bring the first cpmd to the state.
   if (cs.mode != state_t::MODE_DISABLED) {
@@ -84,7 +95,7 @@ TEST_P(KilledIn, RestartsDisabledAndNeverMovesOnItsOwn) {
   c.handle(0.3);  // drain what the dead process sent
 
   // The restart.
-  auto b = std::make_unique<CpmdProcess>(cfg_path, dir + "/b.log");
+  auto b = cpm::test::start_cpmd(cfg_path, dir / "b.log");
   std::vector<state_t> seen;
   c.on_state([&](const state_t& s) { seen.push_back(s); });
   const auto t_end = std::chrono::steady_clock::now() + std::chrono::seconds(20);
@@ -115,7 +126,6 @@ TEST_P(KilledIn, RestartsDisabledAndNeverMovesOnItsOwn) {
   EXPECT_LT((vec(h->position_ref) - p0).norm(), 1e-9);
   EXPECT_LT((vec(h->position) - p0).norm(), 5e-6);
   EXPECT_EQ(b->terminate(), 0) << b->log();
-  std::filesystem::remove_all(dir);
 }
 
 INSTANTIATE_TEST_SUITE_P(EveryState, KilledIn,
@@ -127,13 +137,13 @@ INSTANTIATE_TEST_SUITE_P(EveryState, KilledIn,
 // Row: configuration invalid, at the process level: cpmd exits 1 with the
 // place of the error before it opens the backend or publishes anything.
 TEST(ProcessFaults, InvalidConfigurationExitsBeforeAnythingRuns) {
-  const std::string dir = tmp_dir("badconfig");
-  const std::string cfg_path = sim_config(dir, "bad.yaml", {{"velocity: 0.5 ", "velocity: fast "}});
-  CpmdProcess p(cfg_path, dir + "/cpmd.log");
-  EXPECT_EQ(p.wait_exit(), 1);
-  const std::string log = p.log();
+  const cpm::test::TempDir dir("badconfig");
+  const std::string cfg_path =
+      cpm::test::sim_config(dir.path(), "bad.yaml", dir / "operators.d", {{"velocity: 0.5 ", "velocity: fast "}});
+  const auto p = cpm::test::start_cpmd(cfg_path, dir / "cpmd.log");
+  EXPECT_EQ(p->wait_exit(), 1);
+  const std::string log = p->log();
   EXPECT_TRUE(std::regex_search(log, std::regex("bad\\.yaml:\\d+:\\d+: limits\\.velocity"))) << log;
-  std::filesystem::remove_all(dir);
 }
 
 }  // namespace

@@ -7,7 +7,10 @@
 #include <cstdlib>
 #include <set>
 
-#include "reliability/process_rig.hpp"
+#include <gtest/gtest.h>
+
+#include "cpm/daemon/client.hpp"
+#include "support/daemon_process.hpp"
 
 namespace cpm::daemon::test {
 namespace {
@@ -19,16 +22,17 @@ using cpm_msgs::trajectory_command_t;
 TEST(NothingLost, StateStreamHasNoGapsAtTheLoopRate) {
   const char* env = std::getenv("CPM_STATE_LOG_SECONDS");
   const double seconds = env ? std::atof(env) : 20.0;
-  const std::string dir = tmp_dir("statelog");
-  const std::string cfg_path = sim_config(dir, "sim.yaml");
+  const cpm::test::TempDir dir("statelog");
+  cpm::test::OperatorsDir ops(dir / "operators.d");
+  const std::string cfg_path = cpm::test::sim_config(dir.path(), "sim.yaml", ops.path());
   const DaemonConfig cfg = load_config(cfg_path);
   ASSERT_EQ(cfg.lcm.state_decimation, 1);
   ASSERT_EQ(cfg.loop.rate_hz, 1000);
-  Client c(cfg.lcm);
-  CpmdProcess d(cfg_path, dir + "/cpmd.log");
+  Client c(cfg.lcm, ops.add("bob", Role::operator_));
+  const auto d = cpm::test::start_cpmd(cfg_path, dir / "cpmd.log");
   std::optional<state_t> s;
   for (int i = 0; i < 100 && !s; ++i) s = c.state(0.2);
-  ASSERT_TRUE(s) << d.log();
+  ASSERT_TRUE(s) << d->log();
   ASSERT_TRUE(c.control(control_command_t::CMD_ENABLE).accepted);
 
   // Record; keep the machine busy with the paper's circle meanwhile.
@@ -72,8 +76,7 @@ TEST(NothingLost, StateStreamHasNoGapsAtTheLoopRate) {
   EXPECT_GE(expected, static_cast<std::int64_t>(seconds * 1000 * 0.95));
   // Slots skipped by late cycles account for every difference between the two counters.
   EXPECT_EQ(slot_span - expected, skipped_last - skipped_first);
-  EXPECT_EQ(d.terminate(), 0) << d.log();
-  std::filesystem::remove_all(dir);
+  EXPECT_EQ(d->terminate(), 0) << d->log();
 }
 
 }  // namespace

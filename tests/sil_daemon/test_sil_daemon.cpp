@@ -36,8 +36,7 @@
 #include "cpm/daemon/loop.hpp"
 #include "cpm/sim/closed_loop.hpp"
 #include "sil/sil_check.hpp"
-
-extern char** environ;
+#include "support/daemon_process.hpp"
 
 #define SIL_REQUIRE_VOID(cond, msg)                          \
   do {                                                       \
@@ -59,55 +58,14 @@ using Clock = std::chrono::steady_clock;
 
 double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
-class Process {
- public:
-  Process(const std::string& name, std::vector<std::string> args, const std::string& log) : name_(name), log_(log) {
-    std::vector<char*> argv;
-    for (auto& a : args) argv.push_back(a.data());
-    argv.push_back(nullptr);
-    posix_spawn_file_actions_t fa;
-    posix_spawn_file_actions_init(&fa);
-    posix_spawn_file_actions_addopen(&fa, 2, log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-    posix_spawn_file_actions_addopen(&fa, 1, "/dev/null", O_WRONLY, 0);
-    if (posix_spawn(&pid_, argv[0], &fa, nullptr, argv.data(), environ) != 0) pid_ = -1;
-    posix_spawn_file_actions_destroy(&fa);
-  }
-  ~Process() { kill_now(); }
-  bool running() {
-    if (pid_ <= 0) return false;
-    int st = 0;
-    if (waitpid(pid_, &st, WNOHANG) == pid_) {
-      pid_ = -1;
-      return false;
-    }
-    return true;
-  }
-  void kill_now() {
-    if (pid_ > 0) {
-      kill(pid_, SIGKILL);
-      waitpid(pid_, nullptr, 0);
-      pid_ = -1;
-    }
-  }
-  int terminate() {
-    if (pid_ <= 0) return -1;
-    kill(pid_, SIGTERM);
-    int st = 0;
-    waitpid(pid_, &st, 0);
-    pid_ = -1;
-    return WIFEXITED(st) ? WEXITSTATUS(st) : 128 + WTERMSIG(st);
-  }
-  void dump() const {
-    std::ifstream f(log_);
-    std::string line;
-    std::fprintf(stderr, "---- %s log (%s)\n", name_.c_str(), log_.c_str());
-    while (std::getline(f, line)) std::fprintf(stderr, "  %s\n", line.c_str());
-  }
-
- private:
-  std::string name_, log_;
-  pid_t pid_ = -1;
-};
+// The harness's child process (support/daemon_process.hpp), its log printed on failure.
+using cpm::test::Process;
+void dump(const char* name, const Process& p) {
+  std::ifstream f(p.log_path());
+  std::string line;
+  std::fprintf(stderr, "---- %s log (%s)\n", name, p.log_path().c_str());
+  while (std::getline(f, line)) std::fprintf(stderr, "  %s\n", line.c_str());
+}
 
 // The gpio-sim chip: inputs driven by pull, outputs read back.
 struct Gpio {
@@ -151,7 +109,7 @@ std::string text_of(const state_t& s) {
 }
 
 struct Sil {
-  std::string cpmd_exe, vd_exe, config, model, dir;
+  std::string cpmd_exe, vd_exe, config, model, dir, operators;
   daemon::DaemonConfig cfg;
   std::unique_ptr<daemon::Client> client;
   std::unique_ptr<Process> cpmd, vd;
@@ -160,9 +118,8 @@ struct Sil {
   double rate = 0;
 
   bool start_vd() {
-    vd = std::make_unique<Process>("virtual-drives",
-                                   std::vector<std::string>{vd_exe, "--interface", cfg.canopen.interface, "--model", model,
-                                                            "--rate", std::to_string(rate), "--control", sock},
+    vd = std::make_unique<Process>(std::vector<std::string>{vd_exe, "--interface", cfg.canopen.interface, "--model",
+                                                            model, "--rate", std::to_string(rate), "--control", sock},
                                    dir + "/virtual-drives.log");
     for (auto t0 = Clock::now(); since(t0) < 30;) {
       if (access(sock.c_str(), F_OK) == 0) return true;
@@ -171,7 +128,8 @@ struct Sil {
     return false;
   }
   bool start_cpmd() {
-    cpmd = std::make_unique<Process>("cpmd", std::vector<std::string>{cpmd_exe, "--config", config}, dir + "/cpmd.log");
+    cpmd = std::make_unique<Process>(std::vector<std::string>{cpmd_exe, "--config", config, "--operators", operators},
+                                     dir + "/cpmd.log");
     for (auto t0 = Clock::now(); since(t0) < 60;) {
       if (auto s = client->state(0.5); s && s->mode == state_t::MODE_DISABLED) return true;
       if (!cpmd->running()) return false;
@@ -255,8 +213,8 @@ int main(int argc, char** argv) {
                    s->fault_limit, text_of(*s).c_str());
   }
   if (sil::failures) {
-    if (t.cpmd) t.cpmd->dump();
-    if (t.vd) t.vd->dump();
+    if (t.cpmd) dump("cpmd", *t.cpmd);
+    if (t.vd) dump("virtual-drives", *t.vd);
   }
   return rc;
 }
@@ -281,15 +239,18 @@ int run(Sil& t, int argc, char** argv) {
     SIL_REQUIRE(false, e.what());
   }
   t.rate = t.cfg.loop.rate_hz;
-  t.client = std::make_unique<daemon::Client>(t.cfg.lcm);
+  // A throw-away operator for this run (docs/security.md).
+  cpm::test::OperatorsDir ops(t.dir + "/operators.d");
+  t.operators = ops.path();
+  t.client = std::make_unique<daemon::Client>(t.cfg.lcm, ops.add("sil", daemon::Role::engineer));
 
   // The e-stop chain closed, no limit switch.
   t.gpio.pull(Gpio::estop, true);
   for (int l = 2; l <= 7; ++l) t.gpio.pull(l, false);
   SIL_REQUIRE(t.start_vd(), "virtual-drives did not start");
   if (!t.start_cpmd()) {
-    t.cpmd->dump();
-    t.vd->dump();
+    dump("cpmd", *t.cpmd);
+    dump("virtual-drives", *t.vd);
     SIL_REQUIRE(false, "cpmd did not come up disabled");
   }
   std::printf("sil: cpmd and virtual-drives up after %.1f s\n", since(t_start));
@@ -381,7 +342,7 @@ int run(Sil& t, int argc, char** argv) {
   SIL_CHECK_MSG(mv.accepted, "move refused: " + mv.message);
   t.wait_state([](const state_t& s) { return s.mode == state_t::MODE_MOVING && s.segment_elapsed > 0.2; }, 30);
   SIL_CHECK_MSG(vd_command(t.sock, "status").find("operation enabled") != std::string::npos, "drives not enabled while moving");
-  t.cpmd->kill_now();
+  t.cpmd->kill9();
   std::string after_kill;
   for (auto t0 = Clock::now(); since(t0) < 30; std::this_thread::sleep_for(std::chrono::milliseconds(100))) {
     after_kill = vd_command(t.sock, "status");
@@ -394,7 +355,7 @@ int run(Sil& t, int argc, char** argv) {
   SIL_REQUIRE(t.start_cpmd(), "cpmd did not come back");
   SIL_REQUIRE(t.enable(), "enable failed after the restart");
   std::printf("sil: fault: the virtual drives disappear\n");
-  t.vd->kill_now();
+  t.vd->kill9();
   {
     const auto s = t.wait_state([](const state_t& st) { return st.mode == state_t::MODE_FAULT; }, 60);
     SIL_CHECK_MSG(s.has_value(), "no fault when the drives vanished");

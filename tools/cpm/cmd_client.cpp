@@ -120,8 +120,9 @@ int status(Args& a) {
 int simple(Args& a, std::int8_t cmd, const char* what) {
   const bool no_wait = a.flag("no-wait");
   auto l = lcm_options(a);
+  auto key = cmd == control_command_t::CMD_STOP ? operator_key_if_usable(a) : operator_key(a);
   a.finish();
-  daemon::Client c(l);
+  daemon::Client c(l, key);
   const auto ack = c.control(cmd);
   const int rc = report(what, ack);
   if (rc == 0 && !no_wait && (cmd == control_command_t::CMD_ENABLE || cmd == control_command_t::CMD_STOP)) {
@@ -143,6 +144,7 @@ int controller(Args& a) {
   cmd.command = control_command_t::CMD_SELECT_CONTROLLER;
   const double kp = a.number("kp", NAN), kd = a.number("kd", NAN);
   auto l = lcm_options(a);
+  auto key = operator_key(a);
   const auto pos = a.positionals();
   const auto law = pos.empty() ? std::nullopt : ctl::law_from_name(pos[0]);
   if (pos.size() != 1 || !law) throw UsageError("give one law: pd, pd_gravity, pd_feedforward or computed_torque");
@@ -154,19 +156,21 @@ int controller(Args& a) {
     cmd.kd[i] = std::isnan(kd) ? g.kd[i] : kd;
   }
   a.finish();
-  daemon::Client c(l);
+  daemon::Client c(l, key);
   return report("controller", c.control(cmd));
 }
 
 int load_model(Args& a) {
   auto l = lcm_options(a);
+  auto key = operator_key(a);
   const auto pos = a.positionals();
-  if (pos.size() != 1) throw UsageError("give the model file's path (on the daemon's host)");
+  if (pos.size() != 1)
+    throw UsageError("give the model file's path in cpmd's model directory (security.model_dir), or builtin:elkady");
   a.finish();
   control_command_t cmd{};
   cmd.command = control_command_t::CMD_LOAD_MODEL;
   cmd.model_path = pos[0];
-  daemon::Client c(l);
+  daemon::Client c(l, key);
   return report("load-model", c.control(cmd, 10.0));
 }
 
@@ -210,6 +214,25 @@ int stats(Args& a) {
     std::printf("%-20s %10.2f %10.2f %10.0f %10.0f %10.2f\n", names[k], s->min_ns[k] * 1e-3,
                 s->count[k] ? s->sum_ns[k] / s->count[k] * 1e-3 : 0.0, pct(k, 0.99), pct(k, 0.999),
                 s->max_ns[k] * 1e-3);
+  if (auto sec = c.security(1.5))
+    std::printf("security: %d operators; refused %lld without an operator, %lld with a wrong MAC, %lld beyond the "
+                "role, %lld replayed, %lld not from the holder; %lld undecodable; %lld stops from anyone\n",
+                sec->operators, static_cast<long long>(sec->refused_no_operator),
+                static_cast<long long>(sec->refused_bad_mac), static_cast<long long>(sec->refused_role),
+                static_cast<long long>(sec->refused_replay), static_cast<long long>(sec->refused_not_holder),
+                static_cast<long long>(sec->undecodable), static_cast<long long>(sec->stops_from_anyone));
+  return 0;
+}
+
+int keygen(Args& a) {
+  const auto pos = a.positionals();
+  if (pos.size() != 1) throw UsageError("give the key file to create (e.g. ~/.config/cpm/operator.key)");
+  a.finish();
+  daemon::write_key_file(pos[0], daemon::generate_key());
+  std::printf("%s: a new operator key (32 random bytes, hex, mode 0600). cpmd needs the same key as\n"
+              "operators.d/NAME.key (owned by cpmd's user, mode 0600) and NAME's role in operators.d/roles.yaml\n"
+              "(docs/security.md).\n",
+              pos[0].c_str());
   return 0;
 }
 
@@ -217,20 +240,22 @@ const Command r1{"status", "print the state of a running cpmd (--json for machin
                  "[--json] [--config DAEMON.yaml] [--url LCM_URL]"};
 const Command r2{"enable", "enable the drives (disabled -> enabling -> holding)",
                  [](Args& a) { return simple(a, control_command_t::CMD_ENABLE, "enable"); },
-                 "[--no-wait] [--config DAEMON.yaml] [--url LCM_URL]"};
+                 "[--no-wait] [--config DAEMON.yaml] [--url LCM_URL] [--key FILE] [--operator NAME]"};
 const Command r3{"disable", "disable the drives (a moving machine stops first)",
                  [](Args& a) { return simple(a, control_command_t::CMD_DISABLE, "disable"); },
-                 "[--config DAEMON.yaml] [--url LCM_URL]"};
+                 "[--config DAEMON.yaml] [--url LCM_URL] [--key FILE] [--operator NAME]"};
 const Command r4{"stop", "stop the motion and clear the trajectory queue",
                  [](Args& a) { return simple(a, control_command_t::CMD_STOP, "stop"); },
-                 "[--no-wait] [--config DAEMON.yaml] [--url LCM_URL]"};
+                 "[--no-wait] [--config DAEMON.yaml] [--url LCM_URL] [--key FILE] [--operator NAME]"};
 const Command r5{"reset", "reset a latched fault (the setpoint resyncs to the measured position)",
                  [](Args& a) { return simple(a, control_command_t::CMD_RESET, "reset"); },
-                 "[--config DAEMON.yaml] [--url LCM_URL]"};
+                 "[--config DAEMON.yaml] [--url LCM_URL] [--key FILE] [--operator NAME]"};
 const Command r6{"controller", "select the control law and gains of a running cpmd", controller,
-                 "pd|pd_gravity|pd_feedforward|computed_torque [--kp K] [--kd K] [--config DAEMON.yaml] [--url LCM_URL]"};
+                 "pd|pd_gravity|pd_feedforward|computed_torque [--kp K] [--kd K] [--config DAEMON.yaml] [--url LCM_URL] [--key FILE] [--operator NAME]"};
 const Command r7{"load-model", "load a model file into a running cpmd (when disabled)", load_model,
-                 "MODEL.yaml [--config DAEMON.yaml] [--url LCM_URL]"};
+                 "MODEL.yaml [--config DAEMON.yaml] [--url LCM_URL] [--key FILE] [--operator NAME]"};
+const Command r9{"keygen", "make a new operator key file (32 random bytes, hex, mode 0600; never overwrites)", keygen,
+                 "FILE"};
 const Command r8{"stats", "print cpmd's loop timing: wake-up latency and per-phase times", stats,
                  "[--json] [--config DAEMON.yaml] [--url LCM_URL]"};
 

@@ -21,6 +21,26 @@ inline daemon::LcmConfig lcm_options(Args& a) {
 }
 inline const char* kConnUsage = "[--config DAEMON.yaml] [--url LCM_URL]";
 
+// The operator's key (docs/security.md): --key FILE, else $CPM_KEY_FILE, else
+// ~/.config/cpm/operator.key; the name --operator NAME, else $CPM_OPERATOR,
+// else the key file's name, else the login name. None found: nullopt (the
+// client then refuses every command but stop).
+inline std::optional<daemon::Credentials> operator_key(Args& a) {
+  const auto key = a.option("key");
+  const auto name = a.option("operator");
+  return daemon::find_credentials(key, name);
+}
+// For `stop`, which must work whatever state the key is in: a key that
+// cannot be read is said and left out (cpmd takes an unsigned stop).
+inline std::optional<daemon::Credentials> operator_key_if_usable(Args& a) {
+  try {
+    return operator_key(a);
+  } catch (const Error& e) {
+    std::fprintf(stderr, "cpm: warning: %s; stopping without a key\n", e.what());
+    return std::nullopt;
+  }
+}
+
 // Print an ack; returns 0 when accepted, 1 when rejected.
 inline int report(const char* what, const cpm_msgs::ack_t& a) {
   if (a.accepted)

@@ -36,11 +36,12 @@ int move(Args& a) {
   const double v = a.number("vmax", 0.1), acc = a.number("amax", 1.0), j = a.number("jmax", 50.0);
   const bool no_wait = a.flag("no-wait");
   auto l = lcm_options(a);
+  auto key = operator_key(a);
   const auto pos = a.positionals();  // after the options: they consume their values
   if (pos.size() != 1) throw UsageError("give the target X,Y,Z (m)");
   const Vec3 to = parse_point("target", pos[0]);
   a.finish();
-  daemon::Client c(l);
+  daemon::Client c(l, key);
   const auto ack = c.trajectory(move_cmd(to, v, acc, j));
   if (report("move", ack) != 0) return 1;
   if (no_wait) return 0;
@@ -68,6 +69,7 @@ int circle(Args& a) {
   const double vapp = a.number("approach-vmax", 0.1);
   const bool no_wait = a.flag("no-wait");
   auto l = lcm_options(a);
+  auto key = operator_key(a);
   a.finish();
   for (int i = 0; i < 3; ++i) m.centre[i] = spec.centre[i];
   m.radius = spec.radius;
@@ -79,7 +81,7 @@ int circle(Args& a) {
   spec.plane = static_cast<ctl::CirclePlane>(pl);
   const Vec3 start = ctl::CircleTrajectory(spec).sample(0.0).p;
 
-  daemon::Client c(l);
+  daemon::Client c(l, key);
   auto s = c.state(2.0);
   if (!s) throw Error("no state from cpmd within 2 s");
   const Vec3 end = vec3_of(s->queue_end);
@@ -108,6 +110,7 @@ int circle(Args& a) {
 int stream(Args& a) {
   const bool no_wait = a.flag("no-wait");
   auto l = lcm_options(a);
+  auto key = operator_key(a);
   const auto pos = a.positionals();
   if (pos.size() != 1) throw UsageError("give a CSV file with columns t,x,y,z[,vx,vy,vz] (s, m, m/s)");
   a.finish();
@@ -151,7 +154,7 @@ int stream(Args& a) {
       if (std::isnan(rows[i][4 + k]))
         rows[i][4 + k] = (i == 0 || i + 1 == n) ? 0.0
                                                 : (rows[i + 1][1 + k] - rows[i - 1][1 + k]) / (rows[i + 1][0] - rows[i - 1][0]);
-  daemon::Client c(l);
+  daemon::Client c(l, key);
   std::int64_t last_id = -1;
   int segments = 0;
   for (std::size_t s0 = 0; s0 + 1 < n; s0 += 99) {
@@ -189,13 +192,15 @@ int stream(Args& a) {
 }
 
 const Command r1{"move", "move a running cpmd's platform to X,Y,Z (jerk-limited straight line)", move,
-                 "X,Y,Z [--vmax M/S] [--amax M/S2] [--jmax M/S3] [--no-wait] [--config DAEMON.yaml] [--url LCM_URL]"};
+                 "X,Y,Z [--vmax M/S] [--amax M/S2] [--jmax M/S3] [--no-wait] [--config DAEMON.yaml] [--url LCM_URL]\n"
+                 "       [--key FILE] [--operator NAME]"};
 const Command r2{"circle", "run a circle on a running cpmd (--paper: Elkady's test) and print the tracking error", circle,
                  "[--paper] [--centre X,Y,Z] [--radius M] [--speed RAD/S] [--cw] [--time S] [--ramp S]\n"
                  "       [--plane xy|yz|zx] [--start-angle RAD] [--no-approach] [--approach-vmax M/S] [--no-wait]\n"
-                 "       [--config DAEMON.yaml] [--url LCM_URL]"};
+                 "       [--config DAEMON.yaml] [--url LCM_URL] [--key FILE] [--operator NAME]"};
 const Command r3{"stream", "stream timed setpoints from a CSV (t,x,y,z[,vx,vy,vz]) to a running cpmd", stream,
-                 "FILE.csv [--no-wait] [--config DAEMON.yaml] [--url LCM_URL]"};
+                 "FILE.csv [--no-wait] [--config DAEMON.yaml] [--url LCM_URL]\n"
+                 "       [--key FILE] [--operator NAME]"};
 
 }  // namespace
 }  // namespace cpm::cli::client

@@ -12,9 +12,11 @@
 #include <cpm_msgs/ack_t.hpp>
 #include <cpm_msgs/control_command_t.hpp>
 #include <cpm_msgs/loop_stats_t.hpp>
+#include <cpm_msgs/security_t.hpp>
 #include <cpm_msgs/state_t.hpp>
 #include <cpm_msgs/trajectory_command_t.hpp>
 
+#include "cpm/daemon/auth.hpp"
 #include "cpm/daemon/config.hpp"
 
 namespace lcm {
@@ -24,15 +26,20 @@ class ReceiveBuffer;
 
 namespace cpm::daemon {
 
-// Commands need the session cpmd grants to one commander at a time
-// (docs/daemon.md): the client acquires it with its first command, stamps
-// every command with it and an increasing seq, pings while it waits so the
-// session does not expire, acquires again when the daemon restarted or the
-// session expired, and releases it when destroyed. A stop is sent without a
-// session when none is held (cpmd takes a stop from anyone).
+// Commands need an operator's key (docs/security.md) and the session cpmd
+// grants to one commander at a time (docs/daemon.md): the client signs every
+// command with its credentials, acquires the session with its first command,
+// stamps every command with it and an increasing seq, pings while it waits
+// so the session does not expire, acquires again when the daemon restarted
+// or the session expired, and releases it when destroyed. A stop needs
+// neither: it is sent without a session when none is held, and unsigned
+// without credentials (cpmd takes a stop from anyone). Without credentials
+// every other command throws Error before anything is sent.
 class Client {
  public:
-  explicit Client(const LcmConfig& cfg);  // throws Error when LCM cannot start
+  // Throws Error when LCM cannot start. `operator_key`: whose commands these
+  // are (find_credentials finds the operator's own); none: state and stop only.
+  explicit Client(const LcmConfig& cfg, std::optional<Credentials> operator_key = std::nullopt);
   ~Client();  // releases the session, if held
 
   // Acquire the session now (throws Error naming the reason, e.g. "another
@@ -55,6 +62,7 @@ class Client {
   // The next state message (nullopt on timeout).
   std::optional<cpm_msgs::state_t> state(double timeout_s = 2.0);
   std::optional<cpm_msgs::loop_stats_t> stats(double timeout_s = 3.0);
+  std::optional<cpm_msgs::security_t> security(double timeout_s = 3.0);
   // Called for every state message while handle() runs.
   void on_state(std::function<void(const cpm_msgs::state_t&)> f) { state_cb_ = std::move(f); }
   // Process incoming messages for up to `timeout_s`; returns the number handled.
@@ -62,25 +70,36 @@ class Client {
   [[nodiscard]] const LcmConfig& config() const noexcept { return cfg_; }
 
  private:
-  void on_ack(const lcm::ReceiveBuffer*, const std::string&, const cpm_msgs::ack_t* m);
+  // Raw: whoever is on the bus may publish there, and lcm-gen's typed
+  // decoding of a string trusts its length (a bad one throws out of handle()).
+  void on_ack(const lcm::ReceiveBuffer* rbuf, const std::string&);
   void on_state_msg(const lcm::ReceiveBuffer*, const std::string&, const cpm_msgs::state_t* m);
   void on_stats_msg(const lcm::ReceiveBuffer*, const std::string&, const cpm_msgs::loop_stats_t* m);
+  void on_security_msg(const lcm::ReceiveBuffer*, const std::string&, const cpm_msgs::security_t* m);
+  // Session, seq and time; then the operator's MAC over all of it.
   template <class M>
   void stamp(M& m);
+  void need_key(std::int8_t command) const;  // throws Error without credentials
+  // The next message into `slot` (reset first), keeping the session alive meanwhile.
+  template <class M>
+  std::optional<M> next(std::optional<M>& slot, double timeout_s, int poll_ms);
   void keep_alive();  // a ping when the holder has been silent for 0.25 s
   static bool lost_session(const cpm_msgs::ack_t& a) noexcept;
 
   LcmConfig cfg_;
+  std::optional<Credentials> creds_;
   std::unique_ptr<lcm::LCM> lcm_;
   std::int64_t next_id_ = 0;
   std::int64_t nonce_ = 0;    // this client's acquire nonce
   std::int64_t session_ = 0;  // 0: none held
   std::int64_t seq_ = 0;
+  std::int64_t last_acquire_seq_ = 0;  // an acquire's seq is the wall clock (us), rising
   double last_sent_ = 0.0;    // steady clock (s) of the last stamped command
   std::set<std::int64_t> pings_;  // keep-alive ids whose acks nobody waits for
   std::map<std::int64_t, cpm_msgs::ack_t> acks_;
   std::optional<cpm_msgs::state_t> last_state_;
   std::optional<cpm_msgs::loop_stats_t> last_stats_;
+  std::optional<cpm_msgs::security_t> last_security_;
   std::function<void(const cpm_msgs::state_t&)> state_cb_;
 };
 
@@ -88,5 +107,10 @@ class Client {
 const char* mode_text(std::int8_t mode) noexcept;
 // "following_error,estop" (empty for 0).
 std::string fault_text(std::int32_t mask);
+
+// An ack_t as received: decoded only when its string's length accounts for
+// the message exactly and the string's only NUL is its last byte (nullopt
+// otherwise).
+std::optional<cpm_msgs::ack_t> decode_ack(const void* data, std::size_t size);
 
 }  // namespace cpm::daemon

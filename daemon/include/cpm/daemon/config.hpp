@@ -53,11 +53,32 @@ struct LcmConfig {
   std::string trajectory_channel = "CPMD_TRAJ";
   std::string control_channel = "CPMD_CONTROL";
   std::string ack_channel = "CPMD_ACK";
+  std::string security_channel = "CPMD_SECURITY";  // security_t, 1 Hz
   int state_decimation = 1;  // publish the state every N cycles
   // A commander's session ends after this long without a command or ping
   // from it (s); clients ping every 0.25 s while they hold one.
   double session_timeout = 2.0;
 };
+
+// Who may command and what may be read for the network (docs/security.md).
+struct SecurityConfig {
+  // NAME.key per operator and roles.yaml; re-read on SIGHUP and when it changes.
+  std::string operators_dir = "/etc/cpmd/operators.d";
+  // The only directory CMD_LOAD_MODEL reads from (beneath it, no symlink out,
+  // regular files of at most kMaxModelFileBytes).
+  std::string model_dir = "/var/lib/cpmd/models";
+  // An acquire's seq is the sender's wall clock (us since the epoch): one
+  // farther than this from the daemon's clock is refused, so a recorded
+  // acquire cannot be replayed later (s).
+  double acquire_window = 30.0;
+  // Refusals of unauthenticated or replayed commands answered per second at
+  // most (the rest are counted, not answered: no amplification).
+  double refusal_acks_per_second = 20.0;
+};
+
+// Files cpmd reads at start or over LCM are at most this big.
+inline constexpr long kMaxConfigFileBytes = 1 << 20;
+inline constexpr long kMaxModelFileBytes = 16 << 20;
 
 struct SimConfig {
   std::string truth_model_file;   // the true machine (model file); "" = same as model_file
@@ -86,6 +107,7 @@ struct DaemonConfig {
   ControllerConfig controller;
   LimitsConfig limits;
   LcmConfig lcm;
+  SecurityConfig security;
 };
 
 DaemonConfig load_config(const std::string& path);
@@ -93,7 +115,28 @@ DaemonConfig parse_config(const std::string& text, const std::string& name,
                           const std::string& base_dir = ".");
 
 // Load a model file ("builtin:elkady" is the nominal machine of machine.md),
-// throws Error naming the file.
+// throws Error naming the file. A configuration or model file must be a
+// regular file of at most kMaxConfigFileBytes / kMaxModelFileBytes.
 ctl::MachineModel load_model(const std::string& path);
+
+// A model CMD_LOAD_MODEL could not load. what() is the whole story for the
+// journal (paths, the parser's words quoting the file); `summary` is what
+// may go back over LCM: the reason and, for a parse error, the line, never
+// a byte of the file or more than a few of the path.
+struct ModelLoadError : Error {
+  ModelLoadError(const std::string& full, std::string summary_) : Error(full), summary(std::move(summary_)) {}
+  std::string summary;
+};
+
+// The model a CMD_LOAD_MODEL names: "builtin:elkady", or a path relative to
+// `model_dir` or absolute beneath it. Read through openat2(RESOLVE_BENEATH):
+// nothing outside the directory, no symlink out of it, no /proc magic link;
+// only a regular file named *.yaml or *.yml of at most kMaxModelFileBytes,
+// opened without blocking (a FIFO does not hang). Throws ModelLoadError.
+ctl::MachineModel load_model_beneath(const std::string& model_dir, const std::string& request);
+
+// The bytes of the open file `fd`, refusing (Error naming `path` and `what`)
+// a directory, anything but a regular file, or more than `limit` bytes.
+std::string read_regular_file(int fd, const std::string& path, long limit, const char* what);
 
 }  // namespace cpm::daemon

@@ -1,21 +1,26 @@
 // The command/state side of cpmd (not real-time): one thread with the LCM
-// handle. It decodes commands, validates trajectories against the model and
-// the configured limits (the expensive checks, with messages that say what
-// and where), hands what passed to the loop through its SPSC queue, and
-// publishes the loop's acknowledgements, state snapshots and statistics.
+// handle. It decodes commands, authenticates them (docs/security.md: the
+// operator's MAC, role and session, before anything costly is done for
+// them), validates trajectories against the model and the configured limits
+// (the expensive checks, with messages that say what and where), hands what
+// passed to the loop through its SPSC queue, and publishes the loop's
+// acknowledgements, state snapshots and statistics, and the refusals' counts.
 #pragma once
 
 #include <atomic>
 #include <functional>
 #include <map>
 #include <memory>
+#include <mutex>
 #include <string>
 #include <vector>
 
 #include <cpm_msgs/ack_t.hpp>
 #include <cpm_msgs/control_command_t.hpp>
+#include <cpm_msgs/security_t.hpp>
 #include <cpm_msgs/trajectory_command_t.hpp>
 
+#include "cpm/daemon/auth.hpp"
 #include "cpm/daemon/loop.hpp"
 
 namespace lcm {
@@ -56,6 +61,13 @@ inline constexpr double kMaxSegmentDuration = 600.0;
 Validation validate_segment(const cpm_msgs::trajectory_command_t& cmd, const Vec3& start,
                             const ctl::Machine& machine, const LimitsConfig& limits, double dt);
 
+// The first number of a command that is not finite, or subnormal (never a
+// machine quantity, and slow to compute with): its field name, e.g.
+// "position[3][1]"; nullptr when every double of the message is finite and
+// zero or normal. Unused fields count too: a clean sender leaves them 0.
+std::string bad_number(const cpm_msgs::trajectory_command_t& cmd);
+std::string bad_number(const cpm_msgs::control_command_t& cmd);
+
 class Server {
  public:
   Server(const DaemonConfig& cfg, ControlLoop& loop, ModelStore& models);
@@ -76,22 +88,46 @@ class Server {
   [[nodiscard]] lcm::LCM& bus() noexcept { return *lcm_; }
   // The clock sessions expire by (s, monotonic); tests replace it.
   void set_clock(std::function<double()> now) { now_ = std::move(now); }
+  // The wall clock acquires are checked against (s since the epoch); tests replace it.
+  void set_wall_clock(std::function<double()> now) { wall_now_ = std::move(now); }
   // The session held now (0: none, or the holder went silent for
   // lcm.session_timeout s).
   [[nodiscard]] std::int64_t session() const;
 
+  // The operators who may command (docs/security.md). Any thread: the
+  // housekeeping thread hands a freshly loaded table over whole; the LCM
+  // thread takes the table in use at the start of each message. Without
+  // one, nobody can command (a stop still works).
+  void set_operators(std::shared_ptr<const OperatorTable> table);
+  // A reload that failed (the table in use stays): counted in security_t.
+  void note_reload_failure();
+  [[nodiscard]] std::shared_ptr<const OperatorTable> operators() const;
+  // Counted refusals (security_t without its header), for tests.
+  [[nodiscard]] cpm_msgs::security_t security() const;
+
  private:
   void on_raw(const lcm::ReceiveBuffer* rbuf, const std::string& channel);
-  void on_control(const lcm::ReceiveBuffer* rbuf, const std::string& channel,
-                  const cpm_msgs::control_command_t* msg);
-  void on_trajectory(const lcm::ReceiveBuffer* rbuf, const std::string& channel,
-                     const cpm_msgs::trajectory_command_t* msg);
+  // `raw`: the bytes as received (the MAC is over them).
+  void on_control(const std::uint8_t* raw, std::size_t size, const cpm_msgs::control_command_t* msg);
+  void on_trajectory(const std::uint8_t* raw, std::size_t size, const cpm_msgs::trajectory_command_t* msg);
   void publish_ack(std::int64_t id, std::int8_t source, std::int8_t code, bool ok, std::int16_t reason,
                    const std::string& message, Mode mode, std::int16_t depth, std::int64_t session = 0);
+  // A refusal of a command not (yet) proven to come from an operator, or a
+  // replay: counted always, answered within security.refusal_acks_per_second.
+  void refuse_limited(std::int64_t id, std::int8_t source, std::int8_t code, std::int16_t reason,
+                      const std::string& message);
   bool send(Command& c);
+  // The operator whose key made the message's MAC; nullptr (after the
+  // counted, rate-limited refusal "not authorized") for anyone else.
+  const Operator* authenticate(const OperatorTable* table, const std::uint8_t* raw, std::size_t size,
+                               const std::uint8_t (&name)[kOperatorNameBytes], std::int64_t id, std::int8_t source,
+                               std::int8_t code);
   // Who may command (docs/daemon.md): false after publishing the refusal.
-  bool admit(std::int64_t id, std::int8_t source, std::int8_t code, std::int64_t session, std::int64_t seq);
-  void acquire(const cpm_msgs::control_command_t& m);
+  bool admit(std::int64_t id, std::int8_t source, std::int8_t code, std::int64_t session, std::int64_t seq,
+             const Operator& op);
+  void acquire(const cpm_msgs::control_command_t& m, const Operator& op);
+  void log_security(double now);
+  void publish_security(double now);
 
   DaemonConfig cfg_;
   ControlLoop& loop_;
@@ -108,14 +144,33 @@ class Server {
   std::unique_ptr<Command> scratch_;
   std::int64_t undecodable_ = 0;
   std::function<double()> now_;
+  std::function<double()> wall_now_;
   std::int64_t session_ = 0;        // 0: nobody holds the machine
   std::int64_t session_nonce_ = 0;  // the holder's acquire nonce
+  std::string session_operator_;    // the operator who holds it
+  std::map<std::string, std::int64_t, std::less<>> last_acquire_seq_;  // per operator: acquires are not replayed
   std::int64_t last_seq_ = 0;       // the holder's last admitted seq
   double last_heard_ = 0.0;         // now_() when the holder last spoke
   std::uint64_t session_salt_ = 0;  // random per daemon start: sessions do not repeat across restarts
+  // Security (docs/security.md).
+  mutable std::mutex ops_mu_;  // guards ops_ and the reload counters (housekeeping thread vs this one)
+  std::shared_ptr<const OperatorTable> ops_;
+  std::int64_t ops_loaded_utime_ = 0;
+  std::int32_t reloads_ = 0, reload_failures_ = 0;
+  cpm_msgs::security_t counts_{};      // the refusal counters (this thread)
+  cpm_msgs::security_t logged_{};      // as of the last journal line
+  double refusal_tokens_ = 0.0, refusal_tokens_at_ = 0.0;
+  double last_security_publish_ = -1e300, last_security_log_ = -1e300;
+  std::string last_stranger_;          // the last refused operator name (journal)
   std::map<std::int64_t, const ctl::Machine*> pending_models_;
   std::map<std::int64_t, std::pair<ctl::ControlLaw, ctl::Gains>> pending_laws_;  // a Command is large: build it off the stack
 };
+
+// Whether another daemon already publishes on this bus (its state, statistics
+// or security channel), listening long enough to hear one at `rate_hz` and
+// lcm.state_decimation. Before the loop starts; two daemons starting in the
+// same instant may both hear nothing.
+bool bus_has_another_daemon(const LcmConfig& lcm, double rate_hz);
 
 // systemd's notification protocol ($NOTIFY_SOCKET), without libsystemd.
 // Returns false when not run by systemd or when sending failed.

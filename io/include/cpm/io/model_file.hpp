@@ -42,10 +42,22 @@ struct ModelFile {
   std::vector<Provenance> history;  // oldest first
 };
 
-// Load and validate. Errors say the file, the key path and the reason:
-//   "model.yaml: kinematics.limb2.scale: expected a number, got 'abc'"
+// A model file refused. what() is the whole message for the local user
+// (file:line:column: key.path: reason, quoting what was read); `line` and
+// `summary` are what may be told to a stranger (cpmd's answer over LCM): the
+// line (1-based, 0 when none) and the reason, without a byte of the file.
+struct ModelFileError : Error {
+  ModelFileError(const std::string& full, int line_, std::string summary_)
+      : Error(full), line(line_), summary(std::move(summary_)) {}
+  int line;
+  std::string summary;
+};
+
+// Load and validate. Errors (ModelFileError) say the file, the key path and
+// the reason:
+//   "model.yaml:12:10: kinematics.limb2.scale: expected a number, got 'abc'"
 // Unknown keys, missing required keys, wrong types and out-of-range values
-// are refused.
+// are refused. load_model_file's Error when the file cannot be read is a plain Error.
 ModelFile load_model_file(const std::string& path);
 ModelFile parse_model_file(const std::string& text, const std::string& name);
 // Render and write atomically. Refuses (Error) when `path` is `forbid_path`
