@@ -9,6 +9,7 @@
 // differences of the full residual.
 #include <algorithm>
 #include <cmath>
+#include <complex>
 #include <numbers>
 
 #include "effect_search.hpp"
@@ -353,12 +354,52 @@ Eigen::VectorXd thermal_drift_column(const KinematicProblem& P, int axis, double
   });
 }
 
+namespace {
+
+// RSS of y on two columns a, b (all weighted and off the base): least squares
+// by the 2x2 normal equations; on one column when the two are (numerically)
+// parallel, as the engine's rank detection does.
+double two_column_rss(const Eigen::VectorXd& a, const Eigen::VectorXd& b, const Eigen::VectorXd& y) {
+  const double g11 = a.squaredNorm(), g22 = b.squaredNorm(), g12 = a.dot(b), c1 = a.dot(y), c2 = b.dot(y);
+  const double yy = y.squaredNorm(), det = g11 * g22 - g12 * g12;
+  if (det > 1e-12 * g11 * g22) return yy - (g22 * c1 * c1 - 2.0 * g12 * c1 * c2 + g11 * c2 * c2) / det;
+  if (g11 >= g22) return g11 > 0.0 ? yy - c1 * c1 / g11 : yy;
+  return yy - c2 * c2 / g22;
+}
+
+// The RSS E leaves with cyclic_error's columns at each wavenumber kmin + q dk
+// (q < K). The search runs once per candidate and again beside every choice
+// of the selection: each row's phase is advanced by a rotation per step (set
+// afresh every 64) instead of a sine and a cosine per row and wavenumber.
+std::vector<double> cyclic_grid_rss(const KinematicProblem& P, const Engine& E, int axis, double kmin, double dk,
+                                    int K) {
+  const int N = P.rows();
+  std::vector<std::complex<double>> z(static_cast<std::size_t>(N)), turn(static_cast<std::size_t>(N));
+  auto d = [&](int r) { return P.d[static_cast<std::size_t>(P.sample_of_row(r))][axis]; };
+  for (int r = 0; r < N; ++r) turn[static_cast<std::size_t>(r)] = std::polar(1.0, kTwoPi * dk * d(r));
+  const Eigen::VectorXd y = E.project_off_base(E.problem().y);
+  Eigen::MatrixXd X(N, 2);
+  std::vector<double> out(static_cast<std::size_t>(K));
+  for (int q = 0; q < K; ++q) {
+    for (int r = 0; r < N; ++r) {
+      auto& zr = z[static_cast<std::size_t>(r)];
+      zr = q % 64 == 0 ? std::polar(1.0, kTwoPi * (kmin + q * dk) * d(r)) : zr * turn[static_cast<std::size_t>(r)];
+      X(r, 0) = P.sensitivity(r, axis) * zr.imag();
+      X(r, 1) = P.sensitivity(r, axis) * zr.real();
+    }
+    const Eigen::MatrixXd Xp = E.project_off_base(X);
+    out[static_cast<std::size_t>(q)] = two_column_rss(Xp.col(0), Xp.col(1), y);
+  }
+  return out;
+}
+
+}  // namespace
+
 double search_cyclic_wavenumber(const KinematicProblem& P, const Engine& E, int axis, double kmin, double kmax,
                                 double dk) {
   auto rss = [&](double k) { return E.rss(cyclic_error_columns(P, axis, k)); };
   const int K = static_cast<int>((kmax - kmin) / dk) + 1;
-  std::vector<double> grid(static_cast<std::size_t>(K));
-  for (int q = 0; q < K; ++q) grid[static_cast<std::size_t>(q)] = rss(kmin + q * dk);
+  const std::vector<double> grid = cyclic_grid_rss(P, E, axis, kmin, dk, K);
   return detail::refine_grid_minima(rss, detail::lowest_local_minima(grid, 3), grid, kmin, dk, kmin, kmax, 14, kmin);
 }
 
