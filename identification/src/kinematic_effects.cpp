@@ -185,21 +185,38 @@ Eigen::MatrixXd cyclic_error_jacobian(const KinematicProblem& P, int axis, doubl
                displacement_column(P, axis, [&](int j) { return a * std::cos(kTwoPi * d(j) / lambda + phi); })});
 }
 
+// The wavenumbers a cyclic error on the axis is searched over: [kmin, kmax]
+// (wavelengths of the parameter's bounds, at most 2/3 of the stroke) at
+// spacing dk (a quarter cycle over the stroke); kmax <= 0 when the stroke is
+// too short to see a period.
+struct WaveRange {
+  double stroke = 0.0, kmin = 0.0, kmax = 0.0, dk = 0.0;
+};
+
+WaveRange wave_range(const Ctx& x) {
+  WaveRange w;
+  w.stroke = x.span.hi[x.axis] - x.span.lo[x.axis];
+  const double lmin = x.info.params[1].lower, lmax = std::min(x.info.params[1].upper, w.stroke / 1.5);
+  if (lmax <= lmin * 1.5) return w;
+  w.kmin = 1.0 / lmax;
+  w.kmax = 1.0 / lmin;
+  w.dk = 1.0 / (4.0 * w.stroke);
+  return w;
+}
+
 void fit_cyclic_error(const Ctx& x, CandidateResult& c) {
-  const double stroke = x.span.hi[x.axis] - x.span.lo[x.axis];
-  const double lmin = x.info.params[1].lower, lmax = std::min(x.info.params[1].upper, stroke / 1.5);
-  if (lmax <= lmin * 1.5)
-    return mark_not_identifiable(x, c, "axis " + std::to_string(x.axis + 1) + " covers " + fmt(stroke * 1e3) +
+  const WaveRange w = wave_range(x);
+  if (w.kmax <= 0.0)
+    return mark_not_identifiable(x, c, "axis " + std::to_string(x.axis + 1) + " covers " + fmt(w.stroke * 1e3) +
                                            " mm only: too little to see a periodic error");
-  const double kmin = 1.0 / lmax, kmax = 1.0 / lmin, dk = 1.0 / (4.0 * stroke);
-  const double bk = search_cyclic_wavenumber(x.P, x.E, x.axis, kmin, kmax, dk);
+  const double bk = search_cyclic_wavenumber(x.P, x.E, x.axis, w.kmin, w.kmax, w.dk);
   const Eigen::MatrixXd X = cyclic_error_columns(x.P, x.axis, bk);
   const JointFit f = x.E.fit(X);
   // a sin(x + phi) = (a cos phi) sin x + (a sin phi) cos x
   const double a = std::hypot(f.beta(0), f.beta(1)), phi = std::atan2(f.beta(1), f.beta(0));
   const double lambda = 1.0 / bk;
   finish(x, c, X, f, cyclic_error_jacobian(x.P, x.axis, a, lambda, phi), {a, lambda, phi});
-  c.trials = std::max(1.0, stroke * (kmax - kmin));
+  c.trials = std::max(1.0, w.stroke * (w.kmax - w.kmin));
 }
 
 void fit_guide_angular_error(const Ctx& x, CandidateResult& c) {
@@ -229,22 +246,36 @@ void fit_limb_twist(const Ctx& x, CandidateResult& c) {
   fit_linear(x, c, hcat({effect_difference(x.P, x.info.type, x.axis, 0, 1e-4)}));
 }
 
-void fit_thermal_drift(const Ctx& x, CandidateResult& c) {
+// d(e d (1 - exp(-t / tau))) / d(e, tau) as displacement columns.
+Eigen::MatrixXd thermal_drift_jacobian(const KinematicProblem& P, int axis, double e, double tau) {
+  return hcat({thermal_drift_column(P, axis, tau), displacement_column(P, axis, [&](int j) {
+                 const auto u = static_cast<std::size_t>(j);
+                 const double t = P.inputs[u].t;
+                 return -e * P.d[u][axis] * std::exp(-t / tau) * t / (tau * tau);
+               })});
+}
+
+// The time constants a thermal drift is searched over: [T/30, 10 T] within
+// the parameter's bounds, T the time covered.
+struct TauRange {
+  double lo = 0.0, hi = 0.0;
+};
+
+TauRange tau_range(const Ctx& x) {
   const KinematicSpan& sp = x.span;
   const double T = sp.t1 - std::max(0.0, std::min(sp.t0, sp.t1));
+  return {std::max(x.info.params[1].lower, (sp.t1 - sp.t0) / 30.0), std::min(x.info.params[1].upper, 10.0 * T)};
+}
+
+void fit_thermal_drift(const Ctx& x, CandidateResult& c) {
+  const KinematicSpan& sp = x.span;
   if (!(sp.t1 > sp.t0)) return mark_not_identifiable(x, c, "all samples have the same time");
-  const double lo = std::max(x.info.params[1].lower, (sp.t1 - sp.t0) / 30.0);
-  const double hi = std::min(x.info.params[1].upper, 10.0 * T);
+  const auto [lo, hi] = tau_range(x);
   const double tau = search_thermal_time_constant(x.P, x.E, x.axis, lo, hi);
   const Eigen::MatrixXd X = hcat({thermal_drift_column(x.P, x.axis, tau)});
   const JointFit f = x.E.fit(X);
   const double e = f.beta(0);
-  const Eigen::MatrixXd jac = hcat({X.col(0), displacement_column(x.P, x.axis, [&](int j) {
-                                      const auto u = static_cast<std::size_t>(j);
-                                      const double t = x.P.inputs[u].t;
-                                      return -e * x.P.d[u][x.axis] * std::exp(-t / tau) * t / (tau * tau);
-                                    })});
-  finish(x, c, X, f, jac, {e, tau});
+  finish(x, c, X, f, thermal_drift_jacobian(x.P, x.axis, e, tau), {e, tau});
   c.trials = std::max(1.0, std::log(hi / lo) / std::log(3.0));
   if (c.identifiable && tau >= 0.99 * hi)
     c.note = "tau at the top of the search (" + fmt(hi) + " s): the data see a linear drift";
@@ -305,21 +336,66 @@ void thermal_joint_values(const JointFit& fit, int at, const Eigen::MatrixXd& co
   c.params[0].std_error = std::sqrt(std::max(0.0, cov(at, at)));
 }
 
+// ---------------------------------------------------------------------------
+// Searched again beside the effects chosen before
+
+// The candidate at new columns X: its parameters `values` fitted with the
+// others (fb, on `beside`), their standard errors from the Jacobian jac
+// there; the figures of the effect alone with the base at the new columns.
+void take_beside(const Ctx& x, const Engine& beside, CandidateResult& c, const Eigen::MatrixXd& X, const JointFit& fb,
+                 const Eigen::MatrixXd& jac, const std::array<double, 3>& values) {
+  const Eigen::MatrixXd cov = beside.covariance(jac, fb, beside.base_rank() + static_cast<int>(jac.cols()), true);
+  for (int j = 0; j < x.info.n_params && j < static_cast<int>(c.params.size()); ++j) {
+    const auto u = static_cast<std::size_t>(j);
+    c.params[u].value = values[u];
+    c.params[u].std_error = j < cov.rows() ? std::sqrt(std::max(0.0, cov(j, j))) : -1.0;
+  }
+  c.columns = X;
+  const JointFit fa = x.E.fit(X);
+  c.rss = fa.rss;
+  c.n_eff = fa.n_eff;
+  c.residual_after = fa.residual;
+  c.fitted = X * fa.beta;
+  const double given_rms = Engine::rms(x.P.residual_given);
+  detail::score_candidate(c, x.E, x.E.rss_base(), c.n_params, x.E.base_rank() + c.n_params, given_rms * given_rms);
+}
+
+void search_cyclic_beside(const Ctx& x, const Engine& beside, CandidateResult& c) {
+  const WaveRange w = wave_range(x);
+  if (w.kmax <= 0.0 || c.columns.cols() != 2) return;
+  const double k = search_cyclic_wavenumber(x.P, beside, x.axis, w.kmin, w.kmax, w.dk);
+  const Eigen::MatrixXd X = cyclic_error_columns(x.P, x.axis, k);
+  if (!(beside.rss(X) < beside.rss(c.columns))) return;
+  const JointFit fb = beside.fit(X);
+  const double a = std::hypot(fb.beta(0), fb.beta(1)), phi = std::atan2(fb.beta(1), fb.beta(0));
+  take_beside(x, beside, c, X, fb, cyclic_error_jacobian(x.P, x.axis, a, 1.0 / k, phi), {a, 1.0 / k, phi});
+}
+
+void search_thermal_beside(const Ctx& x, const Engine& beside, CandidateResult& c) {
+  if (!(x.span.t1 > x.span.t0) || c.columns.cols() != 1) return;
+  const auto [lo, hi] = tau_range(x);
+  const double tau = search_thermal_time_constant(x.P, beside, x.axis, lo, hi);
+  const Eigen::MatrixXd X = hcat({thermal_drift_column(x.P, x.axis, tau)});
+  if (!(beside.rss(X) < beside.rss(c.columns))) return;
+  const JointFit fb = beside.fit(X);
+  take_beside(x, beside, c, X, fb, thermal_drift_jacobian(x.P, x.axis, fb.beta(0), tau), {fb.beta(0), tau, 0.0});
+}
+
 // The table: one entry per kinematic effect type, in the order of
 // kin::KinematicEffectType (the diagnosis evaluates them in this order).
 constexpr std::array<KinematicEffectFitter, kin::kKinematicEffectTypes> kFitters = {{
     {KinematicEffectType::backlash, fit_backlash, backlash_joint_values, {true, false, false},
-     BaseSeparation::both_directions},
+     BaseSeparation::both_directions, nullptr},
     {KinematicEffectType::cyclic_error, fit_cyclic_error, cyclic_joint_values, {false, false, true},
-     BaseSeparation::spread_poses},
+     BaseSeparation::spread_poses, search_cyclic_beside},
     {KinematicEffectType::guide_angular_error, fit_guide_angular_error, linear_joint_values, {false, false, false},
-     BaseSeparation::spread_poses},
+     BaseSeparation::spread_poses, nullptr},
     {KinematicEffectType::limb_twist, fit_limb_twist, linear_joint_values, {false, false, false},
-     BaseSeparation::spread_poses},
+     BaseSeparation::spread_poses, nullptr},
     {KinematicEffectType::thermal_drift, fit_thermal_drift, thermal_joint_values, {false, true, false},
-     BaseSeparation::other_times},
+     BaseSeparation::other_times, search_thermal_beside},
     {KinematicEffectType::actuator_scale, fit_actuator_scale, linear_joint_values, {false, false, false},
-     BaseSeparation::is_base_scale},
+     BaseSeparation::is_base_scale, nullptr},
 }};
 
 constexpr bool one_entry_per_type_in_order() {

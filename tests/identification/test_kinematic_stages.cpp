@@ -190,6 +190,50 @@ TEST(KinematicCandidate, CyclicErrorIsFittedWithItsParameters) {
   }
 }
 
+// Searched again beside another effect's column (in the base of `beside`),
+// a cyclic error left at a wrong wavelength (as an alias found alone would
+// be) takes the planted one, its amplitude fitted with the other effect; a
+// second search, finding nothing better, leaves it as it is.
+TEST(KinematicCandidate, ACyclicErrorSearchedAgainBesideAnotherEffectTakesThePlantedWavelength) {
+  KinematicProblem P = synthetic(400);
+  const double lambda = 12e-3, a = 2e-6, phi = -1.1;
+  Eigen::VectorXd planted(P.rows()), other(P.rows());
+  for (int r = 0; r < P.rows(); ++r) {
+    const Vec3& d = P.d[static_cast<std::size_t>(r)];
+    other(r) = P.sensitivity(r, 0) * d[0] * d[0];
+    planted(r) = P.sensitivity(r, 2) * a * std::sin(kTwoPi * d[2] / lambda + phi) + 1e-4 * other(r);
+  }
+  plant(P, planted, 0.2e-6);
+  const Engine E(kinematic_linear_problem(P));
+  LinearProblem L = kinematic_linear_problem(P);
+  L.B = Eigen::MatrixXd(P.rows(), 2);
+  L.B << P.base, other;
+  L.base_names.emplace_back("other");
+  L.base_units.emplace_back("m");
+  L.base_values.push_back(0.0);
+  L.nuisance.push_back(0);
+  const Engine beside(std::move(L));
+  CandidateResult c = evaluate_kinematic_candidate(P, E, "cyclic_error", 2, {});
+  c.params[1].value = 3.1e-3;
+  c.columns = cyclic_error_columns(P, 2, 1.0 / 3.1e-3);
+  const KinematicEffectFitter* f = kinematic_fitter(kin::KinematicEffectType::cyclic_error);
+  ASSERT_NE(f->search_beside, nullptr);
+  const KinematicCandidateContext x{P, E, 2, kin::info(kin::KinematicEffectType::cyclic_error), span_of(P)};
+  f->search_beside(x, beside, c);
+  const double truth[3] = {a, lambda, phi};
+  for (int j = 0; j < 3; ++j) {
+    const ParamEstimate& p = c.params[static_cast<std::size_t>(j)];
+    ASSERT_GT(p.std_error, 0.0) << p.name;
+    EXPECT_LT(std::fabs(p.value - truth[j]), 3.0 * p.std_error) << p.name << " " << p.value;
+  }
+  EXPECT_LT((c.columns - cyclic_error_columns(P, 2, 1.0 / c.params[1].value)).norm(), 1e-9 * c.columns.norm());
+  const CandidateResult again = c;
+  f->search_beside(x, beside, c);
+  EXPECT_EQ(c.params[1].value, again.params[1].value);
+  EXPECT_EQ(c.params[0].value, again.params[0].value);
+  EXPECT_EQ(kinematic_fitter(kin::KinematicEffectType::limb_twist)->search_beside, nullptr);
+}
+
 TEST(KinematicCandidate, BacklashIsHeldAtZeroWhenTheDataSayNegative) {
   KinematicProblem P = synthetic(200);
   Eigen::VectorXd planted(P.rows());
