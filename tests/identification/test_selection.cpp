@@ -1,8 +1,7 @@
 // The stages "selection", "verdict" and "structure" of the motion diagnosis,
 // and cpm fit, as units: forward selection on small synthetic LinearProblems
 // whose answer is known (planted columns, pure noise), the look-elsewhere
-// count, the selection from the calibrated base, the kinematic verdict's ranking
-// and confounding, the structure scan
+// count, the selection from the calibrated base (kinematic data), the structure scan
 // on a synthetic MotionProblem with a planted bump, step or period, and
 // fit_motion refitting only what it is asked to.
 #include <gtest/gtest.h>
@@ -250,38 +249,6 @@ TEST(Verdict, ImplausibleValuesAreNamedPerEffectAndOrdinaryOnesAreNot) {
   c.effect = "spring";
   c.params[0].value = 1e6;
   EXPECT_TRUE(detail::implausible(c).empty());  // no bound said for it
-}
-
-// The kinematic kinds decide in rank_and_decide: the first significant
-// candidate, then forward selection on top of it; candidates whose columns
-// are the same are reported as confounded with each other.
-TEST(RankAndDecide, TheKinematicVerdictIsTheStrongestPlantedEffectAndTheOtherIsAlso) {
-  std::mt19937_64 rng(51);
-  Eigen::MatrixXd X = gaussian(kRows, 4, rng);
-  X.col(3) = X.col(2);  // the same signature under two names
-  const Eigen::VectorXd y = 3.0 * X.col(0) + 1.0 * X.col(2) + gaussian(kRows, 1, rng).col(0);
-  const Engine E(problem(y, offset_column(kRows), 1));
-  Diagnosis D = with_candidates(X);
-  D.kind = "position";
-  for (auto& c : D.candidates) {
-    const JointFit f = E.fit(c.columns);
-    c.rss = f.rss;
-    c.n_eff = f.n_eff;
-    c.fitted = c.columns * f.beta;
-    c.residual_after = f.residual;
-    detail::score_candidate(c, E, E.rss_base(), 1, E.base_rank() + 1, y.squaredNorm() / kRows);
-  }
-  detail::rank_and_decide(D, E, {}, [](const CandidateResult&, const CandidateResult&) { return "measure more"; });
-  ASSERT_EQ(D.verdict, 0);
-  EXPECT_EQ(D.candidates[0].label(), "spring[axis 1]");
-  ASSERT_EQ(D.also.size(), 1u);  // one of the twins, not both
-  const CandidateResult& twin = D.candidates[static_cast<std::size_t>(D.also[0])];
-  EXPECT_TRUE(twin.label() == "spring[axis 3]" || twin.label() == "spring[axis 4]") << twin.label();
-  bool confounded = false;
-  for (const auto& cf : twin.confounded)
-    confounded |= (cf.with == "spring[axis 3]" || cf.with == "spring[axis 4]") && cf.correlation > 0.999;
-  EXPECT_TRUE(confounded);
-  EXPECT_NEAR(Engine::rms(D.residual_final), 1.0, 0.1);
 }
 
 // Kinematic data start the selection from the calibrated base: a smooth
