@@ -24,6 +24,18 @@ using kin::KinematicEffectType;
 namespace {
 
 constexpr double kTwoPi = 2.0 * std::numbers::pi;
+// Another wavelength whose fit is within this much of the best by BIC (at
+// the rows' count; "not worth more than a bare mention") fits alike: the
+// data do not determine the wavelength.
+constexpr double kAliasBic = 2.0;
+
+// The wavenumber (1/m) that leaves the least RSS, and whether another fits alike.
+struct WavenumberSearch {
+  double k = 0.0;
+  bool determined = true;
+};
+WavenumberSearch search_cyclic(const KinematicProblem& P, const Engine& E, int axis, double kmin, double kmax,
+                               double dk);
 
 using Ctx = KinematicCandidateContext;
 
@@ -204,12 +216,24 @@ WaveRange wave_range(const Ctx& x) {
   return w;
 }
 
+// Whether these data determine the wavelength (an axis seen at six heights
+// only fits a sine of almost any wavelength alike): said in the note.
+void note_wavelength(CandidateResult& c, bool determined) {
+  const std::string said = "its wavelength is not determined by these data";
+  const auto at = c.note.find(said);
+  c.searched_determined = determined;
+  if (determined && at != std::string::npos) c.note.erase(at > 2 ? at - 2 : at);
+  if (determined || at != std::string::npos) return;
+  c.note += (c.note.empty() ? "" : "; ") + said + ": others fit alike (on an axis seen at a few positions, its aliases)";
+}
+
 void fit_cyclic_error(const Ctx& x, CandidateResult& c) {
   const WaveRange w = wave_range(x);
   if (w.kmax <= 0.0)
     return mark_not_identifiable(x, c, "axis " + std::to_string(x.axis + 1) + " covers " + fmt(w.stroke * 1e3) +
                                            " mm only: too little to see a periodic error");
-  const double bk = search_cyclic_wavenumber(x.P, x.E, x.axis, w.kmin, w.kmax, w.dk);
+  const WavenumberSearch ws = search_cyclic(x.P, x.E, x.axis, w.kmin, w.kmax, w.dk);
+  const double bk = ws.k;
   const Eigen::MatrixXd X = cyclic_error_columns(x.P, x.axis, bk);
   const JointFit f = x.E.fit(X);
   // a sin(x + phi) = (a cos phi) sin x + (a sin phi) cos x
@@ -217,6 +241,7 @@ void fit_cyclic_error(const Ctx& x, CandidateResult& c) {
   const double lambda = 1.0 / bk;
   finish(x, c, X, f, cyclic_error_jacobian(x.P, x.axis, a, lambda, phi), {a, lambda, phi});
   c.trials = std::max(1.0, w.stroke * (w.kmax - w.kmin));
+  note_wavelength(c, ws.determined);
 }
 
 void fit_guide_angular_error(const Ctx& x, CandidateResult& c) {
@@ -363,7 +388,9 @@ void take_beside(const Ctx& x, const Engine& beside, CandidateResult& c, const E
 void search_cyclic_beside(const Ctx& x, const Engine& beside, CandidateResult& c) {
   const WaveRange w = wave_range(x);
   if (w.kmax <= 0.0 || c.columns.cols() != 2) return;
-  const double k = search_cyclic_wavenumber(x.P, beside, x.axis, w.kmin, w.kmax, w.dk);
+  const WavenumberSearch ws = search_cyclic(x.P, beside, x.axis, w.kmin, w.kmax, w.dk);
+  note_wavelength(c, ws.determined);
+  const double k = ws.k;
   const Eigen::MatrixXd X = cyclic_error_columns(x.P, x.axis, k);
   if (!(beside.rss(X) < beside.rss(c.columns))) return;
   const JointFit fb = beside.fit(X);
@@ -469,14 +496,27 @@ std::vector<double> cyclic_grid_rss(const KinematicProblem& P, const Engine& E, 
   return out;
 }
 
+WavenumberSearch search_cyclic(const KinematicProblem& P, const Engine& E, int axis, double kmin, double kmax,
+                               double dk) {
+  auto rss = [&](double k) { return E.rss(cyclic_error_columns(P, axis, k)); };
+  const int K = static_cast<int>((kmax - kmin) / dk) + 1;
+  const std::vector<double> grid = cyclic_grid_rss(P, E, axis, kmin, dk, K);
+  const std::vector<int> minima = detail::lowest_local_minima(grid, 3);
+  WavenumberSearch w;
+  w.k = detail::refine_grid_minima(rss, minima, grid, kmin, dk, kmin, kmax, 14, kmin);
+  if (minima.size() >= 2) {
+    const double fr = E.floor_rss();
+    const double g0 = grid[static_cast<std::size_t>(minima[0])], g1 = grid[static_cast<std::size_t>(minima[1])];
+    w.determined = E.rows() * std::log((g1 + fr) / (g0 + fr)) >= kAliasBic;
+  }
+  return w;
+}
+
 }  // namespace
 
 double search_cyclic_wavenumber(const KinematicProblem& P, const Engine& E, int axis, double kmin, double kmax,
                                 double dk) {
-  auto rss = [&](double k) { return E.rss(cyclic_error_columns(P, axis, k)); };
-  const int K = static_cast<int>((kmax - kmin) / dk) + 1;
-  const std::vector<double> grid = cyclic_grid_rss(P, E, axis, kmin, dk, K);
-  return detail::refine_grid_minima(rss, detail::lowest_local_minima(grid, 3), grid, kmin, dk, kmin, kmax, 14, kmin);
+  return search_cyclic(P, E, axis, kmin, kmax, dk).k;
 }
 
 double search_thermal_time_constant(const KinematicProblem& P, const Engine& E, int axis, double lo, double hi) {

@@ -213,6 +213,22 @@ detail::StepFit judge_scale(const DiagnoseOptions& opt, const Engine& EA, const 
   return detail::step_statistics(EA, opt, rss_without, T.rss_s, 1, T.k_s, T.n_eff, 1.0, family);
 }
 
+// Why the scales cannot be judged beside the effects chosen, or "": one of
+// them has a searched parameter the data do not determine (a cyclic error on
+// axis 3 seen at six heights: with one bar radius a sine of almost any
+// wavelength fits there alike, each with its own share of a linear term, so
+// the scales at the model as given follow the wavelength chosen: all three
+// were named beside a cyclic error and a scale on one axis).
+std::string not_judged_beside(const Diagnosis& D, const detail::Selection& sel) {
+  for (int j : sel.state.chosen) {
+    const CandidateResult& c = D.candidates[static_cast<std::size_t>(j)];
+    if (!c.searched_determined)
+      return "not judged at the model as given beside " + c.label() +
+             ", whose wavelength these data do not determine: each wavelength that fits alike asks for other scales";
+  }
+  return "";
+}
+
 }  // namespace
 
 void select_scales_at_the_given_model(const KinematicProblem& P, const Engine& E, const DiagnoseOptions& opt,
@@ -220,6 +236,11 @@ void select_scales_at_the_given_model(const KinematicProblem& P, const Engine& E
   if (std::none_of(D.candidates.begin(), D.candidates.end(),
                    [](const CandidateResult& c) { return c.effect == "actuator_scale"; }))
     return;
+  if (const std::string why = not_judged_beside(D, sel); !why.empty()) {
+    for (auto& c : D.candidates)
+      if (c.effect == "actuator_scale") c.note += "; " + why;
+    return;
+  }
   ScaleTest T(P, E.problem(), sel.state.XS);
   // Only the scales of axes that move (a circle in XY leaves z's scale unseen).
   const KinematicSpan sp = span_of(P);

@@ -104,6 +104,7 @@ std::string kinematic_verdict_text(Diagnosis& D) {
   os << "missing: " << v.label() << " — ";
   for (std::size_t j = 0; j < v.params.size(); ++j)
     os << (j ? ", " : "") << v.params[j].name << " = " << fmt(v.params[j].value, 4) << " " << v.params[j].unit;
+  if (!v.searched_determined) os << " (one of several wavelengths these data fit alike)";
   os << "; it brings the residual from " << amount(D.baseline_rms, D.units) << " to "
      << amount(v.rms_after, D.units) << " RMS (noise floor about " << amount(D.noise_floor, D.units) << ")";
   std::vector<std::string> alts = cannot_tell_apart(D, v, true);

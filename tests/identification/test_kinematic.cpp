@@ -250,6 +250,36 @@ TEST(KinematicPairs, AScaleBesideAnotherEffectIsNamedWithItAndOnlyWhereThereIsOn
   EXPECT_EQ(found_labels(B), (std::vector<std::string>{"backlash[axis 3]"})) << B.verdict_text;
 }
 
+// With one bar radius axis 3 is seen at six heights: a sine of almost any
+// wavelength fits there alike, each with its own share of a linear term, so
+// scales judged beside a cyclic error there follow the wavelength chosen (all
+// three were named beside a cyclic error on axis 3 and a scale on axis 1).
+// The cyclic error is named, its wavelength said to be undetermined, and no
+// scale is judged; with two radii the wavelength is determined and the scale
+// on axis 1 is named, alone.
+TEST(KinematicPairs, NoScaleIsJudgedBesideAWavelengthTheDataDoNotDetermine) {
+  test::KinSimOptions so;
+  so.kim_errors = false;
+  so.seed = 7008;
+  const std::vector<PlantedKinematic> planted = {{"cyclic_error", 2, {1e-5, 0.016, 0.3}},
+                                                 {"actuator_scale", 0, {4e-5, 0, 0}}};
+  const Diagnosis one = diagnose(test::kim_ballbar(planted, test::hemisphere_poses({0.150}, 6, 16, 7008), so));
+  EXPECT_EQ(found_labels(one), (std::vector<std::string>{"cyclic_error[axis 3]"})) << one.verdict_text;
+  const auto* c = find(one, "cyclic_error", 2);
+  ASSERT_NE(c, nullptr);
+  EXPECT_FALSE(c->searched_determined);
+  EXPECT_NE(c->note.find("not determined"), std::string::npos) << c->note;
+  for (int i = 0; i < 3; ++i) {
+    const auto* s = find(one, "actuator_scale", i);
+    ASSERT_NE(s, nullptr);
+    EXPECT_NE(s->note.find("not judged"), std::string::npos) << s->note;
+  }
+  const Diagnosis two = diagnose(test::kim_ballbar(planted, ballbar_poses(7008), so));
+  EXPECT_EQ(found_labels(two), (std::vector<std::string>{"actuator_scale[axis 1]", "cyclic_error[axis 3]"}))
+      << two.verdict_text;
+  EXPECT_TRUE(find(two, "cyclic_error", 2)->searched_determined);
+}
+
 // A cyclic error on axis 3 beside a limb twist there (two radii: axis 3 sits
 // at twelve heights): its wavelength searched alone, on a residual holding the
 // twist, lands on an alias; searched again beside the twist once that is
