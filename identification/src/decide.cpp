@@ -1,8 +1,7 @@
-// Shared tail of a diagnosis (internal.hpp, rank_and_decide): look-elsewhere
-// correction and the score against the model as given, the ranking, the
-// confounding between candidates, and for the kinematic kinds the verdict with
-// forward selection on top of it (motion logs choose in select.cpp); and the
-// way values are said to people.
+// Shared middle of a diagnosis (internal.hpp, rank_and_confound): look-elsewhere
+// correction and the score of each candidate alone against the model as given,
+// the ranking by it, the confounding between candidates (the verdict is the
+// selection's: select.cpp); and the way values are said to people.
 #include <algorithm>
 #include <cmath>
 #include <sstream>
@@ -43,11 +42,6 @@ struct Family {
   double size = 0.0;
   double ne_ref = 0.0;
 };
-
-// Per candidate (index in the ranking): the others that explain the data
-// about as well against the model as given (BIC within 10). A verdict for it
-// is then ambiguous.
-using Rivals = std::vector<std::vector<std::string>>;
 
 Family family_of(const Diagnosis& D) {
   Family F;
@@ -119,25 +113,20 @@ void confound_off_base(Diagnosis& D, const Engine& E, const SeparateAdvice& advi
 }
 
 // One base-direction candidate ca against another cb, off the nuisance only
-// (u: ca's signature there): confounded when cb reproduces most of it, a
-// rival when cb alone explains the data about as well.
+// (u: ca's signature there): confounded when cb reproduces most of it.
 void judge_against_base_direction(CandidateResult& ca, const CandidateResult& cb, const Eigen::VectorXd& u,
-                                  const Engine& E, const SeparateAdvice& advice, double ne_ref,
-                                  std::vector<std::string>& rivals) {
+                                  const Engine& E, const SeparateAdvice& advice) {
   const double share = reproduced_share(E.project_off_nuisance(cb.columns), u);
   if (share < kConfoundShare) return;
   if (!names_confounder(ca, cb.label()))
     ca.confounded.push_back({cb.label(), cb.effect, cb.axis, std::sqrt(share), advice(ca, cb)});
-  const double score_b = bic_change(ne_ref, E.rss(cb.columns, false), E.rss_given(), E.floor_rss(), cb.n_params);
-  if (score_b - ca.score < 10.0) rivals.push_back(cb.label());
 }
 
 // Candidates that are base directions (payload, inertia error) are judged
 // against the model as given, where the base does not absorb the others:
 // compare there, off the nuisance only. A force-gain error on the axis that
 // carries the weight is mostly "the weight is off", what a payload is too.
-Rivals confound_base_directions(Diagnosis& D, const Engine& E, const SeparateAdvice& advice, double ne_ref) {
-  Rivals rival(D.candidates.size());
+void confound_base_directions(Diagnosis& D, const Engine& E, const SeparateAdvice& advice) {
   for (int a = 0; a < confound_top(D); ++a) {
     CandidateResult& ca = D.candidates[a];
     if (!is_base_direction(ca.effect) || !ca.identifiable || ca.fitted.size() != E.rows()) continue;
@@ -146,10 +135,9 @@ Rivals confound_base_directions(Diagnosis& D, const Engine& E, const SeparateAdv
     for (std::size_t b = 0; b < D.candidates.size(); ++b) {
       const CandidateResult& cb = D.candidates[b];
       if (static_cast<int>(b) == a || cb.columns.cols() == 0 || !cb.refits_base) continue;
-      judge_against_base_direction(ca, cb, u, E, advice, ne_ref, rival[static_cast<std::size_t>(a)]);
+      judge_against_base_direction(ca, cb, u, E, advice);
     }
   }
-  return rival;
 }
 
 // A candidate the base absorbs completely (e.g. a constant force when the
@@ -173,106 +161,6 @@ void confound_absorbed(Diagnosis& D, const Engine& E, const SeparateAdvice& advi
   }
 }
 
-// Kinematic kinds: the candidates the verdict (candidates[0]) cannot be told
-// apart from, "label (how to separate)"; sets D.ambiguous when there are any.
-std::vector<std::string> kinematic_alternatives(Diagnosis& D, const std::vector<std::string>& rivals) {
-  const CandidateResult& v = D.candidates[0];
-  std::vector<std::string> alts;
-  for (const auto& cf : v.confounded) {
-    if (cf.effect.empty() || cf.correlation < 0.85) continue;
-    const bool close_given = std::find(rivals.begin(), rivals.end(), cf.with) != rivals.end();
-    for (const auto& o : D.candidates)
-      if (o.label() == cf.with && ((o.significant && o.score - v.score < 10.0) || !o.identifiable || close_given)) {
-        D.ambiguous = true;
-        alts.push_back(cf.with + " (" + cf.separate_by + ")");
-      }
-  }
-  return alts;
-}
-
-std::string kinematic_verdict_text(const Diagnosis& D, const std::vector<std::string>& alts) {
-  const CandidateResult& v = D.candidates[0];
-  std::ostringstream os;
-  os << "missing: " << v.label() << " — ";
-  for (std::size_t j = 0; j < v.params.size(); ++j)
-    os << (j ? ", " : "") << v.params[j].name << " = " << fmt(v.params[j].value, 4) << " " << v.params[j].unit;
-  os << "; it brings the residual from " << amount(D.baseline_rms, D.units) << " to "
-     << amount(v.rms_after, D.units) << " RMS (noise floor about " << amount(D.noise_floor, D.units) << ")";
-  if (D.ambiguous) {
-    os << ". These data cannot tell it apart from ";
-    for (std::size_t j = 0; j < alts.size(); ++j) os << (j ? "; " : "") << alts[j];
-  }
-  return os.str();
-}
-
-// The next effect of the kinematic forward selection on top of the columns
-// `acc` (fit `cur`): the significant one with the lowest BIC change, or none.
-struct NextEffect {
-  int index = -1;
-  JointFit fit;
-};
-
-NextEffect next_kinematic_effect(const Diagnosis& D, const Engine& E, const DiagnoseOptions& opt,
-                                 const Eigen::MatrixXd& acc, const JointFit& cur, const std::vector<bool>& used,
-                                 double family) {
-  NextEffect best;
-  double best_bic = 0.0;
-  for (std::size_t j = 0; j < D.candidates.size(); ++j) {
-    const CandidateResult& c = D.candidates[j];
-    if (used[j] || !c.significant || !c.refits_base || c.columns.cols() == 0) continue;
-    const Eigen::MatrixXd X = hstack(acc, c.columns);
-    const JointFit f = E.fit(X);
-    if (!f.full_rank) continue;
-    const int k_total = E.base_rank() + static_cast<int>(X.cols());
-    const NestedTest t = E.nested(cur.rss, f.rss, c.n_params, k_total, std::max(f.n_eff, 10.0));
-    const double p = std::min(1.0, t.p_value * c.trials * family);
-    if (p < opt.alpha && t.delta_bic < best_bic) {
-      best = {static_cast<int>(j), f};
-      best_bic = t.delta_bic;
-    }
-  }
-  return best;
-}
-
-// Forward selection of further effects on top of the verdict (candidates[0]):
-// fills D.also, returns the fit of everything chosen.
-JointFit forward_select_kinematic(Diagnosis& D, const Engine& E, const DiagnoseOptions& opt, double family) {
-  const CandidateResult& v = D.candidates[0];
-  Eigen::MatrixXd acc = v.refits_base ? v.columns : Eigen::MatrixXd(E.rows(), 0);
-  JointFit cur = E.fit(acc);
-  std::vector<bool> used(D.candidates.size(), false);
-  used[0] = true;
-  for (int step = 0; step < opt.max_forward_steps; ++step) {
-    NextEffect next = next_kinematic_effect(D, E, opt, acc, cur, used, family);
-    if (next.index < 0) break;
-    used[static_cast<std::size_t>(next.index)] = true;
-    D.also.push_back(next.index);
-    acc = hstack(acc, D.candidates[static_cast<std::size_t>(next.index)].columns);
-    cur = std::move(next.fit);
-  }
-  return cur;
-}
-
-// Verdict of the kinematic kinds: the first of the ranking when significant,
-// further effects by forward selection on top of it.
-void decide_kinematic(Diagnosis& D, const Engine& E, const DiagnoseOptions& opt, const Rivals& rival, double family) {
-  if (D.candidates.empty() || !D.candidates[0].significant) {
-    D.verdict_text = no_effect_text(D);
-    D.residual_final = E.base_fit().residual;
-    return;
-  }
-  D.verdict = 0;
-  D.verdict_text = kinematic_verdict_text(D, kinematic_alternatives(D, rival[0]));
-  const JointFit cur = forward_select_kinematic(D, E, opt, family);
-  const CandidateResult& v = D.candidates[0];
-  D.residual_final = v.refits_base || !D.also.empty() ? cur.residual : v.residual_after;
-  if (!D.also.empty()) {
-    D.verdict_text += ". Also significant on top of it: ";
-    for (std::size_t j = 0; j < D.also.size(); ++j)
-      D.verdict_text += (j ? ", " : "") + D.candidates[D.also[j]].label();
-  }
-}
-
 }  // namespace
 
 std::string no_effect_text(const Diagnosis& D) {
@@ -280,18 +168,17 @@ std::string no_effect_text(const Diagnosis& D) {
          "(RMS " + amount(D.baseline_rms, D.units) + ", noise floor about " + amount(D.noise_floor, D.units) + ")";
 }
 
-void rank_and_decide(Diagnosis& D, const Engine& E, const DiagnoseOptions& opt, const SeparateAdvice& advice) {
+void rank_and_confound(Diagnosis& D, const Engine& E, const DiagnoseOptions& opt, const SeparateAdvice& advice) {
   // Look-elsewhere: the family of candidates and the search trials within each.
   const Family F = family_of(D);
   judge_against_given(D, E, opt, F);
   rank_by_significance_and_score(D);
   confound_off_base(D, E, advice);
-  const Rivals rival = confound_base_directions(D, E, advice, F.ne_ref);
+  confound_base_directions(D, E, advice);
   confound_absorbed(D, E, advice);
-  // Verdict and forward selection: motion logs choose by one statistic from
-  // the model as given (select_motion_effects, select.cpp); the kinematic kinds as below.
-  if (D.kind == "motion") return;
-  decide_kinematic(D, E, opt, rival, F.size);
+  // The verdict and the ranking after it are the selection's, by one
+  // statistic: select_motion_effects (select.cpp) for motion logs,
+  // select_kinematic_effects (kinematic_select.cpp) for the kinematic kinds.
 }
 
 }  // namespace cpm::ident::detail

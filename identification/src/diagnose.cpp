@@ -425,7 +425,7 @@ Diagnosis diagnose_aligned(const io::MotionData& data, const ctl::Machine& model
   evaluate_candidates(D, E, model.model(), opt);
   // Stage "ranking" (decide.cpp): significance, confounding between candidates.
   const detail::AxisExcitation ex = detail::excitation(D.motion);
-  detail::rank_and_decide(D, E, opt, [&ex](const CandidateResult& a, const CandidateResult& b) {
+  detail::rank_and_confound(D, E, opt, [&ex](const CandidateResult& a, const CandidateResult& b) {
     return separate_advice(a, b, ex);
   });
   select_effects(D, E, model.model(), opt);

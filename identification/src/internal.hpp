@@ -118,9 +118,10 @@ std::vector<StructureFinding> confirmed_outside_library(const Diagnosis& D, cons
 // The measurement that would separate two candidates.
 using SeparateAdvice = std::function<std::string(const CandidateResult&, const CandidateResult&)>;
 
-// Shared tail of a diagnosis: look-elsewhere correction and significance,
-// ranking, confounding between candidates, the verdict and forward selection,
-// residual_final. The candidates must be scored already.
-void rank_and_decide(Diagnosis& D, const Engine& E, const DiagnoseOptions& opt, const SeparateAdvice& advice);
+// Shared middle of a diagnosis: look-elsewhere correction and significance of
+// each candidate alone, the ranking by it, confounding between candidates. The
+// candidates must be scored already; the verdict is the selection's that
+// follows (select_motion_effects; kinematic: select_kinematic_effects).
+void rank_and_confound(Diagnosis& D, const Engine& E, const DiagnoseOptions& opt, const SeparateAdvice& advice);
 
 }  // namespace cpm::ident::detail

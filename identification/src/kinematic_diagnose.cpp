@@ -1,7 +1,7 @@
-// The kinematic diagnosis (kinematic.hpp): stage 4 (selection: every effect
-// of the table on every axis, scored), stage 5 (verdict: noise floor, ranking
-// and decision shared with the motion side, notes) and stage 6 (structure in
-// what remains).
+// The kinematic diagnosis (kinematic.hpp): stage 4 (every effect of the table
+// on every axis, scored alone), stage 5 (verdict: noise floor, ranking and
+// confounding shared with the motion side, the forward selection of
+// kinematic_select.cpp, notes) and stage 6 (structure in what remains).
 #include <algorithm>
 #include <cmath>
 
@@ -95,7 +95,6 @@ std::vector<CandidateResult> evaluate_kinematic_candidates(const KinematicProble
       out.push_back(std::move(c));
     }
   }
-  judge_scales_at_the_given_model(P, opt, out);
   return out;
 }
 
@@ -116,15 +115,16 @@ Diagnosis diagnose_kinematic(std::shared_ptr<const KinematicProblem> Pp, const D
   const Engine E(kinematic_linear_problem(P));
   D.rows = E.rows();
   D.base_refit_rms = Engine::rms(E.base_fit().residual);
-  // Stage 4: selection.
+  // Stage 4: every candidate alone.
   D.candidates = evaluate_kinematic_candidates(P, E, opt);
-  // Stage 5: verdict.
+  // Stage 5: selection and verdict.
   D.noise_floor = kinematic_noise_floor(P, E, D.candidates);
   D.axis_noise = Vec3::Constant(D.noise_floor);
   const KinematicSpan sp = span_of(P);
-  detail::rank_and_decide(D, E, opt, [&](const CandidateResult& a, const CandidateResult& b) {
+  detail::rank_and_confound(D, E, opt, [&](const CandidateResult& a, const CandidateResult& b) {
     return separate_kinematic(P, sp, a, b);
   });
+  select_kinematic_effects(P, E, opt, D);
   data_notes(D, P);
   // Stage 6: structure.
   if (opt.structure_search) D.structure = find_kinematic_structure(P, D.residual_final, opt);

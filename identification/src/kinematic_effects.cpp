@@ -9,6 +9,7 @@
 // differences of the full residual.
 #include <algorithm>
 #include <cmath>
+#include <complex>
 #include <numbers>
 
 #include "effect_search.hpp"
@@ -23,6 +24,18 @@ using kin::KinematicEffectType;
 namespace {
 
 constexpr double kTwoPi = 2.0 * std::numbers::pi;
+// Another wavelength whose fit is within this much of the best by BIC (at
+// the rows' count; "not worth more than a bare mention") fits alike: the
+// data do not determine the wavelength.
+constexpr double kAliasBic = 2.0;
+
+// The wavenumber (1/m) that leaves the least RSS, and whether another fits alike.
+struct WavenumberSearch {
+  double k = 0.0;
+  bool determined = true;
+};
+WavenumberSearch search_cyclic(const KinematicProblem& P, const Engine& E, int axis, double kmin, double kmax,
+                               double dk);
 
 using Ctx = KinematicCandidateContext;
 
@@ -184,21 +197,51 @@ Eigen::MatrixXd cyclic_error_jacobian(const KinematicProblem& P, int axis, doubl
                displacement_column(P, axis, [&](int j) { return a * std::cos(kTwoPi * d(j) / lambda + phi); })});
 }
 
+// The wavenumbers a cyclic error on the axis is searched over: [kmin, kmax]
+// (wavelengths of the parameter's bounds, at most 2/3 of the stroke) at
+// spacing dk (a quarter cycle over the stroke); kmax <= 0 when the stroke is
+// too short to see a period.
+struct WaveRange {
+  double stroke = 0.0, kmin = 0.0, kmax = 0.0, dk = 0.0;
+};
+
+WaveRange wave_range(const Ctx& x) {
+  WaveRange w;
+  w.stroke = x.span.hi[x.axis] - x.span.lo[x.axis];
+  const double lmin = x.info.params[1].lower, lmax = std::min(x.info.params[1].upper, w.stroke / 1.5);
+  if (lmax <= lmin * 1.5) return w;
+  w.kmin = 1.0 / lmax;
+  w.kmax = 1.0 / lmin;
+  w.dk = 1.0 / (4.0 * w.stroke);
+  return w;
+}
+
+// Whether these data determine the wavelength (an axis seen at six heights
+// only fits a sine of almost any wavelength alike): said in the note.
+void note_wavelength(CandidateResult& c, bool determined) {
+  const std::string said = "its wavelength is not determined by these data";
+  const auto at = c.note.find(said);
+  c.searched_determined = determined;
+  if (determined && at != std::string::npos) c.note.erase(at > 2 ? at - 2 : at);
+  if (determined || at != std::string::npos) return;
+  c.note += (c.note.empty() ? "" : "; ") + said + ": others fit alike (on an axis seen at a few positions, its aliases)";
+}
+
 void fit_cyclic_error(const Ctx& x, CandidateResult& c) {
-  const double stroke = x.span.hi[x.axis] - x.span.lo[x.axis];
-  const double lmin = x.info.params[1].lower, lmax = std::min(x.info.params[1].upper, stroke / 1.5);
-  if (lmax <= lmin * 1.5)
-    return mark_not_identifiable(x, c, "axis " + std::to_string(x.axis + 1) + " covers " + fmt(stroke * 1e3) +
+  const WaveRange w = wave_range(x);
+  if (w.kmax <= 0.0)
+    return mark_not_identifiable(x, c, "axis " + std::to_string(x.axis + 1) + " covers " + fmt(w.stroke * 1e3) +
                                            " mm only: too little to see a periodic error");
-  const double kmin = 1.0 / lmax, kmax = 1.0 / lmin, dk = 1.0 / (4.0 * stroke);
-  const double bk = search_cyclic_wavenumber(x.P, x.E, x.axis, kmin, kmax, dk);
+  const WavenumberSearch ws = search_cyclic(x.P, x.E, x.axis, w.kmin, w.kmax, w.dk);
+  const double bk = ws.k;
   const Eigen::MatrixXd X = cyclic_error_columns(x.P, x.axis, bk);
   const JointFit f = x.E.fit(X);
   // a sin(x + phi) = (a cos phi) sin x + (a sin phi) cos x
   const double a = std::hypot(f.beta(0), f.beta(1)), phi = std::atan2(f.beta(1), f.beta(0));
   const double lambda = 1.0 / bk;
   finish(x, c, X, f, cyclic_error_jacobian(x.P, x.axis, a, lambda, phi), {a, lambda, phi});
-  c.trials = std::max(1.0, stroke * (kmax - kmin));
+  c.trials = std::max(1.0, w.stroke * (w.kmax - w.kmin));
+  note_wavelength(c, ws.determined);
 }
 
 void fit_guide_angular_error(const Ctx& x, CandidateResult& c) {
@@ -228,22 +271,36 @@ void fit_limb_twist(const Ctx& x, CandidateResult& c) {
   fit_linear(x, c, hcat({effect_difference(x.P, x.info.type, x.axis, 0, 1e-4)}));
 }
 
-void fit_thermal_drift(const Ctx& x, CandidateResult& c) {
+// d(e d (1 - exp(-t / tau))) / d(e, tau) as displacement columns.
+Eigen::MatrixXd thermal_drift_jacobian(const KinematicProblem& P, int axis, double e, double tau) {
+  return hcat({thermal_drift_column(P, axis, tau), displacement_column(P, axis, [&](int j) {
+                 const auto u = static_cast<std::size_t>(j);
+                 const double t = P.inputs[u].t;
+                 return -e * P.d[u][axis] * std::exp(-t / tau) * t / (tau * tau);
+               })});
+}
+
+// The time constants a thermal drift is searched over: [T/30, 10 T] within
+// the parameter's bounds, T the time covered.
+struct TauRange {
+  double lo = 0.0, hi = 0.0;
+};
+
+TauRange tau_range(const Ctx& x) {
   const KinematicSpan& sp = x.span;
   const double T = sp.t1 - std::max(0.0, std::min(sp.t0, sp.t1));
+  return {std::max(x.info.params[1].lower, (sp.t1 - sp.t0) / 30.0), std::min(x.info.params[1].upper, 10.0 * T)};
+}
+
+void fit_thermal_drift(const Ctx& x, CandidateResult& c) {
+  const KinematicSpan& sp = x.span;
   if (!(sp.t1 > sp.t0)) return mark_not_identifiable(x, c, "all samples have the same time");
-  const double lo = std::max(x.info.params[1].lower, (sp.t1 - sp.t0) / 30.0);
-  const double hi = std::min(x.info.params[1].upper, 10.0 * T);
+  const auto [lo, hi] = tau_range(x);
   const double tau = search_thermal_time_constant(x.P, x.E, x.axis, lo, hi);
   const Eigen::MatrixXd X = hcat({thermal_drift_column(x.P, x.axis, tau)});
   const JointFit f = x.E.fit(X);
   const double e = f.beta(0);
-  const Eigen::MatrixXd jac = hcat({X.col(0), displacement_column(x.P, x.axis, [&](int j) {
-                                      const auto u = static_cast<std::size_t>(j);
-                                      const double t = x.P.inputs[u].t;
-                                      return -e * x.P.d[u][x.axis] * std::exp(-t / tau) * t / (tau * tau);
-                                    })});
-  finish(x, c, X, f, jac, {e, tau});
+  finish(x, c, X, f, thermal_drift_jacobian(x.P, x.axis, e, tau), {e, tau});
   c.trials = std::max(1.0, std::log(hi / lo) / std::log(3.0));
   if (c.identifiable && tau >= 0.99 * hi)
     c.note = "tau at the top of the search (" + fmt(hi) + " s): the data see a linear drift";
@@ -304,21 +361,68 @@ void thermal_joint_values(const JointFit& fit, int at, const Eigen::MatrixXd& co
   c.params[0].std_error = std::sqrt(std::max(0.0, cov(at, at)));
 }
 
+// ---------------------------------------------------------------------------
+// Searched again beside the effects chosen before
+
+// The candidate at new columns X: its parameters `values` fitted with the
+// others (fb, on `beside`), their standard errors from the Jacobian jac
+// there; the figures of the effect alone with the base at the new columns.
+void take_beside(const Ctx& x, const Engine& beside, CandidateResult& c, const Eigen::MatrixXd& X, const JointFit& fb,
+                 const Eigen::MatrixXd& jac, const std::array<double, 3>& values) {
+  const Eigen::MatrixXd cov = beside.covariance(jac, fb, beside.base_rank() + static_cast<int>(jac.cols()), true);
+  for (int j = 0; j < x.info.n_params && j < static_cast<int>(c.params.size()); ++j) {
+    const auto u = static_cast<std::size_t>(j);
+    c.params[u].value = values[u];
+    c.params[u].std_error = j < cov.rows() ? std::sqrt(std::max(0.0, cov(j, j))) : -1.0;
+  }
+  c.columns = X;
+  const JointFit fa = x.E.fit(X);
+  c.rss = fa.rss;
+  c.n_eff = fa.n_eff;
+  c.residual_after = fa.residual;
+  c.fitted = X * fa.beta;
+  const double given_rms = Engine::rms(x.P.residual_given);
+  detail::score_candidate(c, x.E, x.E.rss_base(), c.n_params, x.E.base_rank() + c.n_params, given_rms * given_rms);
+}
+
+void search_cyclic_beside(const Ctx& x, const Engine& beside, CandidateResult& c) {
+  const WaveRange w = wave_range(x);
+  if (w.kmax <= 0.0 || c.columns.cols() != 2) return;
+  const WavenumberSearch ws = search_cyclic(x.P, beside, x.axis, w.kmin, w.kmax, w.dk);
+  note_wavelength(c, ws.determined);
+  const double k = ws.k;
+  const Eigen::MatrixXd X = cyclic_error_columns(x.P, x.axis, k);
+  if (!(beside.rss(X) < beside.rss(c.columns))) return;
+  const JointFit fb = beside.fit(X);
+  const double a = std::hypot(fb.beta(0), fb.beta(1)), phi = std::atan2(fb.beta(1), fb.beta(0));
+  take_beside(x, beside, c, X, fb, cyclic_error_jacobian(x.P, x.axis, a, 1.0 / k, phi), {a, 1.0 / k, phi});
+}
+
+void search_thermal_beside(const Ctx& x, const Engine& beside, CandidateResult& c) {
+  if (!(x.span.t1 > x.span.t0) || c.columns.cols() != 1) return;
+  const auto [lo, hi] = tau_range(x);
+  const double tau = search_thermal_time_constant(x.P, beside, x.axis, lo, hi);
+  const Eigen::MatrixXd X = hcat({thermal_drift_column(x.P, x.axis, tau)});
+  if (!(beside.rss(X) < beside.rss(c.columns))) return;
+  const JointFit fb = beside.fit(X);
+  take_beside(x, beside, c, X, fb, thermal_drift_jacobian(x.P, x.axis, fb.beta(0), tau), {fb.beta(0), tau, 0.0});
+}
+
 // The table: one entry per kinematic effect type, in the order of
 // kin::KinematicEffectType (the diagnosis evaluates them in this order).
 constexpr std::array<KinematicEffectFitter, kin::kKinematicEffectTypes> kFitters = {{
     {KinematicEffectType::backlash, fit_backlash, backlash_joint_values, {true, false, false},
-     BaseSeparation::both_directions},
+     BaseSeparation::both_directions, nullptr},
     {KinematicEffectType::cyclic_error, fit_cyclic_error, cyclic_joint_values, {false, false, true},
-     BaseSeparation::spread_poses},
+     BaseSeparation::spread_poses, search_cyclic_beside},
     {KinematicEffectType::guide_angular_error, fit_guide_angular_error, linear_joint_values, {false, false, false},
-     BaseSeparation::spread_poses},
+     BaseSeparation::spread_poses, nullptr},
     {KinematicEffectType::limb_twist, fit_limb_twist, linear_joint_values, {false, false, false},
-     BaseSeparation::spread_poses},
+     BaseSeparation::spread_poses, nullptr},
     {KinematicEffectType::thermal_drift, fit_thermal_drift, thermal_joint_values, {false, true, false},
-     BaseSeparation::other_times},
+     BaseSeparation::other_times, search_thermal_beside},
     {KinematicEffectType::actuator_scale, fit_actuator_scale, linear_joint_values, {false, false, false},
-     BaseSeparation::is_base_scale},
+     BaseSeparation::is_base_scale, nullptr},
 }};
 
 constexpr bool one_entry_per_type_in_order() {
@@ -353,13 +457,66 @@ Eigen::VectorXd thermal_drift_column(const KinematicProblem& P, int axis, double
   });
 }
 
-double search_cyclic_wavenumber(const KinematicProblem& P, const Engine& E, int axis, double kmin, double kmax,
-                                double dk) {
+namespace {
+
+// RSS of y on two columns a, b (all weighted and off the base): least squares
+// by the 2x2 normal equations; on one column when the two are (numerically)
+// parallel, as the engine's rank detection does.
+double two_column_rss(const Eigen::VectorXd& a, const Eigen::VectorXd& b, const Eigen::VectorXd& y) {
+  const double g11 = a.squaredNorm(), g22 = b.squaredNorm(), g12 = a.dot(b), c1 = a.dot(y), c2 = b.dot(y);
+  const double yy = y.squaredNorm(), det = g11 * g22 - g12 * g12;
+  if (det > 1e-12 * g11 * g22) return yy - (g22 * c1 * c1 - 2.0 * g12 * c1 * c2 + g11 * c2 * c2) / det;
+  if (g11 >= g22) return g11 > 0.0 ? yy - c1 * c1 / g11 : yy;
+  return yy - c2 * c2 / g22;
+}
+
+// The RSS E leaves with cyclic_error's columns at each wavenumber kmin + q dk
+// (q < K). The search runs once per candidate and again beside every choice
+// of the selection: each row's phase is advanced by a rotation per step (set
+// afresh every 64) instead of a sine and a cosine per row and wavenumber.
+std::vector<double> cyclic_grid_rss(const KinematicProblem& P, const Engine& E, int axis, double kmin, double dk,
+                                    int K) {
+  const int N = P.rows();
+  std::vector<std::complex<double>> z(static_cast<std::size_t>(N)), turn(static_cast<std::size_t>(N));
+  auto d = [&](int r) { return P.d[static_cast<std::size_t>(P.sample_of_row(r))][axis]; };
+  for (int r = 0; r < N; ++r) turn[static_cast<std::size_t>(r)] = std::polar(1.0, kTwoPi * dk * d(r));
+  const Eigen::VectorXd y = E.project_off_base(E.problem().y);
+  Eigen::MatrixXd X(N, 2);
+  std::vector<double> out(static_cast<std::size_t>(K));
+  for (int q = 0; q < K; ++q) {
+    for (int r = 0; r < N; ++r) {
+      auto& zr = z[static_cast<std::size_t>(r)];
+      zr = q % 64 == 0 ? std::polar(1.0, kTwoPi * (kmin + q * dk) * d(r)) : zr * turn[static_cast<std::size_t>(r)];
+      X(r, 0) = P.sensitivity(r, axis) * zr.imag();
+      X(r, 1) = P.sensitivity(r, axis) * zr.real();
+    }
+    const Eigen::MatrixXd Xp = E.project_off_base(X);
+    out[static_cast<std::size_t>(q)] = two_column_rss(Xp.col(0), Xp.col(1), y);
+  }
+  return out;
+}
+
+WavenumberSearch search_cyclic(const KinematicProblem& P, const Engine& E, int axis, double kmin, double kmax,
+                               double dk) {
   auto rss = [&](double k) { return E.rss(cyclic_error_columns(P, axis, k)); };
   const int K = static_cast<int>((kmax - kmin) / dk) + 1;
-  std::vector<double> grid(static_cast<std::size_t>(K));
-  for (int q = 0; q < K; ++q) grid[static_cast<std::size_t>(q)] = rss(kmin + q * dk);
-  return detail::refine_grid_minima(rss, detail::lowest_local_minima(grid, 3), grid, kmin, dk, kmin, kmax, 14, kmin);
+  const std::vector<double> grid = cyclic_grid_rss(P, E, axis, kmin, dk, K);
+  const std::vector<int> minima = detail::lowest_local_minima(grid, 3);
+  WavenumberSearch w;
+  w.k = detail::refine_grid_minima(rss, minima, grid, kmin, dk, kmin, kmax, 14, kmin);
+  if (minima.size() >= 2) {
+    const double fr = E.floor_rss();
+    const double g0 = grid[static_cast<std::size_t>(minima[0])], g1 = grid[static_cast<std::size_t>(minima[1])];
+    w.determined = E.rows() * std::log((g1 + fr) / (g0 + fr)) >= kAliasBic;
+  }
+  return w;
+}
+
+}  // namespace
+
+double search_cyclic_wavenumber(const KinematicProblem& P, const Engine& E, int axis, double kmin, double kmax,
+                                double dk) {
+  return search_cyclic(P, E, axis, kmin, kmax, dk).k;
 }
 
 double search_thermal_time_constant(const KinematicProblem& P, const Engine& E, int axis, double lo, double hi) {

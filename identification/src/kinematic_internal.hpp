@@ -1,8 +1,9 @@
 // Pieces the files of the kinematic side share (not a public header):
 // kinematic.cpp (the problem: read, calibrate, residual), kinematic_effects.cpp
 // (the effect table and a candidate's evaluation), kinematic_scales.cpp
-// (actuator_scale at the model as given), kinematic_diagnose.cpp (selection,
-// verdict, structure) and kinematic_fit.cpp (cpm fit).
+// (actuator_scale at the model as given), kinematic_select.cpp (selection and
+// verdict), kinematic_diagnose.cpp (the stages in order, structure) and
+// kinematic_fit.cpp (cpm fit).
 #pragma once
 
 #include <sstream>
@@ -11,6 +12,10 @@
 
 #include "cpm/identification/kinematic_stages.hpp"
 #include "internal.hpp"
+
+namespace cpm::ident::detail {
+struct Selection;  // selection.hpp
+}  // namespace cpm::ident::detail
 
 namespace cpm::ident::kinematic_detail {
 
@@ -45,9 +50,18 @@ Eigen::VectorXd effect_difference(const KinematicProblem& P, kin::KinematicEffec
 // The data of a file as a problem, nothing computed (read_kinematic without the residual).
 KinematicProblem read_problem(const io::DataSet& data, const kin::KinematicModel& model);
 
-// actuator_scale judged at the model as given (kinematic_scales.cpp): fills
-// the actuator_scale candidates among `candidates`.
-void judge_scales_at_the_given_model(const KinematicProblem& P, const DiagnoseOptions& opt,
-                                     std::vector<CandidateResult>& candidates);
+// actuator_scale judged at the model as given jointly with the effects the
+// selection `sel` chose (kinematic_scales.cpp): fills the actuator_scale
+// candidates among D.candidates, their statistics in sel, and adds those
+// named to sel's choices.
+void select_scales_at_the_given_model(const KinematicProblem& P, const Engine& E, const DiagnoseOptions& opt,
+                                      Diagnosis& D, detail::Selection& sel);
+
+// Stage 5, selection and verdict (kinematic_select.cpp): forward selection
+// from the calibrated base (select.cpp), each searched parameter searched
+// again on what the effects chosen before it leave, the scales at the model
+// as given; reorders D.candidates, sets verdict, also, residual_final and the
+// verdict text.
+void select_kinematic_effects(const KinematicProblem& P, const Engine& E, const DiagnoseOptions& opt, Diagnosis& D);
 
 }  // namespace cpm::ident::kinematic_detail

@@ -1,16 +1,18 @@
-// Stage "selection" of the motion diagnosis (internal.hpp, select_motion_effects).
+// Stage "selection" of a diagnosis (selection.hpp; motion logs:
+// internal.hpp, select_motion_effects; kinematic data: kinematic_select.cpp).
 //
 // One statistic for the ranking, the verdict and the significance column:
-// forward selection from the model as given. At each step every effect not
-// yet chosen (every library effect on every axis, the payload, and the base
-// refit itself as inertia_error) is fitted jointly with those chosen so far;
-// the one with the lowest BIC change is taken when its nested F-test, with
-// the look-elsewhere correction over the candidates still in play and its
-// own search trials (Bonferroni over the whole library and all axes, which
-// also bounds the false discoveries),
-// stands below alpha. The base is refitted only once inertia_error has been
+// forward selection. At each step every effect not yet chosen (every library
+// effect on every axis; on motion logs also the payload and the base refit
+// itself as inertia_error) is fitted jointly with those chosen so far; the
+// one with the lowest BIC change is taken when its nested F-test, with the
+// look-elsewhere correction over the candidates still in play and its own
+// search trials (Bonferroni over the whole library and all axes, which also
+// bounds the false discoveries), stands below alpha. Motion logs start from
+// the model as given and refit the base only once inertia_error has been
 // chosen: what a refit would absorb (a payload, a drive gain on z, a mass
-// error) is then a finding of its own instead of vanishing into it.
+// error) is then a finding of its own instead of vanishing into it. Kinematic
+// data start from the calibrated base (effects.md: the base is calibration's).
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -32,28 +34,22 @@ int params_added(const Term& t, const CandidateResult& c, const Engine& E) {
   return t.base ? E.base_rank_beyond_nuisance() : std::max(static_cast<int>(t.X.cols()), c.n_params);
 }
 
-const Term& term_of(const std::vector<Term>& terms, int candidate) {
-  return *std::find_if(terms.begin(), terms.end(), [&](const Term& t) { return t.candidate == candidate; });
+// The term of a candidate, or nullptr (one chosen by a test of its own).
+template <class Terms>
+auto term_of(Terms& terms, int candidate) -> decltype(&terms[0]) {
+  const auto it = std::find_if(terms.begin(), terms.end(), [&](const Term& t) { return t.candidate == candidate; });
+  return it == terms.end() ? nullptr : &*it;
 }
 
 // One term fitted on top of the state, tested against it with the
 // look-elsewhere correction over `family` candidates.
 StepFit step_fit(const Engine& E, const DiagnoseOptions& opt, const Term& t, const CandidateResult& c,
                  const SelectionState& S, double family) {
-  StepFit s;
-  s.fit = E.fit(t.base ? S.XS : hstack(S.XS, t.X), S.base_in || t.base);
+  JointFit fit = E.fit(t.base ? S.XS : hstack(S.XS, t.X), S.base_in || t.base);
+  if (!fit.full_rank || fit.rss >= S.rss) return StepFit{};
   const int q = params_added(t, c, E);
-  if (!s.fit.full_rank || s.fit.rss >= S.rss) return s;
-  const NestedTest nt = E.nested(S.rss, s.fit.rss, q, S.k + q, std::max(s.fit.n_eff, 10.0));
-  const double ne_ref = std::max(10.0, E.base_fit().n_eff);
-  const double fr = E.floor_rss();
-  s.rss = s.fit.rss;
-  s.n_eff = s.fit.n_eff;
-  s.f_stat = nt.f_stat;
-  s.p = nt.p_value;
-  s.p_adj = look_elsewhere(nt.p_value, c.trials, family);
-  s.dbic = S.rss + fr > 0.0 ? bic_change(ne_ref, s.rss, S.rss, fr, q) : 0.0;
-  s.ok = s.p_adj < opt.alpha && s.dbic < 0.0;
+  StepFit s = step_statistics(E, opt, S.rss, fit.rss, q, S.k + q, fit.n_eff, c.trials, family);
+  s.fit = std::move(fit);
   return s;
 }
 
@@ -81,7 +77,7 @@ int best_next_term(const Diagnosis& D, const Engine& E, const DiagnoseOptions& o
   // The family: every candidate of the library on every axis that has not been
   // chosen, whether or not the data can show it (those held at a bound were
   // looked at too).
-  const double remaining = static_cast<double>(D.candidates.size() - sel.state.chosen.size());
+  const double remaining = remaining_family(D, sel.state);
   int best = -1;
   for (const Term& t : terms) {
     if (sel.state.has(t.candidate)) continue;
@@ -97,11 +93,81 @@ int best_next_term(const Diagnosis& D, const Engine& E, const DiagnoseOptions& o
   return best;
 }
 
+// kind.research: every term not chosen searched again on what the chosen leave.
+void search_on_what_is_left(Diagnosis& D, std::vector<Term>& terms, const SelectionState& S, const SelectionKind& kind) {
+  if (!kind.research || S.XS.cols() == 0) return;
+  for (Term& t : terms)
+    if (!t.base && !S.has(t.candidate)) kind.research(t, D.candidates[static_cast<std::size_t>(t.candidate)], S.XS);
+}
+
+// The columns of the chosen terms but `except`, in the order chosen.
+Eigen::MatrixXd chosen_columns(const std::vector<Term>& terms, const SelectionState& S, int except) {
+  Eigen::MatrixXd X(S.XS.rows(), 0);
+  for (int j : S.chosen)
+    if (const Term* t = term_of(terms, j); j != except && t && !t->base) X = hstack(X, t->X);
+  return X;
+}
+
+// kind.research: each term chosen before the last searched again beside all
+// the others (a wavelength found on a residual that held the effect chosen
+// later may be an alias), and the state refitted with what they became.
+void search_chosen_again(Diagnosis& D, const Engine& E, std::vector<Term>& terms, SelectionState& S,
+                         const SelectionKind& kind) {
+  if (!kind.research || S.chosen.size() < 2) return;
+  for (std::size_t m = 0; m + 1 < S.chosen.size(); ++m) {
+    const int j = S.chosen[m];
+    if (Term* t = term_of(terms, j); t && !t->base)
+      kind.research(*t, D.candidates[static_cast<std::size_t>(j)], chosen_columns(terms, S, j));
+  }
+  S.XS = chosen_columns(terms, S, -1);
+  const JointFit f = E.fit(S.XS, S.base_in);
+  S.rss = f.rss;
+  if (S.reference_follows) S.reference = f.residual;
+}
+
+// Term j out of the state (the others kept in the order chosen).
+void drop_from_state(const Engine& E, const std::vector<Term>& terms, int j, int q, SelectionState& S) {
+  S.chosen.erase(std::find(S.chosen.begin(), S.chosen.end(), j));
+  S.XS = chosen_columns(terms, S, -1);
+  S.k -= q;
+  const JointFit f = E.fit(S.XS, S.base_in);
+  S.rss = f.rss;
+  if (S.reference_follows) S.reference = f.residual;
+}
+
+// kind.prune: each term chosen before the last tested again on top of all the
+// others, over the family it would be chosen from again; the first that no
+// longer passes is dropped (its statistics those of that test), and the rest
+// tested again without it.
+void drop_what_no_longer_adds(Diagnosis& D, const Engine& E, const DiagnoseOptions& opt,
+                              const std::vector<Term>& terms, Selection& sel, const SelectionKind& kind) {
+  SelectionState& S = sel.state;
+  for (bool dropped = kind.prune; dropped;) {
+    dropped = false;
+    const double n_eff = E.fit(S.XS, S.base_in).n_eff;
+    for (std::size_t m = 0; m + 1 < S.chosen.size() && !dropped; ++m) {
+      const int j = S.chosen[m];
+      const Term* t = term_of(terms, j);
+      if (!t || t->base) continue;
+      CandidateResult& c = D.candidates[static_cast<std::size_t>(j)];
+      const int q = params_added(*t, c, E);
+      const double rss_without = E.fit(chosen_columns(terms, S, j), S.base_in).rss;
+      const StepFit s = step_statistics(E, opt, rss_without, S.rss, q, S.k, n_eff, c.trials, remaining_family(D, S) + 1.0);
+      if (s.ok) continue;
+      sel.last[static_cast<std::size_t>(j)] = s;
+      sel.at_choice[static_cast<std::size_t>(j)] = StepFit{};
+      c.alternatives.clear();
+      drop_from_state(E, terms, j, q, S);
+      dropped = true;
+    }
+  }
+}
+
 // The effects that explain the data as well as the one chosen (`best`) at this step.
 void name_alternatives(Diagnosis& D, const Engine& E, const std::vector<Term>& terms, const Selection& sel,
                        int best) {
   const StepFit& s = sel.last[static_cast<std::size_t>(best)];
-  const Eigen::VectorXd y_off = E.project_off_nuisance(E.problem().y);
+  const Eigen::VectorXd y_off = E.project_off_nuisance(sel.state.reference);
   const Eigen::VectorXd gain_best = y_off - E.project_off_nuisance(s.fit.residual);
   for (const Term& t : terms) {
     if (t.candidate == best || sel.state.has(t.candidate)) continue;
@@ -181,6 +247,7 @@ void attribute_final_fit(Diagnosis& D, const Engine& E, const SelectionState& S)
       continue;
     }
     const Eigen::Index q = c.columns.cols();
+    if (q == 0) continue;  // chosen by a test of its own (held by the base): its fit stays
     c.fitted = c.columns * final_fit.beta.segment(at, q);
     at += q;
   }
@@ -192,7 +259,33 @@ double look_elsewhere(double p, double trials, double family) {
   return std::min(1.0, p * std::max(1.0, trials) * family);
 }
 
-SelectionState::SelectionState(const Engine& E) : XS(E.rows(), 0), rss(E.rss_given()), k(E.nuisance_rank()) {}
+StepFit step_statistics(const Engine& E, const DiagnoseOptions& opt, double rss_parent, double rss, int q, int k,
+                        double n_eff, double trials, double family) {
+  StepFit s;
+  const NestedTest nt = E.nested(rss_parent, rss, q, k, std::max(n_eff, 10.0));
+  const double ne_ref = std::max(10.0, E.base_fit().n_eff);
+  const double fr = E.floor_rss();
+  s.rss = rss;
+  s.n_eff = n_eff;
+  s.f_stat = nt.f_stat;
+  s.p = nt.p_value;
+  s.p_adj = look_elsewhere(nt.p_value, trials, family);
+  s.dbic = rss_parent + fr > 0.0 ? bic_change(ne_ref, rss, rss_parent, fr, q) : 0.0;
+  s.ok = s.p_adj < opt.alpha && s.dbic < 0.0;
+  return s;
+}
+
+double remaining_family(const Diagnosis& D, const SelectionState& S) {
+  return static_cast<double>(D.candidates.size() - S.chosen.size());
+}
+
+SelectionState::SelectionState(const Engine& E, const SelectionKind& kind)
+    : XS(E.rows(), 0),
+      base_in(kind.base_refitted),
+      rss(kind.base_refitted ? E.rss_base() : E.rss_given()),
+      k(kind.base_refitted ? E.base_rank() : E.nuisance_rank()),
+      reference(kind.gains_beyond_state ? E.fit(XS, base_in).residual : E.problem().y),
+      reference_follows(kind.gains_beyond_state) {}
 
 bool SelectionState::has(int candidate) const {
   return std::find(chosen.begin(), chosen.end(), candidate) != chosen.end();
@@ -204,6 +297,7 @@ void SelectionState::take(const Term& t, const CandidateResult& c, const StepFit
   else XS = hstack(XS, t.X);
   k += params_added(t, c, E);
   rss = s.rss;
+  if (reference_follows) reference = s.fit.residual;
 }
 
 std::vector<Term> selection_terms(const Diagnosis& D, const Engine& E) {
@@ -226,17 +320,20 @@ std::vector<Term> selection_terms(const Diagnosis& D, const Engine& E) {
   return terms;
 }
 
-Selection forward_selection(Diagnosis& D, const Engine& E, const DiagnoseOptions& opt) {
-  const std::vector<Term> terms = selection_terms(D, E);
-  Selection sel(E, D.candidates.size());
+Selection forward_selection(Diagnosis& D, const Engine& E, const DiagnoseOptions& opt, const SelectionKind& kind) {
+  std::vector<Term> terms = selection_terms(D, E);
+  Selection sel(E, kind, D.candidates.size());
   const int max_steps = std::max(1, opt.max_forward_steps);
   for (int step = 0; step <= max_steps; ++step) {
+    search_on_what_is_left(D, terms, sel.state, kind);
     const int best = best_next_term(D, E, opt, terms, sel);
     if (best < 0 || step == max_steps) break;
     name_alternatives(D, E, terms, sel, best);
     const auto j = static_cast<std::size_t>(best);
     sel.at_choice[j] = sel.last[j];
-    sel.state.take(term_of(terms, best), D.candidates[j], sel.last[j], E);
+    sel.state.take(*term_of(terms, best), D.candidates[j], sel.last[j], E);
+    search_chosen_again(D, E, terms, sel.state, kind);
+    drop_what_no_longer_adds(D, E, opt, terms, sel, kind);
   }
   return sel;
 }
@@ -248,7 +345,7 @@ void apply_selection(Diagnosis& D, const Engine& E, const Selection& sel) {
 }
 
 void select_motion_effects(Diagnosis& D, const Engine& E, const DiagnoseOptions& opt) {
-  apply_selection(D, E, forward_selection(D, E, opt));
+  apply_selection(D, E, forward_selection(D, E, opt, SelectionKind{}));
   verdict_text_motion(D);
 }
 

@@ -40,22 +40,21 @@ std::string misses_of(const KinTally& t) {
   return s;
 }
 
-// Pairs the estimator fails today (docs/identification.md, "Two effects at
+// Cells the estimator fails today (docs/identification.md, "Two effects at
 // once on kinematic data"), measured on these seeds: their assertions stay,
 // skipped with the reason while they fail. Empty: judged like every other.
-std::string known_failure(const KinPair& pair) {
-  if (pair.has("actuator_scale"))
-    return "actuator_scale is judged at the model as given (refits_base false) and the forward selection only adds "
-           "candidates that refit the base: ranked second and significant beside the other effect, never named";
-  if (pair.has("thermal_drift"))
-    return "the other effect is judged alone against a residual holding the drift, a smooth function of time and so "
-           "correlated in file order: n_eff falls (33 of 192 rows in one set), it is not significant alone, and the "
-           "forward selection only tries candidates significant alone (a cyclic error so left out is then reported "
-           "by the structure scan)";
-  if (pair.has("limb_twist") && (pair.has("cyclic_error") || pair.has("guide_angular_error")))
-    return "a limb twist (once also a guide error) named on an axis where none was planted: beside a cyclic error "
-           "on axis 3 (two radii; its wavelength, searched alone, lands on an alias: 1.5 mm for 16 mm) or a guide "
-           "error on axis 3 (one radius)";
+std::string known_failure(const KinCell& cell, const KinPair& pair) {
+  if (!cell.position || !pair.has("actuator_scale")) return "";
+  if (cell.one_direction && pair.has("backlash"))
+    return "position data are in the machine frame: a backlash approached from one side is a constant shift of its "
+           "axis, i.e. a plane offset, which only the full calibration explains; the scales at the model as given "
+           "leave it, so the model needs calibrating and no scale is named (on ball-bar data the pivot, a set-up, "
+           "takes the shift and the scale is named)";
+  if (pair.has("guide_angular_error"))
+    return "a guide error and a scale on the same axis (signatures 98.7-98.9 % alike on positions) leave the scale "
+           "only the rest of its signature: its standard error grows 9-15 fold, and its 10x (measured alone) is "
+           "then 2.7-4.5 of them (the one set of five with both on axis 3: s = 2.0e-5 +- 6.9e-6 for 3.1e-5 planted, "
+           "p after the Bonferroni correction 0.06; over 20 seeds named in 2 of the 6 sets with both on one axis)";
   return "";
 }
 
@@ -85,7 +84,7 @@ TEST(KinematicCells, TwoEffectsAtOnceOneAndTwoRadiiOneAndBothDirections) {
       EXPECT_EQ(t.sets, kSeeds);
       EXPECT_EQ(t.planted + t.hidden, 2 * kSeeds);
       EXPECT_EQ(t.hidden > 0, c.cell.one_direction && pair.has("backlash")) << pair.text();
-      if (!known_failure(pair).empty()) continue;  // KnownFailingPairs
+      if (!known_failure(c.cell, pair).empty()) continue;  // KnownFailingPairs
       std::string why;
       for (const auto& w : kin_pair_failures(t)) why += w + "; ";
       EXPECT_TRUE(why.empty()) << c.cell.text() << ", " << pair.text() << ": " << why << misses_of(t);
@@ -98,7 +97,7 @@ TEST(KinematicCells, KnownFailingPairs) {
   std::string why;
   for (const KinColumn& c : columns())
     for (std::size_t p = 0; p < kin_pairs().size(); ++p) {
-      const std::string reason = known_failure(kin_pairs()[p]);
+      const std::string reason = known_failure(c.cell, kin_pairs()[p]);
       if (reason.empty()) continue;
       for (const auto& w : kin_pair_failures(c.pairs[p]))
         why += c.cell.text() + ", " + kin_pairs()[p].text() + ": " + w + " (" + reason + ")\n";

@@ -1,7 +1,7 @@
 // The stages "selection", "verdict" and "structure" of the motion diagnosis,
 // and cpm fit, as units: forward selection on small synthetic LinearProblems
 // whose answer is known (planted columns, pure noise), the look-elsewhere
-// count, the kinematic verdict's ranking and confounding, the structure scan
+// count, the selection from the calibrated base (kinematic data), the structure scan
 // on a synthetic MotionProblem with a planted bump, step or period, and
 // fit_motion refitting only what it is asked to.
 #include <gtest/gtest.h>
@@ -251,36 +251,57 @@ TEST(Verdict, ImplausibleValuesAreNamedPerEffectAndOrdinaryOnesAreNot) {
   EXPECT_TRUE(detail::implausible(c).empty());  // no bound said for it
 }
 
-// The kinematic kinds decide in rank_and_decide: the first significant
-// candidate, then forward selection on top of it; candidates whose columns
-// are the same are reported as confounded with each other.
-TEST(RankAndDecide, TheKinematicVerdictIsTheStrongestPlantedEffectAndTheOtherIsAlso) {
+// Kinematic data start the selection from the calibrated base: a smooth
+// effect (a drift in file order) left in the residual makes the lag-1
+// correlation of every other candidate's residual high, so a second effect
+// judged alone is not significant (its effective sample size collapses);
+// chosen beside the drift it is. The state starts with the base refitted.
+TEST(ForwardSelection, FromTheCalibratedBaseAnEffectHiddenAloneBehindASmoothOneIsChosenBesideIt) {
   std::mt19937_64 rng(51);
-  Eigen::MatrixXd X = gaussian(kRows, 4, rng);
-  X.col(3) = X.col(2);  // the same signature under two names
-  const Eigen::VectorXd y = 3.0 * X.col(0) + 1.0 * X.col(2) + gaussian(kRows, 1, rng).col(0);
+  Eigen::MatrixXd X(kRows, 3);
+  for (int r = 0; r < kRows; ++r) X(r, 0) = 1.0 - std::exp(-3.0 * r / kRows);  // the drift
+  X.rightCols(2) = gaussian(kRows, 2, rng);
+  const Eigen::VectorXd y = 20.0 * X.col(0) + 0.5 * X.col(1) + gaussian(kRows, 1, rng).col(0);
+  const Engine E(problem(y, offset_column(kRows), 0));
+  Diagnosis D = with_candidates(X);
+  // Alone (with the base), the second column's residual holds the drift.
+  const JointFit alone = E.fit(X.col(1));
+  const NestedTest t = E.nested(E.rss_base(), alone.rss, 1, E.base_rank() + 1, alone.n_eff);
+  EXPECT_LT(alone.n_eff, 0.1 * kRows);
+  EXPECT_GT(look_elsewhere(t.p_value, 1.0, 3.0), 0.01);
+  detail::SelectionKind calibrated;
+  calibrated.base_refitted = true;
+  calibrated.gains_beyond_state = true;
+  const detail::SelectionState start(E, calibrated);
+  EXPECT_TRUE(start.base_in);
+  EXPECT_EQ(start.rss, E.rss_base());
+  EXPECT_EQ(start.k, E.base_rank());
+  const detail::Selection sel = forward_selection(D, E, {}, calibrated);
+  EXPECT_EQ(sel.state.chosen, (std::vector<int>{0, 1}));
+  EXPECT_NEAR(sel.state.rss / kRows, 1.0, 0.15);
+  EXPECT_FALSE(sel.last[2].ok);
+}
+
+// A searched parameter is searched again beside what is chosen: each term not
+// chosen before it is tried, each chosen one beside every later choice, with
+// the columns of all the others.
+TEST(ForwardSelection, AResearchSeesTheColumnsOfTheEffectsChosenBesideIt) {
+  std::mt19937_64 rng(52);
+  const Eigen::MatrixXd X = gaussian(kRows, 3, rng);
+  const Eigen::VectorXd y = 3.0 * X.col(0) + 2.0 * X.col(1) + gaussian(kRows, 1, rng).col(0);
   const Engine E(problem(y, offset_column(kRows), 1));
   Diagnosis D = with_candidates(X);
-  D.kind = "position";
-  for (auto& c : D.candidates) {
-    const JointFit f = E.fit(c.columns);
-    c.rss = f.rss;
-    c.n_eff = f.n_eff;
-    c.fitted = c.columns * f.beta;
-    c.residual_after = f.residual;
-    detail::score_candidate(c, E, E.rss_base(), 1, E.base_rank() + 1, y.squaredNorm() / kRows);
-  }
-  detail::rank_and_decide(D, E, {}, [](const CandidateResult&, const CandidateResult&) { return "measure more"; });
-  ASSERT_EQ(D.verdict, 0);
-  EXPECT_EQ(D.candidates[0].label(), "spring[axis 1]");
-  ASSERT_EQ(D.also.size(), 1u);  // one of the twins, not both
-  const CandidateResult& twin = D.candidates[static_cast<std::size_t>(D.also[0])];
-  EXPECT_TRUE(twin.label() == "spring[axis 3]" || twin.label() == "spring[axis 4]") << twin.label();
-  bool confounded = false;
-  for (const auto& cf : twin.confounded)
-    confounded |= (cf.with == "spring[axis 3]" || cf.with == "spring[axis 4]") && cf.correlation > 0.999;
-  EXPECT_TRUE(confounded);
-  EXPECT_NEAR(Engine::rms(D.residual_final), 1.0, 0.1);
+  std::vector<std::pair<int, Eigen::Index>> calls;  // candidate, columns beside it
+  detail::SelectionKind kind;
+  kind.research = [&](detail::Term& term, CandidateResult&, const Eigen::MatrixXd& others) {
+    calls.emplace_back(term.candidate, others.cols());
+  };
+  const detail::Selection sel = forward_selection(D, E, {}, kind);
+  ASSERT_EQ(sel.state.chosen, (std::vector<int>{0, 1}));
+  // Step 2: the two not chosen beside the first; the first again beside the
+  // second once it is chosen; step 3: the last beside both.
+  const std::vector<std::pair<int, Eigen::Index>> expected = {{1, 1}, {2, 1}, {0, 1}, {2, 2}};
+  EXPECT_EQ(calls, expected);
 }
 
 // A synthetic motion problem: every axis sweeps its stroke back and forth

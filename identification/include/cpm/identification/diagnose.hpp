@@ -64,6 +64,9 @@ struct CandidateResult {
   int n_params = 0;         // including searched ones
   int k_total = 0;          // parameters fitted in all (base included) for the test
   double trials = 1.0;      // effective number of independent search trials
+  // false: another value of its searched parameter fits these data alike (a
+  // wavelength on an axis seen at a few positions only: its aliases).
+  bool searched_determined = true;
   double n_eff = 0.0;
   bool identifiable = true;
   bool significant = false;

@@ -7,11 +7,13 @@
 //     nonlinear parameter is searched (cyclic_error's wavelength,
 //     thermal_drift's time constant), what separates it from the base;
 //  3. base refit: the shared engine on kinematic_linear_problem;
-//  4. selection: every effect on every axis evaluated and scored
-//     (evaluate_kinematic_candidates), the actuator scales judged at the model
-//     as given;
-//  5. verdict: the noise floor (kinematic_noise_floor), ranking and decision
-//     (shared with the motion side);
+//  4. candidates: every effect on every axis evaluated and scored alone
+//     (evaluate_kinematic_candidates);
+//  5. selection and verdict: the noise floor (kinematic_noise_floor), the
+//     forward selection the motion side uses too, from the calibrated base,
+//     each searched parameter searched again beside the effects chosen
+//     (KinematicEffectFitter::search_beside), the actuator scales judged at
+//     the model as given with the effects chosen;
 //  6. structure: what remains (find_kinematic_structure).
 // Adding a kinematic effect: its model in kinematics/ (kinematic_effects.hpp,
 // plane_model.cpp) and one entry of the table (kinematic_effects.cpp).
@@ -62,7 +64,8 @@ Eigen::VectorXd thermal_drift_column(const KinematicProblem& P, int axis, double
 
 // The wavenumber (1/m) of cyclic_error on `axis` that leaves the least RSS on
 // E: a grid over [kmin, kmax] at spacing dk (a quarter cycle over the stroke),
-// its three lowest local minima refined by golden section.
+// its three lowest local minima refined by golden section. E may hold other
+// effects' columns in its base (KinematicEffectFitter::search_beside).
 double search_cyclic_wavenumber(const KinematicProblem& P, const Engine& E, int axis, double kmin, double kmax,
                                 double dk);
 // The time constant (s) of thermal_drift on `axis` in [lo, hi] that leaves
@@ -111,14 +114,22 @@ struct KinematicEffectFitter {
                        std::array<double, 3>& v);
   KinematicSignature signature;
   BaseSeparation separation;
+  // Its nonlinear parameter (a wavelength, a time constant) searched again
+  // with the effects chosen before it fitted beside it: `beside` is the base
+  // refit with their columns as base columns too. Updates c.columns, the
+  // searched value and the linear values (fitted with the others), and the
+  // figures of the effect alone at the new value; keeps c as it is when the
+  // new value fits no better. nullptr: the effect has nothing searched.
+  void (*search_beside)(const KinematicCandidateContext& ctx, const Engine& beside, CandidateResult& c);
 };
 
 // The table's entry for an effect type, nullptr when it has none.
 const KinematicEffectFitter* kinematic_fitter(kin::KinematicEffectType type) noexcept;
 
 // Stage 4: every effect of the library (or of options.effects) on every axis,
-// evaluated on E and scored against the base refit; the actuator scales
-// judged at the model as given. In table order, axis by axis.
+// evaluated on E and scored against the base refit (actuator_scale: absorbed
+// by it; judged at the model as given in the selection). In table order, axis
+// by axis.
 std::vector<CandidateResult> evaluate_kinematic_candidates(const KinematicProblem& P, const Engine& E,
                                                            const DiagnoseOptions& options);
 
