@@ -208,7 +208,11 @@ void Master::dispatch(const CanFrame& f, std::int64_t now) noexcept {
       fb.last_emcy = e;
       ++fb.emcy_count;
       fb.emcy_active = e.code != 0;
-      if (e.code != 0) fb.faults |= kFaultEmcy;
+      if (e.code != 0) {
+        fb.faults |= kFaultEmcy;
+        fb.last_error_emcy = e;
+        ++fb.error_emcy_count;
+      }
       return;
     }
     case kTpdo1Base: {
