@@ -16,8 +16,6 @@
 #include <net/if.h>
 #include <signal.h>
 #include <sys/epoll.h>
-#include <sys/socket.h>
-#include <sys/un.h>
 #include <syslog.h>
 #include <unistd.h>
 
@@ -33,6 +31,7 @@
 
 #include "cia402_state.hpp"
 #include "cpm/io/model_file.hpp"
+#include "cpm/sim/control_socket.hpp"
 #include "cpm/sim/virtual_machine.hpp"
 #include "drive_od.hpp"
 
@@ -217,16 +216,8 @@ int run(int argc, char** argv) {
     n.last_us = now_us();
   }
 
-  int listen_fd = -1;
-  if (!control.empty()) {
-    listen_fd = socket(AF_UNIX, SOCK_STREAM | SOCK_NONBLOCK | SOCK_CLOEXEC, 0);
-    sockaddr_un addr{};
-    addr.sun_family = AF_UNIX;
-    std::snprintf(addr.sun_path, sizeof addr.sun_path, "%s", control.c_str());
-    unlink(control.c_str());
-    if (bind(listen_fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr) != 0 || listen(listen_fd, 4) != 0)
-      throw Error("--control " + control + ": " + std::strerror(errno));
-  }
+  std::unique_ptr<sim::ControlSocket> control_socket;
+  if (!control.empty()) control_socket = std::make_unique<sim::ControlSocket>(control);
   signal(SIGINT, on_signal);
   signal(SIGTERM, on_signal);
   signal(SIGPIPE, SIG_IGN);
@@ -284,8 +275,6 @@ int run(int argc, char** argv) {
   // One frame at a time (CANopenLinux reads one per event), then every
   // node's processing; a node that took a SYNC holds its TPDOs until the
   // plant has run through the period that the SYNC ends.
-  struct Client { int fd; std::string buf; };
-  std::vector<Client> clients;
   while (!g_stop && !quit) {
     epoll_event ev{};
     const int ready = epoll_wait(epfd, &ev, 1, 1);
@@ -359,34 +348,15 @@ int run(int argc, char** argv) {
     } else if (!any_pending) {
       for (Node& n : nodes) n.od->drive.x6041_statusword = statusword(n);
     }
-    if (listen_fd >= 0)
-      for (int fd; (fd = accept4(listen_fd, nullptr, nullptr, SOCK_NONBLOCK | SOCK_CLOEXEC)) >= 0;) clients.push_back({fd, {}});
-    for (std::size_t i = 0; i < clients.size();) {
-      char b[512];
-      const ssize_t r = read(clients[i].fd, b, sizeof b);
-      if (r == 0 || (r < 0 && errno != EAGAIN && errno != EWOULDBLOCK && errno != EINTR)) {
-        close(clients[i].fd);
-        clients.erase(clients.begin() + static_cast<std::ptrdiff_t>(i));
-        continue;
-      }
-      if (r > 0) clients[i].buf.append(b, static_cast<std::size_t>(r));
-      for (std::size_t nl; (nl = clients[i].buf.find('\n')) != std::string::npos;) {
-        const std::string line = clients[i].buf.substr(0, nl);
-        clients[i].buf.erase(0, nl + 1);
+    if (control_socket)
+      control_socket->poll([&](const std::string& line) {
         const std::string reply = execute(line);
         std::fprintf(stderr, "canopennode-drives: [sync %llu] %s -> %s\n", static_cast<unsigned long long>(syncs),
                      line.c_str(), reply.c_str());
-        const std::string out = reply + "\n";
-        (void)!write(clients[i].fd, out.data(), out.size());
-      }
-      ++i;
-    }
+        return reply;
+      });
   }
-  for (auto& c : clients) close(c.fd);
-  if (listen_fd >= 0) {
-    close(listen_fd);
-    unlink(control.c_str());
-  }
+  control_socket.reset();
   for (Node& n : nodes) {
     CO_CANsetConfigurationMode(&n.can);
     CO_delete(n.co);
