@@ -58,14 +58,15 @@ PY
 }
 
 mkfifo "$run/vd.in"
-"$vd" --interface "$can" --rate 1000 --stdin <"$run/vd.in" 2>"$run/vd.log" &
+"$vd" --interface "$can" --rate 1000 --stdin --ready-file "$run/vd.ready" <"$run/vd.in" 2>"$run/vd.log" &
 pids+=($!)
 exec 5>"$run/vd.in"
 # Node 126; storage in the run folder (its example dictionary keeps 0x1010/0x1011 there).
 "$canopend" "$can" -i 126 -c "local-$run/gw.sock" -s "$run/od_" >"$run/canopend.log" 2>&1 &
 pids+=($!)
-for i in $(seq 1 300); do [ -S "$run/gw.sock" ] && break; sleep 0.1; done
-[ -S "$run/gw.sock" ] || { cat "$run/canopend.log"; echo "commissioning: canopend did not start"; exit 1; }
+for i in $(seq 1 600); do [ -S "$run/gw.sock" ] && [ -f "$run/vd.ready" ] && break; sleep 0.1; done
+[ -S "$run/gw.sock" ] && [ -f "$run/vd.ready" ] ||
+  { cat "$run/canopend.log" "$run/vd.log"; echo "commissioning: canopend or the virtual drives did not start"; exit 1; }
 
 # SDO, expedited: identity and profile; a write read back; an abort for what is not there.
 expect "device type (CiA 402)" "1 r 0x1000 0 x32" "0x00020192"
