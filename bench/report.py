@@ -337,8 +337,12 @@ def wakeup_verdict(lat, limit=1.2):
     """PASS when cpmd's p99 is within `limit` of cyclictest's; FAIL when it is
     beyond the limit and beyond the spread of two identical cyclictests in the
     same run (the control); otherwise UNDECIDED: the run cannot tell it from noise."""
-    q, qb = lat["ratio"]["p99"], lat["ratio_bound"]["p99"]
-    spread = lat["control"]["spread"]
+    return ratio_verdict(lat["ratio"]["p99"], lat["ratio_bound"]["p99"], lat["control"]["spread"], limit)
+
+
+def ratio_verdict(q, qb, spread, limit=1.2):
+    """The budget's rule for any p99 ratio q (bound qb) of two programs run at once,
+    against the control's spread."""
     spread = math.inf if spread is None else spread
     if q is not None and qb in ("~", "<=") and q <= limit:
         return "PASS"
@@ -561,16 +565,8 @@ def table(r):
     if lc and "skipped" in lc:
         row("LinuxCNC", "not run", lc["skipped"])
     elif lc:
-        spread_v = math.inf if C["spread"] is None else C["spread"]
-
-        def verdict_against(q, qb, k="p99"):
-            # The rule of the budget above: within 1.2x PASS; beyond 1.2x and
-            # beyond the control's spread FAIL; else the run cannot tell.
-            if q[k] is not None and qb[k] in ("~", "<=") and q[k] <= 1.2:
-                return "PASS"
-            if q[k] is not None and qb[k] in ("~", ">=") and q[k] > max(1.2, spread_v):
-                return "FAIL"
-            return "UNDECIDED"
+        def verdict_against(q, qb):
+            return ratio_verdict(q["p99"], qb["p99"], C["spread"])
 
         row("LinuxCNC", "servo thread 1 kHz (rtapi_app POSIX real-time), motmod + lineardeltakins circling, "
             "timedelta + sampler, in the same seconds",
