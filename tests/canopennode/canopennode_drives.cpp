@@ -11,8 +11,8 @@
 //
 // Options and control commands are those of virtual-drives that the SIL test
 // uses (--interface --model --rate --nodes --counts-per-m --rated-force
-// --control; heartbeat AXIS off|on, emcy AXIS CODE [REG], status, quit).
-#include <fcntl.h>
+// --control; heartbeat AXIS off|on, emcy AXIS CODE [REG], status, quit), and
+// --pdos N: the RPDOs and TPDOs each node has (default 2).
 #include <net/if.h>
 #include <signal.h>
 #include <sys/epoll.h>
@@ -71,7 +71,7 @@ constexpr int kQuickStopSyncs = 5;
 
 struct Node {
   std::uint8_t id = 0;
-  std::unique_ptr<canopennode::DriveOd> od = std::make_unique<canopennode::DriveOd>();
+  std::unique_ptr<canopennode::DriveOd> od;
   CO_t* co = nullptr;
   CO_CANptrSocketCan_t can{};
   std::uint64_t last_us = 0;
@@ -100,7 +100,7 @@ void communication_reset(Node& n) {
     throw Error("CO_CANopenInit failed for node " + std::to_string(n.id) + ": error " + std::to_string(e) +
                 ", OD index 0x" + [&] { char b[16]; std::snprintf(b, sizeof b, "%X", info); return std::string(b); }());
   if (CO_CANopenInitPDO(co, co->em, n.od->od(), n.id, &info) != CO_ERROR_NO)
-    throw Error("CO_CANopenInitPDO failed for node " + std::to_string(n.id) + " at 0x" + std::to_string(info));
+    throw Error("CO_CANopenInitPDO failed for node " + std::to_string(n.id) + " at OD entry " + std::to_string(info));
   CO_CANsetNormalMode(co->CANmodule);
   n.master_lost = false;
   n.heartbeat_stopped = false;
@@ -168,6 +168,9 @@ std::vector<double> numbers(const std::string& s, std::size_t count, const std::
 int run(int argc, char** argv) {
   std::string interface, model = "builtin:elkady", control;
   double rate = 1000;
+  // Two RPDOs and two TPDOs, as many drives have: CiA 301 makes the others
+  // optional, and the master must not depend on them (it did; docs/canopen-backend.md).
+  int pdos = 2;
   sim::VirtualMachineConfig cfg = sim::VirtualMachineConfig::defaults();
   for (int i = 1; i < argc; ++i) {
     const std::string a = argv[i];
@@ -179,6 +182,7 @@ int run(int argc, char** argv) {
     else if (a == "--model") model = value();
     else if (a == "--rate") rate = numbers(value(), 1, a)[0];
     else if (a == "--control") control = value();
+    else if (a == "--pdos") pdos = static_cast<int>(numbers(value(), 1, a)[0]);
     else if (a == "--nodes") {
       const auto v = numbers(value(), 3, a);
       for (std::size_t k = 0; k < 3; ++k) cfg.axes[k].node_id = static_cast<int>(v[k]);
@@ -189,7 +193,7 @@ int run(int argc, char** argv) {
       const double v = numbers(value(), 1, a)[0];
       for (auto& ax : cfg.axes) ax.scaling.rated_force_n = v;
     } else {
-      throw Error("unknown option '" + a + "' (--interface --model --rate --nodes --counts-per-m --rated-force --control)");
+      throw Error("unknown option '" + a + "' (--interface --model --rate --nodes --counts-per-m --rated-force --control --pdos)");
     }
   }
   if (interface.empty()) throw Error("--interface is required");
@@ -205,6 +209,7 @@ int run(int argc, char** argv) {
   for (std::size_t i = 0; i < 3; ++i) {
     Node& n = nodes[i];
     n.id = static_cast<std::uint8_t>(cfg.axes[i].node_id);
+    n.od = std::make_unique<canopennode::DriveOd>(pdos);
     n.od->drive.x6076_rated_torque = static_cast<std::uint32_t>(std::lround(plant.scaling(static_cast<int>(i)).rated_force_n * 1000));
     n.od->drive.x6064_position = plant.position_units(static_cast<int>(i));
     n.od->comm.x1018.serial = n.id;

@@ -36,7 +36,9 @@ OD_entry_t* DriveOd::entry(std::uint16_t index) {
   return nullptr;
 }
 
-DriveOd::DriveOd() {
+DriveOd::DriveOd(int pdos) {
+  if (pdos < 1 || pdos > 4) throw std::invalid_argument("a drive node has 1 to 4 RPDOs and TPDOs, not " + std::to_string(pdos));
+  const auto n_pdos = static_cast<std::uint16_t>(pdos);
   CommObjects& c = comm;
   DriveObjects& d = drive;
   var(0x1000, &c.x1000_device_type, R, 4);
@@ -56,7 +58,7 @@ DriveOd::DriveOd() {
                   sub(&c.x1018.revision, 3, R), sub(&c.x1018.serial, 4, R)});
   var(0x1019, &c.x1019_sync_overflow, RW, 1);
   record(0x1200, {sub(&c.x1200.count, 0, R), sub(&c.x1200.rx, 1, R), sub(&c.x1200.tx, 2, R)});
-  for (std::uint16_t n = 0; n < 4; ++n) {
+  for (std::uint16_t n = 0; n < n_pdos; ++n) {
     auto& p = c.x1400[n];
     record(static_cast<std::uint16_t>(0x1400 + n),
            {sub(&p.count, 0, R), sub(&p.cob, 1, RW), sub(&p.type, 2, RW), sub(&p.event_timer, 5, RW)});
@@ -66,14 +68,14 @@ DriveOd::DriveOd() {
     for (std::uint8_t i = 0; i < 8; ++i) s.push_back(sub(&m.entry[i], static_cast<std::uint8_t>(i + 1), RW));
     record(index, std::move(s));
   };
-  for (std::uint16_t n = 0; n < 4; ++n) mapping(static_cast<std::uint16_t>(0x1600 + n), c.x1600[n]);
-  for (std::uint16_t n = 0; n < 4; ++n) {
+  for (std::uint16_t n = 0; n < n_pdos; ++n) mapping(static_cast<std::uint16_t>(0x1600 + n), c.x1600[n]);
+  for (std::uint16_t n = 0; n < n_pdos; ++n) {
     auto& p = c.x1800[n];
     record(static_cast<std::uint16_t>(0x1800 + n),
            {sub(&p.count, 0, R), sub(&p.cob, 1, RW), sub(&p.type, 2, RW), sub(&p.inhibit, 3, RW),
             sub(&p.event_timer, 5, RW), sub(&p.sync_start, 6, RW)});
   }
-  for (std::uint16_t n = 0; n < 4; ++n) mapping(static_cast<std::uint16_t>(0x1A00 + n), c.x1A00[n]);
+  for (std::uint16_t n = 0; n < n_pdos; ++n) mapping(static_cast<std::uint16_t>(0x1A00 + n), c.x1A00[n]);
   var(0x6007, &d.x6007_abort_connection, RW, 2);
   var(0x603F, &d.x603F_error_code, R | T, 2);
   var(0x6040, &d.x6040_controlword, RW | Rx, 2);
@@ -113,10 +115,10 @@ DriveOd::DriveOd() {
   k.ENTRY_H1006 = entry(0x1006);
   k.ENTRY_H1007 = entry(0x1007);
   k.ENTRY_H1019 = entry(0x1019);
-  k.CNT_RPDO = 4;
+  k.CNT_RPDO = n_pdos;
   k.ENTRY_H1400 = entry(0x1400);
   k.ENTRY_H1600 = entry(0x1600);
-  k.CNT_TPDO = 4;
+  k.CNT_TPDO = n_pdos;
   k.ENTRY_H1800 = entry(0x1800);
   k.ENTRY_H1A00 = entry(0x1A00);
 }

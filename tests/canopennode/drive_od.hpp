@@ -72,7 +72,8 @@ struct DriveObjects {
 
 class DriveOd {
  public:
-  DriveOd();
+  // `pdos`: the RPDOs and TPDOs the node has, 1..4 (CiA 301 makes each optional).
+  explicit DriveOd(int pdos = 4);
   DriveOd(const DriveOd&) = delete;
   DriveOd& operator=(const DriveOd&) = delete;
 
