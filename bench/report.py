@@ -166,6 +166,78 @@ def cyclictest_latency(docs, realtime, period_us, seconds_each):
     return f
 
 
+def tsc_mhz():
+    """The TSC's rate as the kernel states it (constant_tsc): LinuxCNC's
+    function .time figures are rdtsc ticks."""
+    with open("/proc/cpuinfo") as f:
+        for line in f:
+            if line.startswith("cpu MHz"):
+                return float(line.split(":", 1)[1])
+    return None
+
+
+def linuxcnc_run(path, period_us):
+    """One LinuxCNC turn from halsampler -t (bench/linuxcnc/cpm-ldelta.hal):
+    tag, timedelta.0.out (ns since the servo thread's previous run),
+    motion-command-handler.time, motion-controller.time, servo-thread.time
+    (TSC ticks; the thread's is of the period before). timedelta gives
+    periods, not wake-ups: the lateness of wake-up k against the thread's own
+    schedule is the sum of (period - T) up to k, plus that of the first
+    (unknown). rtapi_app never skips a slot (a late thread runs at once and
+    catches up), so taking the run's earliest wake-up as on time gives every
+    wake-up's lateness less that smallest one: a lower bound, short by the
+    thread's minimum latency (cyclictest's minimum, a few us, in the same run)."""
+    periods, cost, thread, lost = [], [], [], 0
+    last_tag = None
+    with open(path) as f:
+        for line in f:
+            w = line.split()
+            if not w or w[0] == "overrun":
+                lost += 1 if w else 0
+                continue
+            tag, out, cmd, ctl, thr = (int(x) for x in w[:5])
+            if last_tag is not None and tag != last_tag + 1:
+                lost += tag - last_tag - 1
+            last_tag = tag
+            if out > 0:
+                periods.append(out / 1000.0)
+            cost.append(cmd + ctl)
+            if thr > 0:
+                thread.append(thr)
+    lateness, acc = [], 0.0
+    for p in periods:
+        acc += p - period_us
+        lateness.append(acc)
+    low = min(lateness + [0.0])
+    return {"periods_us": periods, "lateness_us": [0.0 - low] + [x - low for x in lateness],
+            "cost_ticks": cost, "thread_ticks": thread, "lost": lost}
+
+
+def linuxcnc_figures(runs, period_us, mhz):
+    hist = {}
+    lateness = [x for r in runs for x in r["lateness_us"]]
+    for x in lateness:
+        b = min(int(x), TOP_US)
+        hist[b] = hist.get(b, 0) + 1
+    f = latency_figures(hist, 0, period_us, max(lateness), min(lateness), sum(lateness) / len(lateness), len(lateness))
+    periods = sorted(x for r in runs for x in r["periods_us"])
+
+    def pct(v, q):
+        return v[min(len(v) - 1, max(0, math.ceil(q * len(v)) - 1))]
+
+    cost = sorted(x * 1000.0 / mhz for r in runs for x in r["cost_ticks"])
+    thread = sorted(x * 1000.0 / mhz for r in runs for x in r["thread_ticks"])
+    f.update({"realtime": True, "lost_samples": sum(r["lost"] for r in runs),
+              "period_min_us": periods[0], "period_max_us": periods[-1],
+              "period_mean_us": sum(periods) / len(periods),
+              # LinuxCNC's latency-test figure: the largest |period - T|.
+              "timedelta_jitter_us": max(periods[-1] - period_us, period_us - periods[0]),
+              "tsc_mhz": mhz,
+              "motion_ns": {"median": pct(cost, 0.5), "p99": pct(cost, 0.99), "max": cost[-1], "mean": sum(cost) / len(cost)},
+              "thread_ns": {"median": pct(thread, 0.5), "p99": pct(thread, 0.99), "max": thread[-1]} if thread else None})
+    return f
+
+
 def latency_ratio(a, b):
     """a / b for p50, p99, p99.9 and max, each with what kind of figure it is:
     '~' (two bin edges of the same bins), '=' (maxima), '>=' or '<=' where one
@@ -265,8 +337,12 @@ def wakeup_verdict(lat, limit=1.2):
     """PASS when cpmd's p99 is within `limit` of cyclictest's; FAIL when it is
     beyond the limit and beyond the spread of two identical cyclictests in the
     same run (the control); otherwise UNDECIDED: the run cannot tell it from noise."""
-    q, qb = lat["ratio"]["p99"], lat["ratio_bound"]["p99"]
-    spread = lat["control"]["spread"]
+    return ratio_verdict(lat["ratio"]["p99"], lat["ratio_bound"]["p99"], lat["control"]["spread"], limit)
+
+
+def ratio_verdict(q, qb, spread, limit=1.2):
+    """The budget's rule for any p99 ratio q (bound qb) of two programs run at once,
+    against the control's spread."""
     spread = math.inf if spread is None else spread
     if q is not None and qb in ("~", "<=") and q <= limit:
         return "PASS"
@@ -332,6 +408,22 @@ def build(a):
     control = {"a": ctl_a, "b": ctl_b, "ratio": ctl_ratio, "ratio_bound": ctl_bound,
                "spread": spread_of(ctl_ratio["p99"], ctl_bound["p99"]),
                "per_turn": per_turn(each_turn(a_docs), each_turn(b_docs))}
+    linuxcnc = None
+    lc_paths = [os.path.join(d, f"linuxcnc_{k}.txt") for k in segments]
+    if all(os.path.exists(x) for x in lc_paths):
+        lc_runs = [linuxcnc_run(x, a.interval_us) for x in lc_paths]
+        if all(r["periods_us"] for r in lc_runs):
+            linuxcnc = linuxcnc_figures(lc_runs, a.interval_us, tsc_mhz())
+            linuxcnc["cpus"] = sorted({p.get("linuxcnc_cpu") for p in pinning if p.get("linuxcnc_cpu")})
+            ratio_lc, ratio_lc_bound = latency_ratio(cpmd, linuxcnc)
+            lc_ct, lc_ct_bound = latency_ratio(linuxcnc, ct)
+            linuxcnc.update({"ratio_cpmd_to_linuxcnc": ratio_lc, "ratio_cpmd_to_linuxcnc_bound": ratio_lc_bound,
+                             "ratio_to_cyclictest": lc_ct, "ratio_to_cyclictest_bound": lc_ct_bound,
+                             "per_turn_cpmd_vs_linuxcnc": per_turn(
+                                 [cpmd_latency(x, a.interval_us) for x in cpmd_docs],
+                                 [linuxcnc_figures([r], a.interval_us, tsc_mhz()) for r in lc_runs])})
+    elif os.path.exists(os.path.join(d, "linuxcnc_skipped.txt")):
+        linuxcnc = {"skipped": open(os.path.join(d, "linuxcnc_skipped.txt")).read().strip()}
     kim = perf["kim"]
     lm, trf = sp["methods"]["lm"], sp["methods"]["trf"]
     cpp_solve_s = kim["solve"]["median_ns"] * 1e-9
@@ -359,7 +451,7 @@ def build(a):
             "cpmd": cpmd, "cyclictest": ct, "ratio": ratio, "ratio_bound": ratio_bound,
             "cyclictest_idle": idle, "ratio_idle": ratio_idle, "ratio_idle_bound": ratio_idle_bound,
             "load_effect": load_effect, "load_effect_bound": load_effect_bound,
-            "per_turn": turns, "control": control},
+            "per_turn": turns, "control": control, "linuxcnc": linuxcnc},
         "bus": perf["bus"],
         "calibration": {
             "problem": "Kim's 32-point ball-bar, 9 unknowns, analytic Jacobian, the same tolerances",
@@ -469,6 +561,45 @@ def table(r):
     row("wake-up latency", "control: two cyclictests at once, p99 / slots late",
         f"{fig(C['a'], 'p99')} / {C['a']['late_slots']}", f"{fig(C['b'], 'p99')} / {C['b']['late_slots']}",
         f"p99 {ratio_text(C['ratio'], C['ratio_bound'], 'p99')}: spread {spread}")
+    lc = L.get("linuxcnc")
+    if lc and "skipped" in lc:
+        row("LinuxCNC", "not run", lc["skipped"])
+    elif lc:
+        def verdict_against(q, qb):
+            return ratio_verdict(q["p99"], qb["p99"], C["spread"])
+
+        row("LinuxCNC", "servo thread 1 kHz (rtapi_app POSIX real-time), motmod + lineardeltakins circling, "
+            "timedelta + sampler, in the same seconds",
+            f"SCHED_FIFO {L['priority']}, {cpus(lc)}, {lc['cycles']} periods ({lc['lost_samples']} lost)",
+            "sharing its CPU with cyclictest in half the turns, with cpmd in the other half")
+        for k, name in (("p50", "p50"), ("p99", "p99"), ("p999", "p99.9"), ("max", "max")):
+            row("LinuxCNC", f"wake-up latency {name} (from its periods: a lower bound, short by its minimum)",
+                "LinuxCNC " + fig(lc, k),
+                "cpmd " + fig(c, k) + " / cyclictest " + fig(t, k),
+                "cpmd/LinuxCNC " + ratio_text(lc["ratio_cpmd_to_linuxcnc"], lc["ratio_cpmd_to_linuxcnc_bound"], k) +
+                ("; LinuxCNC/cyclictest " + ratio_text(lc["ratio_to_cyclictest"], lc["ratio_to_cyclictest_bound"], k) +
+                 " " + verdict_against(lc["ratio_to_cyclictest"], lc["ratio_to_cyclictest_bound"]) +
+                 "; cpmd/LinuxCNC " + verdict_against(lc["ratio_cpmd_to_linuxcnc"], lc["ratio_cpmd_to_linuxcnc_bound"])
+                 if k == "p99" else ""))
+        row("LinuxCNC", "timedelta: period min / max, jitter max |period - T| (its latency-test figure)",
+            f"{lc['period_min_us']:.1f} / {lc['period_max_us']:.1f} us, jitter {lc['timedelta_jitter_us']:.1f} us",
+            f"cpmd jitter bound {c['period_jitter_bound_us']:.1f} us / cyclictest {t['period_jitter_bound_us']:.1f} us")
+        row("LinuxCNC", "wake-ups late by a period or more (run late, never skipped)", f"{lc['late_slots']}",
+            f"cpmd {c['late_slots']} / cyclictest {t['late_slots']}")
+        ptl = lc["per_turn_cpmd_vs_linuxcnc"]
+        row("LinuxCNC", "turn by turn: cpmd's p99 above LinuxCNC's in / geometric mean of the ratios",
+            f"{ptl['above']} of {ptl['turns']} / {g(ptl)}")
+        mo, th = lc["motion_ns"], lc["thread_ns"]
+        row("LinuxCNC", "cost per cycle: motion-command-handler + motion-controller (lineardeltakins) .time, "
+            "median / p99 / max",
+            f"{mo['median']:.0f} / {mo['p99']:.0f} / {mo['max']:.0f} ns (TSC {lc['tsc_mhz']:.0f} MHz)",
+            f"cpmd's cycle compute {cc['median_ns']} / {cc['p99_ns']} / {cc['max_ns']} ns",
+            f"LinuxCNC/cpmd median {mo['median'] / cc['median_ns']:.2f}, p99 {mo['p99'] / cc['p99_ns']:.2f}")
+        if th:
+            row("LinuxCNC", "servo thread .time (all its functions) in the run, median / p99 / max",
+                f"{th['median'] / 1000:.1f} / {th['p99'] / 1000:.1f} / {th['max'] / 1000:.1f} us",
+                f"cpmd whole cycle in the run mean / p99 / max {cyc['mean_ns'] / 1000:.1f} / {cyc['p99_us']:g} / "
+                f"{cyc['max_us']:.1f} us" if cyc else "")
     bus = r["bus"]
     s, alt, fb = bus["shipped"], bus["alternative"], bus["fake_bus"]
     row("CAN bus", f"{bus['drives']} drives, {bus['bitrate'] / 1e6:g} Mbit/s, {bus['rate_hz']:g} Hz: frames per cycle",

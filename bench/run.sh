@@ -3,6 +3,7 @@
 # their references in one run, printed as a table and written as JSON.
 #
 #   bash bench/run.sh [--quick] [--json FILE] [--seconds S] [--segments K] [--raw DIR] [--build-dir DIR] [--no-build]
+#                     [--no-linuxcnc]
 #
 #   --quick        seconds, not minutes: small samples, 2 s latency runs (2 turns), the
 #                  5 s motion log (the smoke test; its figures are not the
@@ -14,6 +15,7 @@
 #   --raw DIR      keep the raw outputs (every turn's histograms, logs) in DIR
 #   --build-dir    the build to use (default build)
 #   --no-build     do not run tools/build.sh first
+#   --no-linuxcnc  leave LinuxCNC out of the latency runs
 #
 # What runs, in this order (one step at a time: each figure gets the machine
 # to itself, but for the two programs of the latency comparison):
@@ -41,13 +43,21 @@
 #        A ratio above the budget but within that spread is UNDECIDED, not
 #        FAIL: the run cannot tell it from noise.
 #      (Order: together, idle, control; the next turn control, idle, together.)
+#      With LinuxCNC (linuxcnc-uspace, from tools/setup.sh) the "together" run
+#      has a third program: LinuxCNC's servo thread at 1 kHz, real-time at the
+#      same priority, its motion controller with lineardeltakins running
+#      circles, timedelta and the sampler recording every period and the
+#      functions' .time (bench/linuxcnc/). It starts first and circles until
+#      after cpmd and cyclictest end; two CPUs for three programs, so it
+#      shares one: cyclictest's in half the turns, cpmd's in the other half,
+#      on each CPU equally (--no-linuxcnc leaves it out).
 #   6. bench/report.py: the table with the budgets, and the JSON.
 # Exit status: 0 when every figure was measured (a budget that is not met is
 # reported in the table and the JSON, not as a failure of the command).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 root=$PWD
-quick=0 json="" seconds="" segments="" raw="" build_dir=build do_build=1
+quick=0 json="" seconds="" segments="" raw="" build_dir=build do_build=1 use_linuxcnc=1
 while [ $# -gt 0 ]; do
   case "$1" in
     --quick) quick=1 ;;
@@ -57,7 +67,8 @@ while [ $# -gt 0 ]; do
     --raw) raw=$2; shift ;;
     --build-dir) build_dir=$2; shift ;;
     --no-build) do_build=0 ;;
-    -h|--help) sed -n '2,46p' "$0"; exit 0 ;;
+    --no-linuxcnc) use_linuxcnc=0 ;;
+    -h|--help) sed -n '2,57p' "$0"; exit 0 ;;
     *) echo "bench/run.sh: unknown option '$1'" >&2; exit 2 ;;
   esac
   shift
@@ -126,6 +137,16 @@ interval_us=$("$PY" -c "print(round(1e6 / $rate))")
 if chrt -f "$prio" true 2>/dev/null; then rt=1; ct_sched=(-p "$prio"); else rt=0; ct_sched=(--policy=other -p 0); fi
 
 mark compute
+# LinuxCNC beside them, where it can run real-time here (bench/linuxcnc/run-linuxcnc.sh
+# says what that takes); otherwise the table says why not.
+lc=0
+if [ $use_linuxcnc -eq 0 ]; then lc_why="left out (--no-linuxcnc)"
+elif ! command -v linuxcnc >/dev/null || ! command -v halsampler >/dev/null; then lc_why="linuxcnc-uspace is not installed (bash tools/setup.sh)"
+elif [ $rt -eq 0 ]; then lc_why="SCHED_FIFO refused: LinuxCNC's POSIX real-time needs it"
+elif [ ! -f "$B/lib/libcpm_rtprio_shim.so" ]; then lc_why="$B/lib/libcpm_rtprio_shim.so missing: build first"
+elif ! id -u nobody >/dev/null 2>&1; then lc_why="no user nobody for RTAPI_UID"
+else lc=1; fi
+[ $lc -eq 1 ] || echo "$lc_why" >"$out/linuxcnc_skipped.txt"
 # Two CPUs for the latency runs: the last two (CPU 0 usually takes more of the
 # machine's interrupts, and the turns swap them anyway). On one CPU both run on it.
 ncpu=$(nproc)
@@ -147,16 +168,35 @@ cyclictest_run() {  # NAME SECONDS [CPU]
     { cat "$out/$1.log" >&2; echo "bench/run.sh: cyclictest ($1) failed" >&2; return 1; }
 }
 run_together() {  # K
-  local cp_cpu=$cpu_b ct_cpu=$cpu_a
+  local cp_cpu=$cpu_b ct_cpu=$cpu_a lc_cpu=$cpu_a lc_pid=""
   if [ $(($1 % 2)) -eq 0 ]; then cp_cpu=$cpu_a ct_cpu=$cpu_b; fi
+  # LinuxCNC on A in turns 1, 2 (mod 4), on B in 3, 4: with cyclictest, cpmd, cpmd, cyclictest.
+  if [ $(($1 % 4)) -eq 0 ] || [ $(($1 % 4)) -eq 3 ]; then lc_cpu=$cpu_b; fi
+  if [ $lc -eq 1 ]; then
+    # It takes a few seconds to start and home: the others start once it circles.
+    bash bench/linuxcnc/run-linuxcnc.sh $((segment_s + 2)) "$prio" "$lc_cpu" "$out/linuxcnc_$1.txt" \
+      "$out/linuxcnc_ready_$1" "$B/lib/libcpm_rtprio_shim.so" >"$out/linuxcnc_run_$1.log" 2>&1 &
+    lc_pid=$!
+    local waited=0
+    while [ ! -f "$out/linuxcnc_ready_$1" ]; do
+      if ! kill -0 "$lc_pid" 2>/dev/null || [ $waited -ge 1200 ]; then
+        cat "$out/linuxcnc_run_$1.log" >&2; echo "bench/run.sh: LinuxCNC did not start circling (turn $1)" >&2
+        kill "$lc_pid" 2>/dev/null; exit 1
+      fi
+      sleep 0.1; waited=$((waited + 1))
+    done
+  fi
   cyclictest_run "cyclictest_$1" $((segment_s + 1)) "$ct_cpu" &
   local ct_pid=$!
   sleep 0.5
   bash daemon/latency-run.sh "$B" "$segment_s" "$out/cpmd_stats_$1.json" ${cp_cpu:+"$cp_cpu"} >"$out/cpmd_run_$1.log" 2>&1 ||
     { cat "$out/cpmd_run_$1.log" >&2; echo "bench/run.sh: the cpmd latency run ($1 of $segments) failed" >&2
-      kill "$ct_pid" 2>/dev/null; exit 1; }
+      kill "$ct_pid" $lc_pid 2>/dev/null; exit 1; }
   wait "$ct_pid" || exit 1
-  echo "cpmd_cpu=${cp_cpu:-any} cyclictest_cpu=${ct_cpu:-any}" >"$out/cpus_$1.txt"
+  if [ -n "$lc_pid" ]; then
+    wait "$lc_pid" || { cat "$out/linuxcnc_run_$1.log" >&2; echo "bench/run.sh: LinuxCNC failed (turn $1)" >&2; exit 1; }
+  fi
+  echo "cpmd_cpu=${cp_cpu:-any} cyclictest_cpu=${ct_cpu:-any}${lc_pid:+ linuxcnc_cpu=${lc_cpu:-any}}" >"$out/cpus_$1.txt"
 }
 run_control() {  # K: cyclictest against itself on run_together's CPUs, swapped as cpmd and cyclictest are
   local a_cpu=$cpu_b b_cpu=$cpu_a

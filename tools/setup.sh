@@ -15,6 +15,7 @@ packages=(
   qemu-system-x86 xz-utils # SIL tests: boots Debian's kernel (vcan, gpio-sim) when the host has none
   rt-tests                 # bench/run.sh: cyclictest, the kernel's own wake-up latency beside cpmd's
   python3-scipy            # bench/run.sh: SciPy's least_squares on Kim's ball-bar problem beside cpmd's solver
+  linuxcnc-uspace          # bench/run.sh: LinuxCNC's servo thread and motion controller (lineardeltakins) beside cpmd's loop
 )
 missing=()
 for p in "${packages[@]}"; do

@@ -146,14 +146,14 @@ BackendResult CanopenBackend::read(std::int64_t, BackendInput& in) noexcept {
       fault = true;
       note("drive %zu (%s, node %d): no TPDO for %u cycles", i + 1, dc.name.c_str(), dc.node_id, d.missed_cycles);
     }
-    if (d.emcy_count != emcy_seen_[i]) {
-      emcy_seen_[i] = d.emcy_count;
-      if (d.emcy_active) {
-        fault = true;
-        char e[112];
-        hal::canopen::describe_emcy(static_cast<std::uint8_t>(dc.node_id), d.last_emcy, e, sizeof e);
-        note("drive %zu (%s): %s", i + 1, dc.name.c_str(), e);
-      }
+    // Every error EMCY since the last cycle, even when the drive's "error
+    // reset" EMCY came after it in the same cycle.
+    if (d.error_emcy_count != emcy_seen_[i]) {
+      emcy_seen_[i] = d.error_emcy_count;
+      fault = true;
+      char e[112];
+      hal::canopen::describe_emcy(static_cast<std::uint8_t>(dc.node_id), d.last_error_emcy, e, sizeof e);
+      note("drive %zu (%s): %s", i + 1, dc.name.c_str(), e);
     }
     const std::uint32_t fresh_bits = d.faults & ~faults_seen_[i];
     faults_seen_[i] = d.faults;

@@ -208,7 +208,11 @@ void Master::dispatch(const CanFrame& f, std::int64_t now) noexcept {
       fb.last_emcy = e;
       ++fb.emcy_count;
       fb.emcy_active = e.code != 0;
-      if (e.code != 0) fb.faults |= kFaultEmcy;
+      if (e.code != 0) {
+        fb.faults |= kFaultEmcy;
+        fb.last_error_emcy = e;
+        ++fb.error_emcy_count;
+      }
       return;
     }
     case kTpdo1Base: {
@@ -349,7 +353,17 @@ void Master::write_pdo(Drive& d, const pdo::Layout& l, bool enabled) {
 void Master::disable_unused_pdos(Drive& d) {
   const std::uint16_t unused[] = {0x1401, 0x1402, 0x1403, 0x1802, 0x1803};
   for (std::uint16_t comm : unused) {
-    const std::uint32_t cur = sdo_read_u32(d.node, comm, 1);
+    std::uint32_t cur = 0;
+    try {
+      cur = sdo_read_u32(d.node, comm, 1);
+    } catch (const Error&) {
+      // CiA 301 makes every PDO optional: a drive without this one answers
+      // "object does not exist", and there is nothing to disable.
+      if (d.sdo.state() == SdoClient::State::aborted && d.sdo.aborted_by_server() &&
+          d.sdo.abort_code() == kAbortNoObject)
+        continue;
+      throw;
+    }
     if (!(cur & kCobIdInvalid)) sdo_write_u32(d.node, comm, 1, cur | kCobIdInvalid);
   }
 }

@@ -48,7 +48,7 @@ void VirtualDrive::build_dictionary() {
   add(0x1018, 2, 4, false, cfg_.product_code);
   add(0x1018, 3, 4, false, 0x00010000);
   add(0x1018, 4, 4, false, 0x5E000000 + n);
-  for (std::uint16_t i = 0; i < 4; ++i) {
+  for (std::uint16_t i = 0; i < std::clamp(cfg_.pdos, 1, 4); ++i) {
     add(0x1400 + i, 0, 1, false, 2);
     add(0x1400 + i, 1, 4, true, kRpdoBase[i] + n + (i == 0 ? 0 : kCobIdInvalid));
     add(0x1400 + i, 2, 1, true, 255);
@@ -223,8 +223,8 @@ void VirtualDrive::poll(std::int64_t now_ns) {
       continue;
     }
     for (int i = 0; i < 4; ++i) {
-      const std::uint32_t c = find(static_cast<std::uint16_t>(0x1400 + i), 1)->value;
-      if (!(c & kCobIdInvalid) && (c & 0x7FF) == cob) on_rpdo(i, f);
+      const Entry* e = find(static_cast<std::uint16_t>(0x1400 + i), 1);
+      if (e && !(e->value & kCobIdInvalid) && (e->value & 0x7FF) == cob) on_rpdo(i, f);
     }
   }
   // Answers held back by answer_late().
@@ -404,7 +404,7 @@ void VirtualDrive::handle_sync(std::int64_t) {
 
 void VirtualDrive::transmit_sync_pdos() {
   find(cia402::kStatusword, 0)->value = statusword();
-  for (std::uint16_t n = 0; n < 4; ++n) {
+  for (std::uint16_t n = 0; n < 4 && find(static_cast<std::uint16_t>(0x1800 + n), 1); ++n) {
     const std::uint32_t cob = find(static_cast<std::uint16_t>(0x1800 + n), 1)->value;
     const std::uint32_t type = find(static_cast<std::uint16_t>(0x1800 + n), 2)->value;
     if ((cob & kCobIdInvalid) || type < 1 || type > 240 || syncs_ % type != 0) continue;

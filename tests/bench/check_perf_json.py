@@ -3,6 +3,7 @@
 reports, each a finite number (or the stated type). Shape only: no timing."""
 import json
 import math
+import shutil
 import sys
 
 NUM = (int, float)
@@ -82,6 +83,20 @@ def main():
                 errors.append(f"latency.{who}: {w['cycles']} cycles + {w['skipped']} skipped of {slots:.0f} slots")
     for name in ("ratio", "ratio_idle", "load_effect"):
         check(lat.get(name, {}), {k: NUM_OR_NULL for k in ("p50", "p99", "p999", "max")}, f"latency.{name}", errors)
+    # LinuxCNC in the together runs: measured where it can run real-time (installed, SCHED_FIFO
+    # allowed), else the reason it was left out.
+    lc = lat.get("linuxcnc")
+    if isinstance(lc, dict) and "skipped" in lc:
+        check(lc, {"skipped": str}, "latency.linuxcnc", errors)
+        if shutil.which("linuxcnc") and r.get("machine", {}).get("realtime_allowed"):
+            errors.append(f"latency.linuxcnc: skipped ({lc['skipped']}) although LinuxCNC is installed and SCHED_FIFO allowed")
+    else:
+        check(lc if isinstance(lc, dict) else {}, dict(LATENCY, lost_samples=int, period_min_us=NUM, period_max_us=NUM,
+                                                      timedelta_jitter_us=NUM, tsc_mhz=NUM, motion_ns=dict,
+                                                      ratio_cpmd_to_linuxcnc=dict, ratio_to_cyclictest=dict),
+              "latency.linuxcnc", errors)
+        if isinstance(lc, dict):
+            check(lc.get("motion_ns", {}), {k: NUM for k in ("median", "p99", "max", "mean")}, "latency.linuxcnc.motion_ns", errors)
     for m in ("shipped", "alternative"):
         check(r.get("bus", {}).get(m, {}), BUS, f"bus.{m}", errors)
     for d in ("motion_1khz", "ballbar_32_file", "ballbar_192"):

@@ -163,5 +163,50 @@ class PerTurn(unittest.TestCase):
         self.assertIsNone(report.per_turn([], [])["geomean"])
 
 
+class LinuxCnc(unittest.TestCase):
+    """LinuxCNC's wake-ups rebuilt from timedelta's periods (halsampler -t lines),
+    against wake-ups built by hand: late, a stall, the thread running back to back
+    to catch up, on time again."""
+    lateness = [2.0, 7.0, 3.0, 1200.0, 200.5, 4.0, 2.0]   # us after each slot, in order
+
+    def write(self, lines):
+        import tempfile
+        f = tempfile.NamedTemporaryFile("w", suffix=".txt", delete=False)
+        f.write("\n".join(lines) + "\n")
+        f.close()
+        self.addCleanup(os.unlink, f.name)
+        return f.name
+
+    def samples(self):
+        wake = [k * PERIOD_US + x for k, x in enumerate(self.lateness)]
+        lines = ["0 0 100 900 0"]  # the first sample: no period yet
+        for k in range(1, len(wake)):
+            ns = round((wake[k] - wake[k - 1]) * 1000)
+            lines.append(f"{k} {ns} {100 + k} {900 + 10 * k} 5000")
+        return lines
+
+    def test_lateness_from_periods_less_the_smallest(self):
+        r = report.linuxcnc_run(self.write(self.samples()), PERIOD_US)
+        low = min(self.lateness)
+        for got, want in zip(r["lateness_us"], self.lateness):
+            self.assertAlmostEqual(got, want - low, places=6)
+        self.assertEqual(r["lost"], 0)
+        f = report.linuxcnc_figures([r], PERIOD_US, 1000.0)   # 1 GHz: a tick is a ns
+        self.assertAlmostEqual(f["max_us"], 1198.0)
+        self.assertEqual(f["late_slots"], 1)                 # the stall, run late: never skipped
+        self.assertAlmostEqual(f["period_min_us"], 0.5)      # catching up back to back
+        self.assertAlmostEqual(f["timedelta_jitter_us"], 1197.0)
+        self.assertEqual(f["p50_us"], 3)                     # upper edge of the 2 us bin
+        costs = sorted(100 + k + 900 + 10 * k for k in range(1, 7)) + [1000]
+        self.assertEqual(f["motion_ns"]["max"], max(costs))
+
+    def test_lost_samples_are_counted(self):
+        lines = self.samples()
+        del lines[3]
+        lines.insert(3, "overrun")
+        r = report.linuxcnc_run(self.write(lines), PERIOD_US)
+        self.assertEqual(r["lost"], 2)  # the overrun line, and the gap in the tags
+
+
 if __name__ == "__main__":
     unittest.main()

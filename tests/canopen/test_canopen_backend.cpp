@@ -144,6 +144,18 @@ TEST_F(Faulted, EmcyFromADrive) {
   r.to_holding();
 }
 
+// A drive may clear a transient error at once: the error EMCY and its
+// "error reset" EMCY (code 0) reach the master in the same cycle. CANopenNode
+// does this (found by the SIL test against it): the error must still fault.
+TEST_F(Faulted, EmcyClearedWithinTheCycleStillFaults) {
+  r.vm->drive(2).send_emcy(0x2310, 0x03);
+  r.vm->drive(2).send_emcy(0x0000, 0x00);
+  r.run(2);
+  expect_fault(kFaultDrive, 2, "0x2310");
+  EXPECT_TRUE(r.simple(CommandKind::reset).accepted);
+  r.to_holding();
+}
+
 TEST_F(Faulted, DriveFaultBitIsResetOnlyOnceItsCauseIsGone) {
   r.vm->drive(0).inject_fault(0x7121, 0x01, /*persistent=*/true);  // motor blocked
   r.run(3);

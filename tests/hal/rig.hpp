@@ -41,7 +41,8 @@ struct Rig {
   double mass_kg = 10;
   std::vector<double> pos_m, vel_mps;
 
-  explicit Rig(MasterConfig cfg = three_drives()) {
+  // `pdos`: the RPDOs and TPDOs each drive has (VirtualDriveConfig::pdos).
+  explicit Rig(MasterConfig cfg = three_drives(), int pdos = 4) {
     const double dt = 1.0 / cfg.rate_hz;
     pos_m.assign(cfg.drives.size(), 0.0);
     vel_mps.assign(cfg.drives.size(), 0.0);
@@ -49,6 +50,7 @@ struct Rig {
       drive_ports.push_back(&net.add_port("drive" + std::to_string(i + 1)));
       VirtualDriveConfig vc;
       vc.node_id = static_cast<std::uint8_t>(cfg.drives[i].node_id);
+      vc.pdos = pdos;
       drives.push_back(std::make_unique<VirtualDrive>(*drive_ports.back(), vc));
       const double counts = cfg.drives[i].counts_per_m, rated = cfg.drives[i].rated_force_n;
       drives.back()->on_sync = [this, i, dt, counts, rated](VirtualDrive& d) {

@@ -54,6 +54,33 @@ TEST(Master, StartConfiguresAndVerifiesEveryDrive) {
   }
 }
 
+// CiA 301 makes every PDO optional. The master used to read the COB-ID of
+// RPDO 2-4 and TPDO 3-4 to invalidate them, and refused to start on a drive
+// without them ("object does not exist"); one without them has nothing to
+// invalidate. A drive without a PDO the mapping needs is still refused.
+TEST(Master, StartAcceptsDrivesWithOnlyThePdosItMaps) {
+  Rig r(three_drives(), 2);  // RPDO 1-2, TPDO 1-2
+  r.master->start();
+  ASSERT_TRUE(r.master->started());
+  r.cycle();
+  r.cycle();
+  for (std::size_t i = 0; i < 3; ++i) {
+    EXPECT_TRUE(r.fb.drive[i].fresh) << "drive " << i + 1;
+    EXPECT_EQ(r.fb.drive[i].faults, 0u) << "drive " << i + 1;
+    EXPECT_TRUE(r.drives[i]->od_value(0x1401, 1) & 0x80000000u);  // the RPDO it has but is not used: invalid
+  }
+  r.target_all(Target::enabled);
+  for (int k = 0; k < 6; ++k) r.cycle();
+  EXPECT_EQ(r.fb.drive[0].state, State::operation_enabled);
+
+  MasterConfig with_velocity = three_drives();
+  with_velocity.velocity_from_drive = true;
+  Rig one(with_velocity, 1);  // TPDO1 only: no TPDO2 for the velocity
+  const std::string e = error_of([&] { one.master->start(); });
+  EXPECT_NE(e.find("0x1801:01"), std::string::npos) << e;
+  EXPECT_NE(e.find("0x06020000 Object does not exist"), std::string::npos) << e;
+}
+
 TEST(Master, BootToOperationEnabledAndBackThroughEveryStep) {
   Rig r;
   r.master->start();

@@ -4,20 +4,20 @@
 #include <fcntl.h>
 #include <poll.h>
 #include <signal.h>
-#include <sys/socket.h>
-#include <sys/un.h>
 #include <unistd.h>
 
 #include <cstdio>
 #include <cstring>
 #include <fstream>
 #include <map>
+#include <memory>
 #include <sstream>
 #include <string>
 #include <vector>
 
 #include "cpm/hal/socketcan.hpp"
 #include "cpm/io/model_file.hpp"
+#include "cpm/sim/control_socket.hpp"
 #include "cpm/sim/virtual_drives_control.hpp"
 
 namespace {
@@ -67,11 +67,6 @@ std::vector<double> numbers(const std::string& s, std::size_t n, const std::stri
   if (v.size() != n) throw Error(opt + ": expected " + std::to_string(n) + " comma-separated numbers, got '" + s + "'");
   return v;
 }
-
-struct ControlClient {
-  int fd;
-  std::string buf;
-};
 
 int run(int argc, char** argv) {
   std::string interface, model = "builtin:elkady", control, ready_file;
@@ -137,17 +132,8 @@ int run(int argc, char** argv) {
   hal::SteadyClock clock;
   sim::VirtualMachine vm(bus, truth, cfg);
 
-  int listen_fd = -1;
-  if (!control.empty()) {
-    listen_fd = socket(AF_UNIX, SOCK_STREAM | SOCK_NONBLOCK | SOCK_CLOEXEC, 0);
-    sockaddr_un addr{};
-    addr.sun_family = AF_UNIX;
-    if (control.size() >= sizeof addr.sun_path) throw Error("--control: path too long");
-    std::strcpy(addr.sun_path, control.c_str());
-    unlink(control.c_str());
-    if (listen_fd < 0 || bind(listen_fd, reinterpret_cast<sockaddr*>(&addr), sizeof addr) != 0 || listen(listen_fd, 4) != 0)
-      throw Error(hal::errno_text("--control " + control, errno));
-  }
+  std::unique_ptr<sim::ControlSocket> control_socket;
+  if (!control.empty()) control_socket = std::make_unique<sim::ControlSocket>(control);
   if (use_stdin) fcntl(0, F_SETFL, fcntl(0, F_GETFL) | O_NONBLOCK);
   signal(SIGINT, on_signal);
   signal(SIGTERM, on_signal);
@@ -159,7 +145,6 @@ int run(int argc, char** argv) {
                cfg.axes[0].node_id, cfg.axes[1].node_id, cfg.axes[2].node_id, interface.c_str(), rate,
                sim::timing_name(cfg.timing), model.c_str());
 
-  std::vector<ControlClient> clients;
   std::string stdin_buf;
   bool quit = false;
   auto execute = [&](const std::string& line) {
@@ -167,22 +152,6 @@ int run(int argc, char** argv) {
     std::fprintf(stderr, "virtual-drives: [sync %llu] %s -> %s\n", static_cast<unsigned long long>(vm.syncs()),
                  line.c_str(), reply.c_str());
     return reply;
-  };
-  // Lines from a non-blocking fd; false when it closed.
-  auto drain = [&](int fd, std::string& buf, bool answer) {
-    char b[512];
-    for (;;) {
-      const ssize_t n = read(fd, b, sizeof b);
-      if (n == 0) return false;
-      if (n < 0) return errno == EAGAIN || errno == EWOULDBLOCK || errno == EINTR;
-      buf.append(b, static_cast<std::size_t>(n));
-      for (std::size_t nl; (nl = buf.find('\n')) != std::string::npos;) {
-        const std::string line = buf.substr(0, nl);
-        buf.erase(0, nl + 1);
-        const std::string r = execute(line) + "\n";
-        if (answer) (void)!write(fd, r.data(), r.size());
-      }
-    }
   };
 
   hal::CanFrame f;
@@ -200,23 +169,10 @@ int run(int argc, char** argv) {
         }
     }
     vm.poll(now);
-    if (listen_fd >= 0)
-      for (int fd; (fd = accept4(listen_fd, nullptr, nullptr, SOCK_NONBLOCK | SOCK_CLOEXEC)) >= 0;) clients.push_back({fd, {}});
-    for (std::size_t i = 0; i < clients.size();) {
-      if (!drain(clients[i].fd, clients[i].buf, true)) {
-        close(clients[i].fd);
-        clients.erase(clients.begin() + static_cast<std::ptrdiff_t>(i));
-      } else {
-        ++i;
-      }
-    }
-    if (use_stdin && !drain(0, stdin_buf, false)) use_stdin = false;
+    if (control_socket) control_socket->poll(execute);
+    if (use_stdin && !sim::serve_lines(0, stdin_buf, false, execute)) use_stdin = false;
   }
-  for (auto& c : clients) close(c.fd);
-  if (listen_fd >= 0) {
-    close(listen_fd);
-    unlink(control.c_str());
-  }
+  control_socket.reset();
   std::fprintf(stderr, "virtual-drives: stopped after %llu SYNCs, %llu plant steps\n",
                static_cast<unsigned long long>(vm.syncs()), static_cast<unsigned long long>(vm.steps()));
   return 0;

@@ -96,6 +96,12 @@ struct DriveFeedback {
   canopen::Emcy last_emcy{};
   std::uint32_t emcy_count = 0;
   bool emcy_active = false;          // last EMCY had a non-zero code
+  // The last EMCY with a non-zero code and how many there were: a drive may
+  // follow an error with its "error reset" EMCY (code 0) before the next
+  // cycle reads them (CANopenNode does for a transient error), and the error
+  // must not be lost behind it.
+  canopen::Emcy last_error_emcy{};
+  std::uint32_t error_emcy_count = 0;
   std::uint32_t faults = kFaultNone; // DriveFault bits, latched
   std::uint16_t controlword = 0;     // last sent
   std::int16_t torque_permille = 0;  // last sent

@@ -26,6 +26,9 @@ struct VirtualDriveConfig {
   std::uint32_t rated_torque = 1000;      // 0x6076 (mN for a linear drive)
   std::int16_t quick_stop_option = 2;     // 0x605A: 1-4 end in switch on disabled, 5-8 stay
   int quick_stop_syncs = 5;               // SYNCs a quick stop takes before the drive stands still
+  // RPDOs and TPDOs the drive has (1..4): CiA 301 makes every one optional,
+  // and drives with fewer than four of each are common.
+  int pdos = 4;
 };
 
 class VirtualDrive {

@@ -43,6 +43,7 @@
 #include "cpm/hal/pdo.hpp"
 #include "cpm/hal/virtual_drive.hpp"
 #include "cpm/sim/plant.hpp"
+#include "cpm/sim/synced_plant.hpp"
 
 namespace cpm::sim {
 
@@ -92,12 +93,12 @@ class VirtualMachine {
   [[nodiscard]] bool gone() const noexcept { return gone_; }
 
   [[nodiscard]] hal::VirtualDrive& drive(int i) { return *drives_.at(static_cast<std::size_t>(i)); }
-  [[nodiscard]] const Plant& plant() const noexcept { return *plant_; }
-  [[nodiscard]] std::uint64_t steps() const noexcept { return steps_; }     // SYNCs that moved the plant
+  [[nodiscard]] const Plant& plant() const noexcept { return plant_->plant(); }
+  [[nodiscard]] std::uint64_t steps() const noexcept { return plant_->steps(); }  // SYNCs that moved the plant
   [[nodiscard]] std::uint64_t syncs() const noexcept { return syncs_; }     // SYNCs seen
   // N, per actuator: the force acting now (synchronous: over the period that starts at the last SYNC).
-  [[nodiscard]] const Vec3& last_force() const noexcept { return force_; }
-  [[nodiscard]] bool plant_failed() const noexcept { return plant_failed_; }
+  [[nodiscard]] const Vec3& last_force() const noexcept { return plant_->last_force(); }
+  [[nodiscard]] bool plant_failed() const noexcept { return plant_->failed(); }
   [[nodiscard]] const VirtualMachineConfig& config() const noexcept { return cfg_; }
 
  private:
@@ -105,15 +106,11 @@ class VirtualMachine {
   void on_sync(std::int64_t now_ns);
   hal::CanBus& bus_;
   VirtualMachineConfig cfg_;
-  std::unique_ptr<Plant> plant_;
+  std::unique_ptr<SyncedPlant> plant_;
   std::vector<std::unique_ptr<Port>> ports_;
   std::vector<std::unique_ptr<hal::VirtualDrive>> drives_;
   std::array<std::uint64_t, 3> sync_seen_{};  // each drive's SYNC count before the frame
-  Vec3 force_ = Vec3::Zero();
-  std::uint64_t steps_ = 0, syncs_ = 0;
-  bool plant_failed_ = false;
-  bool enabled_before_ = false;  // every drive was in operation enabled at the previous SYNC
-  bool released_ = false;        // synchronous timing: the brakes were open over the period now ending
+  std::uint64_t syncs_ = 0;
   bool gone_ = false;
 };
 
