@@ -8,6 +8,10 @@ packages=(
   libgtest-dev libgmock-dev googletest
   libbenchmark-dev
   libyaml-cpp-dev          # configuration and model files
+  libcli11-dev             # every command line (cpm, cpmd, the drives, the tools)
+  nlohmann-json3-dev       # every JSON read and written
+  help2man                 # man pages generated from --help
+  bash-completion          # completion for cpm (pkg-config gives its install folder)
   libssl-dev               # SHA-256 of data files (libcrypto), model file provenance
   liblcm-dev liblcm-bin    # LCM transport and lcm-gen
   libgpiod-dev             # GPIO (v1 API, libgpiod 1.6)
