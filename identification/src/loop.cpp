@@ -97,6 +97,7 @@ std::optional<Refit> first_that_lowers(const io::DataSet& data, const ctl::Machi
                                        std::string& label) {
   const double before = R.steps.back().rms;
   std::vector<std::vector<FitRequest>> tries;
+  std::vector<std::string> refused;
   for (const FitRequest& r : named) tries.push_back({r});
   if (named.size() > 1) tries.push_back(named);
   for (const auto& extra : tries) {
@@ -104,8 +105,17 @@ std::optional<Refit> first_that_lowers(const io::DataSet& data, const ctl::Machi
     trial.insert(trial.end(), extra.begin(), extra.end());
     label.clear();
     for (const FitRequest& r : extra) label += (label.empty() ? "" : " + ") + label_of(r);
-    Refit F = refit(data, model, trial, o);
-    if (F.rms < before) {
+    // A trial whose fit leaves the physical range (a negative viscous
+    // friction, named beside a delay on a 250 Hz log) is not kept, and the
+    // loop goes on with the next: one implausible effect must not end it.
+    std::optional<Refit> F;
+    try {
+      F = refit(data, model, trial, o);
+    } catch (const Error& e) {
+      refused.push_back(label + " (" + e.what() + ")");
+      continue;
+    }
+    if (F->rms < before) {
       R.added = std::move(trial);
       return F;
     }
@@ -113,6 +123,7 @@ std::optional<Refit> first_that_lowers(const io::DataSet& data, const ctl::Machi
   label.clear();
   for (const FitRequest& r : named) label += (label.empty() ? "" : ", ") + label_of(r);
   label += named.size() > 1 ? " (one at a time or together)" : "";
+  for (const std::string& r : refused) label += "; not fitted: " + r;
   return std::nullopt;
 }
 

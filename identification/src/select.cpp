@@ -128,6 +128,7 @@ void search_chosen_again(Diagnosis& D, const Engine& E, std::vector<Term>& terms
 // Term j out of the state (the others kept in the order chosen).
 void drop_from_state(const Engine& E, const std::vector<Term>& terms, int j, int q, SelectionState& S) {
   S.chosen.erase(std::find(S.chosen.begin(), S.chosen.end(), j));
+  if (const Term* t = term_of(terms, j); t && t->base) S.base_in = false;
   S.XS = chosen_columns(terms, S, -1);
   S.k -= q;
   const JointFit f = E.fit(S.XS, S.base_in);
@@ -148,10 +149,13 @@ void drop_what_no_longer_adds(Diagnosis& D, const Engine& E, const DiagnoseOptio
     for (std::size_t m = 0; m + 1 < S.chosen.size() && !dropped; ++m) {
       const int j = S.chosen[m];
       const Term* t = term_of(terms, j);
-      if (!t || t->base) continue;
+      // The base refit (motion: a term of its own) is tested again too: chosen
+      // first for what two effects did together (a drive gain on y and a
+      // spring on z, both largely in the base's span), it may not stand beside them.
+      if (!t || (t->base && kind.base_refitted)) continue;
       CandidateResult& c = D.candidates[static_cast<std::size_t>(j)];
       const int q = params_added(*t, c, E);
-      const double rss_without = E.fit(chosen_columns(terms, S, j), S.base_in).rss;
+      const double rss_without = E.fit(chosen_columns(terms, S, j), S.base_in && !t->base).rss;
       const StepFit s = step_statistics(E, opt, rss_without, S.rss, q, S.k, n_eff, c.trials, remaining_family(D, S) + 1.0);
       if (s.ok) continue;
       sel.last[static_cast<std::size_t>(j)] = s;
@@ -345,7 +349,9 @@ void apply_selection(Diagnosis& D, const Engine& E, const Selection& sel) {
 }
 
 void select_motion_effects(Diagnosis& D, const Engine& E, const DiagnoseOptions& opt) {
-  apply_selection(D, E, forward_selection(D, E, opt, SelectionKind{}));
+  SelectionKind kind;
+  kind.prune = true;
+  apply_selection(D, E, forward_selection(D, E, opt, kind));
   verdict_text_motion(D);
 }
 
