@@ -97,7 +97,7 @@ std::string KimReproduction::report() const {
   std::ostringstream o;
   const Identifiability& id = fit.identifiability;
   o << "Kim's ball-bar experiment in simulation\n"
-    << "  true machine: Kim's fitted errors (machine.md); pivot declared at (430, 430, 530) mm, "
+    << "  true machine: Kim's fitted errors (docs/model.md); pivot declared at (430, 430, 530) mm, "
        "really at dq = (-0.018, 0.017, -1.030) mm from it\n"
     << "  " << poses.size() << " poses on hemispheres of 100 and 150 mm (Kim's layout), commanded "
        "through the nominal model; bar error uniform within +-" << fmt("%.2f", 0.5) << " µm\n"

@@ -58,7 +58,7 @@ void add_effect(MachineModel& model, std::string_view name, int axis,
     return;
   }
   const auto dt = dynamic_effect_from_name(name);
-  if (!dt) throw Error("unknown effect '" + label + "' (see shared/spec/effects.md for the names)");
+  if (!dt) throw Error("unknown effect '" + label + "' (see docs/effects.md for the names)");
   const DynamicEffectInfo& in = info(*dt);
   if (static_cast<int>(values.size()) != in.n_params)
     throw Error(label + ": expects " + std::to_string(in.n_params) + " values, got " +

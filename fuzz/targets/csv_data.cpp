@@ -1,5 +1,5 @@
 // io::parse_data on arbitrary text: the three measurement-file kinds of
-// data-formats.md (the `# kind = ...` line picks the kind, so the corpus
+// docs/data-formats.md (the `# kind = ...` line picks the kind, so the corpus
 // holds all three). Oracle: refused only with cpm::Error; what is accepted
 // renders to text that parses again and renders to the same text.
 #include "cpm/io/data_files.hpp"

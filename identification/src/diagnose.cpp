@@ -96,7 +96,7 @@ void check_effect_for_kind(const std::string& effect, const std::string& kind) {
   const bool kinem = kin::kinematic_effect_from_name(effect).has_value();
   if (!dyn && !kinem)
     throw Error("unknown effect '" + effect +
-                "' (the names are those of shared/spec/effects.md, e.g. coulomb_friction, cogging, backlash)");
+                "' (the names are those of docs/effects.md, e.g. coulomb_friction, cogging, backlash)");
   if (kind == "motion" && kinem)
     throw Error(effect + " is a kinematic effect (it changes where the platform is, not the force): a motion "
                 "log (kind = motion) cannot show it; measure ball-bar lengths or positions");

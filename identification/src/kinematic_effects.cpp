@@ -1,5 +1,5 @@
 // Stage 2, columns per effect: the kinematic effect table. Each kinematic
-// effect of effects.md has one entry: how its columns are built, how its
+// effect of docs/effects.md has one entry: how its columns are built, how its
 // nonlinear parameter is searched, how its values are read from a joint fit,
 // and what separates it from the base and from other effects.
 //

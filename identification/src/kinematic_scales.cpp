@@ -1,7 +1,7 @@
 // actuator_scale at the model as given (part of stage 5, the selection:
 // kinematic_select.cpp).
 //
-// effects.md lists actuator_scale "so that a nominal-only model can name it":
+// docs/effects.md has actuator_scale so that a nominal-only model can name it:
 // the calibrated base absorbs a scale (it is c_i), so the forward selection,
 // which starts from the calibrated base, cannot see one; the scales are
 // judged where the model is, jointly with the effects the selection chose
@@ -17,7 +17,7 @@
 // explained the other effect's share the scales could not, so a planted scale
 // beside another effect was never named. H0 and Hs are fitted by Gauss-Newton
 // on the residual of the given model with the scales as its own effects
-// (their definition in effects.md): a pivot a millimetre off is too far for
+// (their definition in docs/effects.md): a pivot a millimetre off is too far for
 // one linearisation.
 #include <algorithm>
 #include <cmath>

@@ -12,7 +12,7 @@
 // the model as given and refit the base only once inertia_error has been
 // chosen: what a refit would absorb (a payload, a drive gain on z, a mass
 // error) is then a finding of its own instead of vanishing into it. Kinematic
-// data start from the calibrated base (effects.md: the base is calibration's).
+// data start from the calibrated base (docs/identification.md, "Kinematic side": the base is calibration's).
 #include <algorithm>
 #include <array>
 #include <cmath>

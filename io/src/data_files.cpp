@@ -1,4 +1,4 @@
-// The measurement files of shared/spec/data-formats.md: CSV with `#`
+// The measurement files of docs/data-formats.md: CSV with `#`
 // comments, `# key = value` metadata and a header of column names.
 //
 // The reader is one pass over lines (string_views into the file's bytes) and
@@ -197,7 +197,7 @@ void read_kind(Table& tb) {
   const auto it = tb.info.metadata.find("kind");
   if (it == tb.info.metadata.end())
     tb.fail(0, "no '# kind = ...' line: the file must say which layout it is "
-               "(ballbar, position or motion; shared/spec/data-formats.md)");
+               "(ballbar, position or motion; docs/data-formats.md)");
   tb.kind = kind_from_name(it->second);
   if (!tb.kind)
     tb.fail_meta("kind", "'" + it->second + "' is not one of ballbar, position, motion");

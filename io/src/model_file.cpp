@@ -231,7 +231,7 @@ void load_limb(const Loader& ld, const Map& parent, int i, ctl::MachineModel& m)
 ctl::DynamicEffect load_dynamic_effect(const Loader& ld, const YAML::Node& n, const std::string& path) {
   if (!n.IsMap()) ld.fail(n, path, "expected a mapping {effect: NAME, axis: N, params...}");
   const YAML::Node name_node = n["effect"];
-  if (!name_node) ld.fail(n, path, "missing required key 'effect' (the effect's name of effects.md)");
+  if (!name_node) ld.fail(n, path, "missing required key 'effect' (the effect's name of docs/effects.md)");
   const std::string name = ld.text(name_node, join(path, "effect"));
   const auto type = ctl::dynamic_effect_from_name(name);
   if (!type) {
@@ -451,7 +451,7 @@ std::string render_model_file(const ModelFile& mf) {
   const kin::LimbGeometry& g = km.limbs;
   Writer w;
   w.raw("# cpmd machine model: the 3-PRRR Cartesian parallel manipulator\n"
-        "# (shared/spec/machine.md and effects.md; the schema is docs/model-file.md).\n"
+        "# (docs/model.md and docs/effects.md; the schema is docs/model-file.md).\n"
         "# SI units throughout: m, s, kg, N, rad. Each number's unit is in the comment beside it.\n");
   w.kv(0, "cpmd_model", std::to_string(kFormatVersion), "format version of this file");
   w.raw("\n# Limb geometry (Elkady Table 1).\n");
@@ -471,7 +471,7 @@ std::string render_model_file(const ModelFile& mf) {
   w.raw("\n");
   w.kv(0, "force_limit", num(m.force_limit), "N, largest |F_i| an actuator may be commanded");
   w.raw("\n# Per limb i (limb i drives axis i): the assembly mode, the actuator, the calibrated\n"
-        "# plane u^T p = (d~ + d0) c + n (Kim eq. 5) and the kinematic effects of effects.md.\n");
+        "# plane u^T p = (d~ + d0) c + n (Kim eq. 5) and the kinematic effects of docs/effects.md.\n");
   w.kv(0, "kinematics", "");
   static const char* drives[] = {"drives x", "drives y", "drives z"};
   for (int i = 0; i < 3; ++i) {
@@ -493,10 +493,10 @@ std::string render_model_file(const ModelFile& mf) {
       if (any) present.push_back(type);
     }
     if (present.empty()) {
-      w.kv(4, "effects", "{}", "kinematic effects by name (effects.md)");
+      w.kv(4, "effects", "{}", "kinematic effects by name (docs/effects.md)");
       continue;
     }
-    w.kv(4, "effects", "", "kinematic effects by name (effects.md)");
+    w.kv(4, "effects", "", "kinematic effects by name (docs/effects.md)");
     for (const auto type : present) {
       const kin::KinematicEffectInfo& in = kin::info(type);
       const auto v = kin::get_params(km.effects[i], type);
@@ -504,7 +504,7 @@ std::string render_model_file(const ModelFile& mf) {
       for (int j = 0; j < in.n_params; ++j) w.kv(8, in.params[j].name, num(v[j]), in.params[j].unit);
     }
   }
-  w.raw("\n# Dynamic effects (effects.md): forces beyond Elkady's rigid-body model, in the order\n"
+  w.raw("\n# Dynamic effects (docs/effects.md): forces beyond Elkady's rigid-body model, in the order\n"
         "# the model adds them. Per-axis effects name their axis (1..3).\n");
   if (m.effects.size() == 0) {
     w.kv(0, "dynamic_effects", "[]");

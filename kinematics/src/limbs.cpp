@@ -11,7 +11,7 @@ using Mat23 = Eigen::Matrix<double, 2, 3>;
 
 // Each limb lives in a plane of two machine axes (a, b). The first link's
 // direction is u = (cos alpha, sin alpha) with alpha = sign * theta + offset,
-// which folds machine.md's three parametrisations into one.
+// which folds docs/model.md's three parametrisations into one.
 struct LimbFrame {
   int axis_a, axis_b;   // machine axes spanning the limb's plane
   double sign;          // d alpha / d theta
@@ -135,9 +135,9 @@ std::array<int, 3> default_assembly_modes(const LimbGeometry& base) {
         modes[i] = m;
       }
     }
-    if (best > 0.01 * deg * 10)  // machine.md gives the angles to 0.01 deg
+    if (best > 0.01 * deg * 10)  // docs/model.md gives the angles to 0.01 deg
       throw Error("limb " + std::to_string(i + 1) +
-                  ": no assembly mode reproduces machine.md's reference angle; is the geometry right?");
+                  ": no assembly mode reproduces docs/model.md's reference angle; is the geometry right?");
   }
   return modes;
 }

@@ -1,7 +1,7 @@
 // A motion log recorded through cpmd's CANopen path, for the diagnosis: the
 // daemon's loop, the canopen backend and the hal master on the fake bus,
 // three virtual drives with real (synchronous) timing around the true plant
-// (machine.md's machine), encoders with noise. What comes back is what the
+// (the nominal machine of docs/model.md), encoders with noise. What comes back is what the
 // daemon publishes on its state channel, turned into rows by the converter
 // of `cpm record` and `cpm lcm-log-to-csv` (cli::StateToMotion): per period
 // t, the encoders' d and v as the daemon read them, and the force it

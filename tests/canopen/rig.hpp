@@ -60,7 +60,7 @@ struct Rig {
   // `timing`: when the drives apply a torque (synchronous: from the SYNC
   // after the one whose positions it was computed from, as real CiA 402
   // drives; lockstep: at once, as the in-process loop). `believed`: the
-  // model cpmd controls with (the truth is always machine.md's machine).
+  // model cpmd controls with (the truth is always the nominal machine of docs/model.md).
   explicit Rig(const DaemonConfig& c = canopen_config(), bool start = true,
                sim::DriveTiming timing = sim::DriveTiming::synchronous,
                const ctl::MachineModel& believed = ctl::MachineModel::elkady(),

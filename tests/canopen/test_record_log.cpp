@@ -1,5 +1,5 @@
 // The motion log recorded through the CANopen path (record_log.hpp): what it
-// holds, and that it survives the CSV layout of data-formats.md.
+// holds, and that it survives the CSV layout of docs/data-formats.md.
 #include <algorithm>
 #include <filesystem>
 

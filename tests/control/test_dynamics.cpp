@@ -1,4 +1,4 @@
-// Elkady's dynamics checked against itself and the effects against effects.md.
+// Elkady's dynamics checked against itself and the effects against docs/effects.md.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -95,7 +95,7 @@ TEST(Dynamics, MassAndCoriolisComeFromTheKineticEnergy) {
 }
 
 TEST(DynamicEffects, EachForceMatchesItsEquation) {
-  // effects.md, with sgn_eps(v) = tanh(v / 1e-3).
+  // docs/effects.md, with sgn_eps(v) = tanh(v / 1e-3).
   auto sgn = [](double v) { return std::tanh(v / 1e-3); };
   const double d = 0.173, v = -0.042;
   auto force = [&](const char* name, std::vector<double> p) {

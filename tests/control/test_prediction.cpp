@@ -77,7 +77,7 @@ TEST(Prediction, APerfectModelPredictsTheDelayedPlantsStateAtTPlusTau) {
 
 struct CircleFigures {
   bool ok = false;
-  double rmse = std::numeric_limits<double>::infinity();     // m, the whole run (machine.md's figure)
+  double rmse = std::numeric_limits<double>::infinity();     // m, the whole run (docs/model.md's figure)
   double settled = std::numeric_limits<double>::infinity();  // m, over t >= 0.5 s
 };
 
@@ -107,7 +107,7 @@ CircleFigures circle_run(double truth_tau, double model_tau, double ramp_time) {
 }
 
 TEST(Prediction, ThePapersCircleOnADelayedPlantTracksAsWithoutDelay) {
-  // machine.md's reference conditions, the plant with a dead time of one
+  // docs/model.md's reference conditions, the plant with a dead time of one
   // and two periods. The paper's circle starts with the reference at
   // 0.275 m/s and the platform at rest: its RMSE is that start's transient
   // (critically damped, ~2 mm peak). No controller can answer it before
@@ -119,7 +119,7 @@ TEST(Prediction, ThePapersCircleOnADelayedPlantTracksAsWithoutDelay) {
   // step at the start) shows the same over its whole run.
   const CircleFigures undelayed = circle_run(0.0, 0.0, 0.0);
   ASSERT_TRUE(undelayed.ok);
-  EXPECT_NEAR(undelayed.rmse, 1.973e-4, 0.03 * 1.973e-4);  // machine.md's independent figure
+  EXPECT_NEAR(undelayed.rmse, 1.973e-4, 0.03 * 1.973e-4);  // docs/model.md's independent figure
   const CircleFigures ramped = circle_run(0.0, 0.0, 0.5);
   ASSERT_TRUE(ramped.ok);
   std::printf("circle, computed torque, 1 kHz        whole run   t >= 0.5 s   ramped circle\n");

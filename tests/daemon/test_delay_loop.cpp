@@ -73,7 +73,7 @@ TEST(DelayLoop, ADelayTheHistoryCannotHoldIsRefusedAtStart) {
   ctl::MachineModel far = ctl::MachineModel::elkady();
   ctl::add_effect(far, "actuation_delay", -1, {0.05});  // 500 periods: fits
   EXPECT_NO_THROW(LoopHarness(c, 0.005, far, far));
-  // The bound is the history's: 0.05 s at 10 kHz is the most effects.md
+  // The bound is the history's: 0.05 s at 10 kHz is the most docs/effects.md
   // allows; beyond, the simulator refuses to start rather than fail a step.
   EXPECT_THROW(ctl::check_delay_fits(0.05, 10100.0), Error);
   SimBackend sim(std::make_unique<ctl::Machine>(far), SimBackendOptions{});

@@ -50,7 +50,7 @@ const std::vector<KinPoolEffect>& kin_pool();
 
 // A pair of pool effects (a row of the table). actuator_scale is nameable
 // only where the model is nominal-only and the machine needs no other
-// calibration (effects.md; docs "Kinematic side"): a pair with it is planted
+// calibration (docs/effects.md; docs "Kinematic side"): a pair with it is planted
 // on a machine whose planes are nominal, every other pair on Kim's machine.
 struct KinPair {
   std::size_t a = 0, b = 0;  // indices in kin_pool()

@@ -108,7 +108,7 @@ struct Planted {
 
 // inertia_error as the first links' centre of mass lying s further out than
 // mid-length: B and C change by about s (m1 L1 / 2, m1 g), A and E not
-// (machine.md: m1 = 1.892994 kg, L1 = 0.5 m). A mass error would change A
+// (docs/model.md: m1 = 1.892994 kg, L1 = 0.5 m). A mass error would change A
 // and E in a payload's ratio, and the diagnosis rightly names the simpler
 // payload_mass for it until the B and C parts are significant on their own.
 constexpr double kM1 = 1.892994, kL1 = 0.5;
@@ -217,7 +217,7 @@ TEST_P(PlantedEffect, AtThreeAndTenTimesTheNoiseItIsFirstOnTheRightAxisWithinThr
   }
 }
 
-// Every dynamic effect of effects.md: viscous, Coulomb, Stribeck, cogging,
+// Every dynamic effect of docs/effects.md: viscous, Coulomb, Stribeck, cogging,
 // spring, force gain, payload, inertia error.
 INSTANTIATE_TEST_SUITE_P(DynamicLibrary, PlantedEffect, ::testing::Range(0, 8));
 

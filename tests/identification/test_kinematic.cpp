@@ -193,8 +193,8 @@ TEST(KinematicNoEffect, VerdictIsNoneAtLeast95PercentOfSeeds) {
   EXPECT_GE(none, static_cast<int>(std::ceil(0.95 * total)));
 }
 
-// effects.md: actuator_scale "is listed so that a nominal-only model can name
-// it". A calibrated base absorbs a scale (it is c_i); with the nominal model
+// docs/effects.md: actuator_scale exists so that a nominal-only model can name
+// it. A calibrated base absorbs a scale (it is c_i); with the nominal model
 // and a machine whose planes are otherwise nominal, the scale alone explains
 // what a full calibration would, and the diagnosis names it. On Kim's machine
 // the planes need calibrating anyway: no scale is named.

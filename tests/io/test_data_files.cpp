@@ -1,4 +1,4 @@
-// The measurement files of shared/spec/data-formats.md: round trips of the
+// The measurement files of docs/data-formats.md: round trips of the
 // three layouts, every error rule with the line/column its message names,
 // real-world formatting (CRLF, BOM, spaces, quotes), and atomic writes.
 #include <gmock/gmock.h>
@@ -181,10 +181,10 @@ TEST(DataFiles, ColumnOrderIsFree) {
   EXPECT_EQ(a.d[0], Vec3(1, 2, 3));
   EXPECT_EQ(a.length[0], 0.1);
   EXPECT_EQ(a.pivot, Vec3(1, 2, 3));
-  EXPECT_TRUE(a.length_offset_known);  // the default of data-formats.md
+  EXPECT_TRUE(a.length_offset_known);  // the default of docs/data-formats.md
 }
 
-// --- Error rules of data-formats.md -------------------------------------
+// --- Error rules of docs/data-formats.md -------------------------------------
 
 const std::string kBallbarHead = "# kind = ballbar\n# pivot = 0.43 0.43 0.53\n";
 

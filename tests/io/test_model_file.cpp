@@ -131,7 +131,7 @@ TEST(ModelFile, EveryEffectKindRoundTripsBitExactlyOverManySeeds) {
 
 TEST(ModelFile, FileNamesEffectsAndUnitsForAPersonToRead) {
   const std::string text = render_model_file(everything(3));
-  // Effects by their effects.md names, parameters by their names, units beside them.
+  // Effects by their docs/effects.md names, parameters by their names, units beside them.
   EXPECT_THAT(text, HasSubstr("      backlash:\n        b: "));
   EXPECT_THAT(text, HasSubstr("  - effect: coulomb_friction\n    axis: 3\n    f_c: "));
   EXPECT_THAT(text, HasSubstr("  - effect: payload_mass\n    dm: 0.25"));
@@ -325,7 +325,7 @@ TEST(ModelFile, FailedSaveLeavesTheOldFile) {
   save_model_file(path, ModelFile{});
   const std::string before = test::read_text(path);
   ModelFile bad;
-  bad.model.kinematics.effects[0].actuator_scale = 0.2;  // beyond effects.md's physical bound
+  bad.model.kinematics.effects[0].actuator_scale = 0.2;  // beyond docs/effects.md's physical bound
   EXPECT_THAT(error_of([&] { save_model_file(path, bad); }), HasSubstr("kinematics.limb1.effects.actuator_scale.s"));
   EXPECT_EQ(test::read_text(path), before);
 }

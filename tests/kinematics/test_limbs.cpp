@@ -1,5 +1,5 @@
 // The limb solver checked against itself (finite differences), against the
-// paper's own Gamma and against machine.md's reference angles.
+// paper's own Gamma and against docs/model.md's reference angles.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -18,14 +18,14 @@ TEST(Limbs, DefaultAssemblyModesGiveMachineMdReferenceAngles) {
   const LimbGeometry g = LimbGeometry::elkady();
   LimbPose pose;
   ASSERT_TRUE(solve_limbs(g, Vec3(0.600, 0.425, 0.300), pose));
-  // machine.md gives the angles to 0.01 degree.
+  // docs/model.md gives the angles to 0.01 degree.
   EXPECT_NEAR(pose.theta()[0], 89.41 * kDeg, 0.006 * kDeg);
   EXPECT_NEAR(pose.theta()[1], 19.17 * kDeg, 0.006 * kDeg);
   EXPECT_NEAR(pose.theta()[2], 2.89 * kDeg, 0.006 * kDeg);
 }
 
 TEST(Limbs, LinksHaveTheirLengths) {
-  // Rebuild M_i from theta with machine.md's formulas and check |B - M| = L2.
+  // Rebuild M_i from theta with docs/model.md's formulas and check |B - M| = L2.
   const LimbGeometry g = LimbGeometry::elkady();
   std::mt19937_64 rng(1);
   for (int k = 0; k < 200; ++k) {

@@ -1,4 +1,4 @@
-// Calibrated plane kinematics (Kim eqs. 1-7) with the effects of effects.md.
+// Calibrated plane kinematics (Kim eqs. 1-7) with the effects of docs/effects.md.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -114,7 +114,7 @@ TEST_P(RandomModels, InverseJacobianIsTheDerivativeOfInverseKinematics) {
 INSTANTIATE_TEST_SUITE_P(WithAndWithoutEffects, RandomModels, ::testing::Bool());
 
 TEST(KinematicEffects, EachMatchesItsEquation) {
-  // effects.md, written out again for one limb at a time.
+  // docs/effects.md, written out again for one limb at a time.
   const Vec3 u = Vec3(1.0, 0.001, -0.002).normalized();
   const double d = 0.1234, t = 300.0;
   constexpr double kTwoPi = 2.0 * std::numbers::pi;

@@ -1,4 +1,4 @@
-// The plant's actuation delay (effects.md, actuation_delay): the command
+// The plant's actuation delay (docs/effects.md, actuation_delay): the command
 // given at t_k acts over [t_k + tau, t_k+1 + tau).
 #include <gtest/gtest.h>
 

@@ -16,7 +16,7 @@ namespace {
 TEST(Table3, ReproducesTheIndependentFiguresWithinThreePercentInThePapersOrder) {
   const auto rows = reproduce_table3();
   const char* names[] = {"pd", "pd_gravity", "pd_feedforward", "computed_torque"};
-  // machine.md's independent re-implementation under the same conditions.
+  // docs/model.md's independent re-implementation under the same conditions.
   const double independent[] = {2.886e-3, 3.980e-4, 3.101e-4, 1.973e-4};
   for (int i = 0; i < 4; ++i) {
     EXPECT_STREQ(ctl::law_name(rows[i].law), names[i]);

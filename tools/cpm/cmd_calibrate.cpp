@@ -15,7 +15,7 @@ int run(Args& a) {
   const auto json = a.option("json");
   const bool quiet = a.flag("quiet");
   a.finish();
-  if (!data) throw UsageError("--data FILE.csv is required (a ballbar or position file, data-formats.md)");
+  if (!data) throw UsageError("--data FILE.csv is required (a ballbar or position file, docs/data-formats.md)");
   if (!out) throw UsageError("--out NEW.yaml is required (the input model is never overwritten)");
   std::string tool = "cpm calibrate --model " + model + " --data " + *data + " --out " + *out;
   const cal::CalibrationResult r = cal::calibrate_files(model, *data, *out, json, tool);
@@ -28,7 +28,7 @@ const Command reg{"calibrate",
                   "kinematic calibration from ball-bar or full-position measurements (Kim 2005)", run,
                   "[--model MODEL.yaml] --data FILE.csv --out NEW.yaml [--json FILE] [--quiet]\n"
                   "  MODEL.yaml defaults to config/machine.yaml; FILE.csv is a `kind = ballbar` or\n"
-                  "  `kind = position` file (data-formats.md). Nothing is written when the input is bad."};
+                  "  `kind = position` file (docs/data-formats.md). Nothing is written when the input is bad."};
 
 }  // namespace
 }  // namespace cpm::cli

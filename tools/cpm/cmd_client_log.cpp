@@ -1,5 +1,5 @@
 // Client subcommands that look at the state stream: watch (live view),
-// record (state -> motion CSV of data-formats.md), lcm-log-to-csv (the same
+// record (state -> motion CSV of docs/data-formats.md), lcm-log-to-csv (the same
 // from an lcm-logger file).
 #include <signal.h>
 
@@ -122,7 +122,7 @@ int log_to_csv(Args& a) {
 
 const Command r1{"watch", "live text view of a running cpmd's state, with trajectory progress", watch,
                  "[--duration S] [--config DAEMON.yaml] [--url LCM_URL]"};
-const Command r2{"record", "record cpmd's state to a motion CSV (data-formats.md, kind = motion)", record,
+const Command r2{"record", "record cpmd's state to a motion CSV (docs/data-formats.md, kind = motion)", record,
                  "--out FILE.csv (--duration S | --until-idle) [--config DAEMON.yaml] [--url LCM_URL]"};
 const Command r3{"lcm-log-to-csv", "convert an lcm-logger file of cpmd's state channel to a motion CSV", log_to_csv,
                  "LOGFILE --out FILE.csv [--channel CPMD_STATE]"};

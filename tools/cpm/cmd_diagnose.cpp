@@ -52,7 +52,7 @@ const Command reg{
     "diagnose", "name the effect missing from a model, judged on measurements", run,
     "--data FILE.csv [--model MODEL.yaml] [--json OUT.json] [--report OUT.html]\n"
     "       [--effect NAME]... (only these effects) [--alpha 0.01] [--window MS (filter half width, 12)] [--quiet]\n"
-    "  Motion logs: the force residual, every dynamic effect of effects.md on every axis fitted with the\n"
+    "  Motion logs: the force residual, every dynamic effect of docs/effects.md on every axis fitted with the\n"
     "  base (A, B, C, E), scored (RMS after, share explained, F-test, BIC, confounding), ranked, a verdict,\n"
     "  and the structure no effect explains. Ball-bar and position data: the same with every kinematic\n"
     "  effect, fitted jointly with calibration's base (beta', dq[, dl]; the 12 plane parameters).\n"

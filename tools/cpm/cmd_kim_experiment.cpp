@@ -38,7 +38,7 @@ int run(Args& a) {
     io::Provenance p;
     p.tool = "cpm kim-experiment";
     p.date = io::utc_now_iso8601();
-    p.note = "true machine carrying Kim's fitted errors (machine.md); the fixed ball is 1.030 mm above its declared pivot";
+    p.note = "true machine carrying Kim's fitted errors (docs/model.md); the fixed ball is 1.030 mm above its declared pivot";
     t.history.push_back(p);
     io::save_model_file(*truth_out, t);
   }

@@ -119,7 +119,7 @@ int run(Args& args) {
       throw UsageError(file + " exists; give --force to replace it");
     io::ModelFile mf;
     mf.history.push_back({"cpm model init", "", "", io::utc_now_iso8601(),
-                          "the nominal machine of shared/spec/machine.md"});
+                          "the nominal machine of docs/model.md"});
     io::save_model_file(file, mf);
     std::printf("%s: wrote the nominal machine model\n", file.c_str());
     return 0;
@@ -155,7 +155,7 @@ const Command reg{"model", "check or show a model file, or write the nominal one
                   "check FILE | show FILE | init FILE [--force]\n"
                   "  check: validate FILE (exit 1 with the error on a bad file)\n"
                   "  show:  validate and print it (mm, µm, degrees, ppm)\n"
-                  "  init:  write the nominal machine of machine.md to FILE"};
+                  "  init:  write the nominal machine of docs/model.md to FILE"};
 
 }  // namespace
 }  // namespace cpm::cli

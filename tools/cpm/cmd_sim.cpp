@@ -79,7 +79,7 @@ int run(Args& a) {
   const double kp = a.number("kp", gains.kp.x()), kd = a.number("kd", gains.kd.x());
   gains.kp.setConstant(kp);
   gains.kd.setConstant(kd);
-  // The controller's model and the true machine: model files (data-formats.md),
+  // The controller's model and the true machine: model files (docs/model-file.md),
   // the nominal machine when none is given; --truth-effect adds to the truth.
   const auto model_path = a.option("model");
   const auto truth_path = a.option("truth");

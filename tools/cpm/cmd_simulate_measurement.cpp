@@ -1,6 +1,6 @@
 // cpm simulate-measurement: what a ball-bar or a laser tracker would read on
 // a true machine commanded through a controller's model, as a measurement
-// file of data-formats.md (for trying the calibration and for tests).
+// file of docs/data-formats.md (for trying the calibration and for tests).
 #include <algorithm>
 #include <cmath>
 #include <cstdio>

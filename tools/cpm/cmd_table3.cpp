@@ -1,4 +1,4 @@
-// cpm table3: Elkady's Table 3 under machine.md's reference conditions.
+// cpm table3: Elkady's Table 3 under docs/model.md's reference conditions.
 #include <cstdio>
 #include <sstream>
 

@@ -31,7 +31,7 @@ void usage() {
   std::fprintf(stderr,
                "usage: virtual-drives --interface IF [options]\n"
                "  --interface IF       SocketCAN interface (vcan0)\n"
-               "  --model FILE         the true machine (model file; builtin:elkady = machine.md) [builtin:elkady]\n"
+               "  --model FILE         the true machine (model file; builtin:elkady = docs/model.md) [builtin:elkady]\n"
                "  --rate HZ            control rate: the plant advances 1/HZ s per SYNC [1000]\n"
                "  --initial X,Y,Z      platform centre at power-on (m) [0.600,0.425,0.300]\n"
                "  --nodes A,B,C        node ids of the drives of actuators 1, 2, 3 [1,2,3]\n"

@@ -12,7 +12,7 @@
 // Only the rigid-body physics of the true machine is shared
 // (ctl::Machine: M, G, K, J, the effect forces, the drive gain).
 //
-// Timing of the logged force f_k (data-formats.md, "Timing of the force column"):
+// Timing of the logged force f_k (docs/data-formats.md, "Timing of the force column"):
 //   sampled  - the controller is continuous (evaluated at every RK4 stage);
 //              the drive applies that continuous force; the log records it at t_k.
 //   zoh      - f_k is computed at t_k and applied over [t_k, t_k+1).
@@ -52,9 +52,9 @@ NoisePlacement noise_from_name(const std::string& s);
 double delay_periods(Timing t) noexcept;
 
 struct PlantedEffect {
-  std::string name;             // effects.md name
+  std::string name;             // docs/effects.md name
   int axis = -1;                // 0..2, -1 for machine-wide effects
-  std::vector<double> values;   // in the order and units of effects.md
+  std::vector<double> values;   // in the order and units of docs/effects.md
 };
 
 struct GeneratorSpec {

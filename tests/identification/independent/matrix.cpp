@@ -17,7 +17,7 @@
 namespace cpm::indep {
 namespace {
 
-constexpr double kM1 = 1.892994, kL1 = 0.5;  // machine.md: first link mass (kg) and length (m)
+constexpr double kM1 = 1.892994, kL1 = 0.5;  // docs/model.md: first link mass (kg) and length (m)
 
 double seconds_since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -352,7 +352,7 @@ std::vector<int> effect_pool(const MatrixOptions& o) {
     int found = -1;
     for (int i = 0; i < static_cast<int>(lib.size()); ++i)
       if (lib[static_cast<std::size_t>(i)].name == name) found = i;
-    if (found < 0) throw Error("unknown effect '" + name + "' (the dynamic library of effects.md)");
+    if (found < 0) throw Error("unknown effect '" + name + "' (the dynamic library of docs/effects.md)");
     pool.push_back(found);
   }
   return pool;

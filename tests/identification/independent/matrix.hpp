@@ -1,7 +1,7 @@
 // The robustness matrix of the motion diagnosis: logs from the independent
 // generator (generator.hpp) in every cell of
 //   {sampled, zoh, delay1, delay1_5} x {plant, command} x {250, 1000, 4000 Hz},
-// null logs and each dynamic effect of effects.md planted at 3x and 10x its
+// null logs and each dynamic effect of docs/effects.md planted at 3x and 10x its
 // unit amplitude (4 standard errors of the amplitude on effect-free data),
 // each diagnosed with `cpm::ident::diagnose_motion` and default options, and
 // scored: hit (the planted effect on its axis is named), phantom (anything
@@ -40,7 +40,7 @@ struct NamedEffect {
   // Effects the verdict names beside it as explaining these data as well
   // (an ambiguous verdict); labels as label() writes them.
   std::vector<std::string> alternatives;
-  // Its parameters as the diagnosis gives them (effects.md order, SI) and
+  // Its parameters as the diagnosis gives them (docs/effects.md order, SI) and
   // their standard errors (< 0: not determined).
   std::vector<double> values, std_errors;
   [[nodiscard]] std::string label() const;  // "viscous_friction[axis 2]" (axis 1-based), "payload_mass"

@@ -2,7 +2,7 @@
 // distance between a ball on the platform (at P) and a fixed ball (the pivot)
 // at actuator readings d_j. Distances do not see the frame: its origin and
 // orientation are free, so the 12 plane parameters reduce to 6 in the
-// ball-bar frame of machine.md:
+// ball-bar frame of docs/calibration.md:
 //   u_1 = (1, 0, 0), u_2 = (-sin tz, cos tz, 0),
 //   u_3 = (cos tx sin ty, -sin tx, cos tx cos ty),  n_i = 0,
 // with the scales c_i used directly where Kim has cos(gamma_i). Unknowns

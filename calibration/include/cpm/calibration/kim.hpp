@@ -1,6 +1,6 @@
 // Kim's ball-bar experiment (Kim 2005, section 5), reproduced in simulation:
-// a true machine carrying Kim's fitted errors (machine.md, "Ball-bar
-// experiment"), the QC10's +-0.5 µm on every length, Kim's 32 poses
+// a true machine carrying Kim's fitted errors (docs/calibration.md, "Kim's
+// experiment in simulation"), the QC10's +-0.5 µm on every length, Kim's 32 poses
 // commanded through the nominal model; the ball-bar fit; and the circular
 // test (XY, radius 150 mm, CCW and CW) before and after calibration beside
 // Kim's 534 -> 128 µm.

@@ -2,7 +2,7 @@
 // tracker, CMM) measures the platform point p_j in the machine frame at
 // actuator readings d_j. All 12 plane parameters are identifiable:
 // per limb i the normal u_i (two tilt angles), the scale c_i and the offset n_i
-// of  u_i^T p = (d~_i + d0_i) c_i + n_i  (machine.md, "Calibrated kinematics").
+// of  u_i^T p = (d~_i + d0_i) c_i + n_i  (docs/model.md, "Kinematics").
 //
 // Two stages:
 //  1. Kim's analytic solution (eqs. 10-13), per limb, generalised from 4

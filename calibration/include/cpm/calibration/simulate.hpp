@@ -1,5 +1,5 @@
 // Simulated measurements: what an instrument would read on a true machine
-// commanded through a controller's model (machine.md, issue 3):
+// commanded through a controller's model (docs/model.md, issue 3):
 //   d = IK_controller(p_commanded)      the encoder readings the drives settle at
 //   p_true = FK_truth(d)                where the real platform then is
 //   ball-bar: length = |p_true - pivot_true| - dl_true + noise

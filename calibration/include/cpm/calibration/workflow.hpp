@@ -1,5 +1,5 @@
 // Calibration from files, as `cpm calibrate` runs it: read the model file and
-// a measurement file (data-formats.md: kind = ballbar or position), check
+// a measurement file (docs/data-formats.md: kind = ballbar or position), check
 // every row, fit, and produce the new model file (nominal values, fitted
 // values, standard errors, provenance with the data file's SHA-256) and the
 // reports. Nothing is written unless everything succeeded.

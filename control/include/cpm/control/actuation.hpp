@@ -1,5 +1,5 @@
 // Dead time between a force command and the force it makes (the
-// actuation_delay effect of effects.md): the command given at t_k acts over
+// actuation_delay effect of docs/effects.md): the command given at t_k acts over
 // [t_k + tau, t_k+1 + tau) instead of [t_k, t_k+1).
 //
 // Both sides of the loop need the same two things: the plant, to apply the
@@ -21,7 +21,7 @@
 
 namespace cpm::ctl {
 
-// Commands kept: enough for the largest delay effects.md allows (0.05 s) at
+// Commands kept: enough for the largest delay docs/effects.md allows (0.05 s) at
 // the highest loop rate the daemon accepts (10 kHz), plus the command that
 // is acting and the one being given. 16 KiB.
 inline constexpr int kCommandHistoryCapacity = 502;

@@ -1,4 +1,4 @@
-// The dynamic effects of shared/spec/effects.md: forces the actuators must
+// The dynamic effects of docs/effects.md: forces the actuators must
 // supply beyond Elkady's rigid-body model.
 //
 // The plant obeys, per actuator i (forces in N, d in m, v = d_dot in m/s):
@@ -37,7 +37,7 @@ enum class DynamicEffectType : std::uint8_t {
 };
 inline constexpr int kDynamicEffectTypes = 9;
 
-// sgn_eps(v) = tanh(v / eps), the smooth sign of effects.md.
+// sgn_eps(v) = tanh(v / eps), the smooth sign of docs/effects.md.
 inline constexpr double kSignEpsilon = 1e-3;  // m/s
 
 struct EffectParameter {
@@ -60,7 +60,7 @@ struct EffectDependence {
 
 struct DynamicEffectInfo {
   DynamicEffectType type;
-  const char* name;       // stable name of effects.md
+  const char* name;       // stable name of docs/effects.md
   bool per_axis;          // acts on one axis (true) or on the machine as a whole
   EffectDependence depends_on;
   int n_params;

@@ -4,7 +4,7 @@
 // the algorithms are functions over it; per-cycle values live in the
 // caller's preallocated structs.
 //
-// Dynamics (Elkady eqs. 4-14, machine.md), in the machine frame with z down
+// Dynamics (Elkady eqs. 4-14, docs/model.md), in the machine frame with z down
 // and q = p the platform centre (m):
 //     F = M(q) q_dd + G(q, q_d) q_d + K(q)
 //     M = 2A I + 2B Gamma^T Gamma,  G = 2B Gamma^T Gamma_dot,
@@ -36,7 +36,7 @@ struct LinkMasses {
   double m4 = 0.3;
 };
 
-// The four constants in which the dynamics is linear (machine.md):
+// The four constants in which the dynamics is linear (docs/model.md):
 // A (kg), B (kg m^2), C (N m), E (N).
 struct InertiaConstants {
   double A = 0, B = 0, C = 0, E = 0;
@@ -50,14 +50,14 @@ struct MachineModel {
   DynamicEffects effects;
   double force_limit = 120.0;  // |F_i| per actuator (N)
 
-  static MachineModel elkady();  // the nominal machine of machine.md
+  static MachineModel elkady();  // the nominal machine of docs/model.md
   void validate() const;         // throws Error saying what and where
 };
 
-// Add an effect of effects.md to a model by its stable name: kinematic ones
+// Add an effect of docs/effects.md to a model by its stable name: kinematic ones
 // (backlash, cyclic_error, ...) to limb `axis` (0..2) of the kinematics,
 // dynamic ones to the effect list (axis -1 for machine-wide ones). Values in
-// the order and units of effects.md. Throws Error naming the effect and what
+// the order and units of docs/effects.md. Throws Error naming the effect and what
 // is wrong (unknown name, wrong number of values, out of bounds).
 void add_effect(MachineModel& model, std::string_view name, int axis,
                 const std::vector<double>& values);

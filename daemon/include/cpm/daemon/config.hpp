@@ -99,7 +99,7 @@ struct CanopenConfig {
 
 struct DaemonConfig {
   std::string source;             // the file it came from
-  std::string model_file;         // the model the controller believes; "builtin:elkady" = machine.md
+  std::string model_file;         // the model the controller believes; "builtin:elkady" = docs/model.md
   std::string backend = "sim";    // "sim" or "canopen"
   SimConfig sim;
   CanopenConfig canopen;
@@ -114,7 +114,7 @@ DaemonConfig load_config(const std::string& path);
 DaemonConfig parse_config(const std::string& text, const std::string& name,
                           const std::string& base_dir = ".");
 
-// Load a model file ("builtin:elkady" is the nominal machine of machine.md),
+// Load a model file ("builtin:elkady" is the nominal machine of docs/model.md),
 // throws Error naming the file. A configuration or model file must be a
 // regular file of at most kMaxConfigFileBytes / kMaxModelFileBytes.
 ctl::MachineModel load_model(const std::string& path);

@@ -1,7 +1,7 @@
 // The control loop of cpmd: the state machine and one control cycle.
 //
 // cycle() is the real-time part: a straight list of phases over preallocated
-// data (architecture.md), allocation-free, lock-free, noexcept, and with no
+// data (docs/daemon.md), allocation-free, lock-free, noexcept, and with no
 // system call but the backend's I/O (and clock_gettime, a vDSO read, for the
 // phase timers):
 //   1 read backend   drive feedback, drive status, e-stop

@@ -1,6 +1,6 @@
 // Stage "align" of the motion diagnosis: when does the logged force act?
 //
-// A motion log's force column is the force commanded at t_k (data-formats.md),
+// A motion log's force column is the force commanded at t_k (docs/data-formats.md),
 // but where it acts depends on the drive and the logger: a zero-order hold
 // acts over [t_k, t_k+1) (tau = 0), a logger sampling a continuous force
 // records it at t_k itself (tau = -T/2), a drive on a synchronous bus acts
@@ -13,7 +13,7 @@
 // the effects found until it settles (diagnose_motion).
 //
 // A tau within +-T/2 of the model's own actuation_delay is how the data were
-// sampled; beyond T/2 it is a delay the drive adds (effects.md): the
+// sampled; beyond T/2 it is a delay the drive adds (docs/effects.md): the
 // diagnosis names `actuation_delay` with tau - model tau.
 #pragma once
 

@@ -1,4 +1,4 @@
-// Diagnosis: which effects of shared/spec/effects.md are missing from a
+// Diagnosis: which effects of docs/effects.md are missing from a
 // model, judged on measurements. For a motion log, a straight list of stages
 // (docs/identification.md):
 //  1. read: the force residual of the model as given (motion.hpp);
@@ -49,9 +49,9 @@ struct Confounder {
 };
 
 struct CandidateResult {
-  std::string effect;       // name of effects.md
+  std::string effect;       // name of docs/effects.md
   int axis = -1;            // 0..2, -1 for machine-wide effects
-  std::vector<ParamEstimate> params;        // in the order of effects.md
+  std::vector<ParamEstimate> params;        // in the order of docs/effects.md
   std::vector<ParamEstimate> base_after;    // base parameters after the joint refit
   bool refits_base = true;
   double rss = 0.0;         // weighted

@@ -7,7 +7,7 @@
 // for position data the 12 plane parameters (cal::fit_positions,
 // cal::position_residuals). The data are first calibrated (the model's own
 // kinematic effects applied to the encoder readings), then every kinematic
-// effect of effects.md is fitted jointly with the base by the shared engine
+// effect of docs/effects.md is fitted jointly with the base by the shared engine
 // (engine.hpp), linearised at the calibrated point (the effects are microns
 // on a calibrated machine: second-order terms are far below the noise).
 //

@@ -2,7 +2,7 @@
 //  1. read: the data and the model's residual (read_kinematic), the base
 //     calibrated at the model's own effects (prepare_kinematic);
 //  2. columns per effect: the effect table (kinematic_fitter), one entry per
-//     kinematic effect type of effects.md: how its columns are built from the
+//     kinematic effect type of docs/effects.md: how its columns are built from the
 //     residual's sensitivity to each axis' effective displacement, how its
 //     nonlinear parameter is searched (cyclic_error's wavelength,
 //     thermal_drift's time constant), what separates it from the base;

@@ -114,7 +114,7 @@ struct MotionProblem {
   Eigen::VectorXd residual;       // g F(aligned by `delay`) - model force (N), 3 rows per kept row
   Eigen::VectorXd model_force;    // the model's force at the rows: rigid body + its own effects (N)
 
-  // Force-to-motion alignment (shared/spec/effects.md, actuation_delay). Row
+  // Force-to-motion alignment (docs/effects.md, actuation_delay). Row
   // k's logged force acts over [t_k + tau, t_k+1 + tau); over one sample
   // interval that is the mix (1 - phi) F_{k-n} + phi F_{k-n-1}, tau = (n + phi) T,
   // exact for the interval means the acceleration estimate sees. The filtered

@@ -1,7 +1,7 @@
-// Readers and writers for the measurement files of shared/spec/data-formats.md
+// Readers and writers for the measurement files of docs/data-formats.md
 // (a published interface: read exactly as written there).
 //
-// Common rules (data-formats.md): UTF-8, one header line of column names,
+// Common rules (docs/data-formats.md): UTF-8, one header line of column names,
 // comma separated; column order free; unknown columns ignored with a warning
 // (in `warnings`); a missing required column is an error naming it; `#` lines
 // are comments, `# key = value` is metadata; SI units; a non-numeric, NaN or

@@ -1,7 +1,6 @@
-// The YAML model file (shared/spec/data-formats.md, "Machine and model
-// files"): the machine's nominal parameters and every calibrated or
-// identified addition, in one human-readable file. The default machine model
-// is config/machine.yaml.
+// The YAML model file (docs/model-file.md): the machine's nominal
+// parameters and every calibrated or identified addition, in one
+// human-readable file. The default machine model is config/machine.yaml.
 //
 // A tool that fits something writes a new model file (never the input in
 // place; temporary file, fsync, rename), keeping the nominal values, the

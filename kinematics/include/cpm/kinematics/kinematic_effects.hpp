@@ -1,4 +1,4 @@
-// The kinematic effects of shared/spec/effects.md by name: their parameters,
+// The kinematic effects of docs/effects.md by name: their parameters,
 // units, bounds and a one-line cause and signature, and access to their
 // values in a LimbKinematicEffects. The equations are in plane_model.cpp.
 #pragma once

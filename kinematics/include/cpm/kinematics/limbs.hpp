@@ -1,6 +1,6 @@
 // The three PRRR limbs: where their links are for a given platform point.
 //
-// Geometry of shared/spec/machine.md (read from Elkady's matrix Gamma):
+// Geometry of docs/model.md (read from Elkady's matrix Gamma):
 //   limb 1 (drives x) moves in the (y, z) plane: A1 = (0, 0),
 //          M1 = A1 + L1 (cos t11, sin t11),  B1 = (y - L, z)
 //   limb 2 (drives y) moves in the (x, z) plane: A2 = (0, 0),
@@ -11,7 +11,7 @@
 // machine frame (z down).
 //
 // Each limb has two assembly modes (the elbow on one side or the other of
-// the line A_i B_i). The default modes are the ones machine.md fixes: at
+// the line A_i B_i). The default modes are the ones docs/model.md fixes: at
 // p = (0.600, 0.425, 0.300) they give t11 = 89.41 deg, t21 = 19.17 deg,
 // t31 = 2.89 deg. A mode is a fixed branch of the closed-form solution, so
 // the angles stay continuous along any motion that avoids the singularity.
@@ -29,7 +29,7 @@ struct LimbGeometry {
   double L2 = 0.373;   // second link M_i B_i (m)
   double D = 0.9144;   // offset of limb 3's base along y (m)
   // Assembly mode of each limb: +1 or -1, the sign of the branch of the
-  // closed-form solution. default_modes() gives those of machine.md.
+  // closed-form solution. default_modes() gives those of docs/model.md.
   std::array<int, 3> mode{+1, +1, +1};
   // A limb whose elbow is within this angle of straight or folded is
   // reported as near its singularity (rad).
@@ -72,7 +72,7 @@ Status solve_limb_motion(const LimbGeometry& g, const Vec3& p, const Vec3& p_dot
 // used by the limb-twist effect.
 Status elbow_gradient(const LimbGeometry& g, const Vec3& p, Mat3& out) noexcept;
 
-// The modes of machine.md, found from its reference pose and angles.
+// The modes of docs/model.md, found from its reference pose and angles.
 std::array<int, 3> default_assembly_modes(const LimbGeometry& g);
 
 }  // namespace cpm::kin

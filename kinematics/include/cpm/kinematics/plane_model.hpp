@@ -1,8 +1,8 @@
 // Kinematics of the machine: the calibrated plane model of Kim 2005 plus the
-// kinematic effects of shared/spec/effects.md.
+// kinematic effects of docs/effects.md.
 //
 // Each limb i holds the platform centre P on a plane (Kim eq. 5, with the
-// scale c_i as its own parameter, machine.md):
+// scale c_i as its own parameter, docs/model.md):
 //     u_i^T p = (d~_i + d0_i) c_i + n_i
 // where u_i is a unit normal, c_i the scale (cos gamma_i in Kim's terms, but
 // free so that c_i > 1 is allowed), n_i the projected offset (m) and d~_i the
@@ -27,7 +27,7 @@ struct LimbPlane {
   double offset = 0.0;         // n_i (m)
 };
 
-// The kinematic effects of effects.md, one set per limb. Zero means absent.
+// The kinematic effects of docs/effects.md, one set per limb. Zero means absent.
 struct LimbKinematicEffects {
   double backlash = 0.0;             // b (m)
   double cyclic_amplitude = 0.0;     // a (m)

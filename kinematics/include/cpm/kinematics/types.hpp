@@ -1,7 +1,7 @@
 // Basic types shared by every module.
 //
 // Units are SI everywhere inside the project: metres, seconds, newtons,
-// radians. The machine frame is the one of shared/spec/machine.md: origin on
+// radians. The machine frame is the one of docs/model.md: origin on
 // the base, x, y, z along the three nominal actuator axes, z pointing down.
 #pragma once
 

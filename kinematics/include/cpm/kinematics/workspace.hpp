@@ -15,7 +15,7 @@ namespace cpm::kin {
 
 struct Strokes {
   Vec3 min = Vec3::Zero();                 // (m)
-  Vec3 max = Vec3(0.400, 0.400, 0.300);    // (m), machine.md
+  Vec3 max = Vec3(0.400, 0.400, 0.300);    // (m), docs/model.md
   void validate() const;
 };
 

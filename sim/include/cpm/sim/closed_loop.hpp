@@ -53,9 +53,9 @@ struct RunResult {
 RunResult run_closed_loop(const ctl::Controller& controller, Plant& plant,
                           const ctl::Trajectory& trajectory, const LoopOptions& options);
 
-// The log as a motion data set of data-formats.md (t, d, v, f; no acceleration).
+// The log as a motion data set of docs/data-formats.md (t, d, v, f; no acceleration).
 io::MotionData to_motion_data(const std::vector<LogRow>& log, double rate_hz);
-// Motion log of shared/spec/data-formats.md (kind = motion), written
+// Motion log of docs/data-formats.md (kind = motion), written
 // atomically (io::write_motion).
 void write_motion_log(const std::string& path, const std::vector<LogRow>& log, double rate_hz);
 

@@ -1,8 +1,8 @@
-// Elkady's Table 3 under the reference conditions of machine.md: the paper's
+// Elkady's Table 3 under the reference conditions of docs/model.md: the paper's
 // circle from rest at P1, each of the four laws with its Table 3 gains,
 // control at 1 kHz with zero-order hold, the plant integrated by RK4 in 10
 // sub-steps, RMSE over the 4000 samples t = k ms. Controller model and true
-// machine are both the nominal machine of machine.md.
+// machine are both the nominal machine of docs/model.md.
 #pragma once
 
 #include <array>
@@ -18,7 +18,7 @@ struct Table3Row {
   Status fault;
   double paper_position_rmse;        // m, Elkady Table 3
   double paper_velocity_rmse;        // m/s, Elkady Table 3
-  double independent_position_rmse;  // m, machine.md's independent re-implementation
+  double independent_position_rmse;  // m, docs/model.md's independent re-implementation
 };
 
 std::array<Table3Row, 4> reproduce_table3();

@@ -65,7 +65,7 @@ struct VirtualMachineConfig {
   PlantOptions plant;
   int quick_stop_option = 2;                             // each drive's 0x605A default
   // The default: node ids 1, 2, 3; 1e7 counts/m (0.1 um), velocity in
-  // counts/s, rated force 40 N, clamp 3000 per mille (120 N, machine.md).
+  // counts/s, rated force 40 N, clamp 3000 per mille (120 N, docs/model.md).
   static VirtualMachineConfig defaults();
 };
 
