@@ -12,6 +12,14 @@
 #include "matrix.hpp"
 
 namespace cpm::test {
+
+io::DataSet kin_data(const KinCell& cell, bool nominal_planes, const std::vector<PlantedKinematic>& planted,
+                     std::uint64_t seed) {
+  const std::vector<Vec3> poses = cell.poses(seed);
+  const KinSimOptions so = cell.options(seed, nominal_planes);
+  return cell.position ? io::DataSet(kim_positions(planted, poses, so)) : io::DataSet(kim_ballbar(planted, poses, so));
+}
+
 namespace {
 
 // Readings per set: ball-bar 6 rings x 16 azimuths per radius (docs: 192
@@ -41,10 +49,7 @@ std::string machine_text(bool nominal_planes) { return nominal_planes ? "nominal
 // The condition's data with `planted` on its machine, diagnosed from the nominal model.
 ident::Diagnosis diagnose_set(const KinCell& cell, bool nominal_planes, const std::vector<PlantedKinematic>& planted,
                               std::uint64_t seed) {
-  const std::vector<Vec3> poses = cell.poses(seed);
-  const KinSimOptions so = cell.options(seed, nominal_planes);
-  const io::DataSet ds = cell.position ? io::DataSet(kim_positions(planted, poses, so))
-                                       : io::DataSet(kim_ballbar(planted, poses, so));
+  const io::DataSet ds = kin_data(cell, nominal_planes, planted, seed);
   return ident::diagnose_kinematic(std::make_shared<const ident::KinematicProblem>(
       ident::prepare_kinematic(ds, ctl::MachineModel::elkady().kinematics)));
 }

@@ -93,6 +93,10 @@ struct KinSetResult {
   std::string named_text;                    // "backlash[axis 1] cyclic_error[axis 2]"
 };
 KinSetResult run_kin_set(const KinCell& cell, const KinSet& set);
+// The condition's data (ball-bar lengths or positions) with `planted` on its
+// machine (nominal planes or Kim's), noise and pose order from `seed`.
+io::DataSet kin_data(const KinCell& cell, bool nominal_planes, const std::vector<PlantedKinematic>& planted,
+                     std::uint64_t seed);
 
 // One cell's counts over the seeds.
 struct KinTally {
