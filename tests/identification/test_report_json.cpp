@@ -50,7 +50,7 @@ TEST(ReportJson, NumbersReadBackExactlyAndShortest) {
   const std::string text = diagnosis_json(small_diagnosis());
   const json j = json::parse(text);
   EXPECT_EQ(j["baseline"]["rms"].get<double>(), 0.6);
-  EXPECT_NE(text.find("\"rms\": 0.6,"), std::string::npos) << "shortest text that reads back: 0.6";
+  EXPECT_NE(text.find(R"("rms": 0.6,)"), std::string::npos) << "shortest text that reads back: 0.6";
   EXPECT_EQ(j["baseline"]["max"].get<double>(), 0.1 + 0.2);
   EXPECT_EQ(j["candidates"][0]["params"]["b"].get<double>(), 1.0 / 3.0);
   // Not finite, and an undetermined standard error: null, as before.
