@@ -24,15 +24,23 @@ Json vec_json(const Vec3& v) { return Json::array({v[0], v[1], v[2]}); }
 // A standard error, null when there is none (negative).
 Json std_error_json(double se) { return se >= 0 ? Json(se) : Json(); }
 
-// "params" and "std_errors" of a candidate, by parameter name (SI units).
-void add_params(Json& o, const CandidateResult& c) {
-  Json params = Json::object(), errors = Json::object();
-  for (const auto& p : c.params) {
-    params[p.name] = p.value;
-    errors[p.name] = std_error_json(p.std_error);
-  }
-  o["params"] = std::move(params);
-  o["std_errors"] = std::move(errors);
+// A candidate's parameters by name (SI units), their standard errors and units.
+Json params_json(const CandidateResult& c) {
+  Json o = Json::object();
+  for (const auto& p : c.params) o[p.name] = p.value;
+  return o;
+}
+
+Json std_errors_json(const CandidateResult& c) {
+  Json o = Json::object();
+  for (const auto& p : c.params) o[p.name] = std_error_json(p.std_error);
+  return o;
+}
+
+Json units_json(const CandidateResult& c) {
+  Json o = Json::object();
+  for (const auto& p : c.params) o[p.name] = p.unit;
+  return o;
 }
 
 Json confounder_json(const Confounder& cf) {
@@ -44,37 +52,37 @@ Json confounder_json(const Confounder& cf) {
 }
 
 Json candidate_json(const CandidateResult& c) {
-  Json o = {{"effect", c.effect}, {"axis", axis_json(c.axis)}};
-  add_params(o, c);
-  Json units = Json::object();
-  for (const auto& p : c.params) units[p.name] = p.unit;
-  o["units"] = std::move(units);
-  o["rms_after"] = c.rms_after;
-  o["explained"] = c.explained;
-  o["explained_beyond_base"] = c.explained_beyond_base;
-  o["significant"] = c.significant;
-  o["identifiable"] = c.identifiable;
-  o["f_stat"] = c.f_stat;
-  o["p_value"] = c.p_value;
-  o["p_adjusted"] = c.p_adjusted;
-  o["delta_bic"] = c.delta_bic;
-  o["n_params"] = c.n_params;
-  o["refits_base"] = c.refits_base;
-  o["note"] = c.note;
   Json with = Json::array();
   for (const auto& cf : c.confounded) with.push_back(confounder_json(cf));
-  o["confounded_with"] = std::move(with);
-  return o;
+  return {{"effect", c.effect},
+          {"axis", axis_json(c.axis)},
+          {"params", params_json(c)},
+          {"std_errors", std_errors_json(c)},
+          {"units", units_json(c)},
+          {"rms_after", c.rms_after},
+          {"explained", c.explained},
+          {"explained_beyond_base", c.explained_beyond_base},
+          {"significant", c.significant},
+          {"identifiable", c.identifiable},
+          {"f_stat", c.f_stat},
+          {"p_value", c.p_value},
+          {"p_adjusted", c.p_adjusted},
+          {"delta_bic", c.delta_bic},
+          {"n_params", c.n_params},
+          {"refits_base", c.refits_base},
+          {"note", c.note},
+          {"confounded_with", with}};
 }
 
 // An effect the verdict names, with its parameters and what else would fit.
 Json named_effect_json(const CandidateResult& c) {
-  Json o = {{"effect", c.effect}, {"axis", axis_json(c.axis)}};
-  add_params(o, c);
   const std::string implausible = detail::implausible(c);
-  o["implausible"] = implausible.empty() ? Json() : Json(implausible);
-  o["alternatives"] = c.alternatives;
-  return o;
+  return {{"effect", c.effect},
+          {"axis", axis_json(c.axis)},
+          {"params", params_json(c)},
+          {"std_errors", std_errors_json(c)},
+          {"implausible", implausible.empty() ? Json() : Json(implausible)},
+          {"alternatives", c.alternatives}};
 }
 
 Json structure_json(const std::vector<StructureFinding>& items) {
