@@ -1,6 +1,6 @@
 // cpm_perf: the figures Google Benchmark's per-iteration means cannot give.
 //
-//   cpm_perf --source DIR [--cycles N] [--repeat R] [--kim-problem FILE] [--json FILE]
+//   cpm_perf --source DIR [--cycles N] [--repeat R] [--kim-problem FILE] [--json FILE]  (--help: each option)
 //
 // - the control cycle's compute: cpmd's own ControlLoop::cycle (estimate,
 //   commands, trajectory, calibrated IK, computed torque with the model's
@@ -28,9 +28,11 @@
 #include <cstdio>
 #include <fstream>
 #include <memory>
-#include <sstream>
 #include <string>
 #include <vector>
+
+#include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
 
 #include "bench_models.hpp"
 #include "cpm/io/model_file.hpp"
@@ -44,14 +46,20 @@
 #include "cpm/hal/master.hpp"
 #include "cpm/hal/virtual_drive.hpp"
 #include "cpm/sim/closed_loop.hpp"
-#include "cpm/cli.hpp"
 #include "support/allocation_counter.hpp"
 
 namespace {
 
 using namespace cpm;
-using cal::json_num;
-using cal::json_string;
+using Json = nlohmann::ordered_json;
+
+// Eigen vectors (VecX, Vec3) as JSON arrays.
+template <class V>
+Json vec_json(const V& v) {
+  return std::vector<double>(v.data(), v.data() + v.size());
+}
+
+std::string dumped(const Json& j) { return j.dump(2, ' ', false, Json::error_handler_t::replace) + "\n"; }
 
 std::int64_t now_ns() noexcept {
   timespec t{};
@@ -74,16 +82,19 @@ struct Timing {
     for (auto v : ns) sum += static_cast<double>(v);
     return sum / static_cast<double>(ns.size());
   }
-  // JSON members (no braces), shares of `period_s`.
-  [[nodiscard]] std::string json(double period_s) const {
+  // The distribution, with the median and p99 as shares of `period_s`.
+  [[nodiscard]] Json json(double period_s) const {
     const std::int64_t med = percentile(0.5), p99 = percentile(0.99);
-    std::ostringstream o;
-    o << "\"samples\": " << ns.size() << ", \"min_ns\": " << percentile(0.0) << ", \"median_ns\": " << med
-      << ", \"mean_ns\": " << json_num(mean()) << ", \"p99_ns\": " << p99 << ", \"p999_ns\": " << percentile(0.999)
-      << ", \"max_ns\": " << percentile(1.0) << ", \"period_s\": " << json_num(period_s)
-      << ", \"median_share\": " << json_num(static_cast<double>(med) * 1e-9 / period_s)
-      << ", \"p99_share\": " << json_num(static_cast<double>(p99) * 1e-9 / period_s);
-    return o.str();
+    return {{"samples", ns.size()},
+            {"min_ns", percentile(0.0)},
+            {"median_ns", med},
+            {"mean_ns", mean()},
+            {"p99_ns", p99},
+            {"p999_ns", percentile(0.999)},
+            {"max_ns", percentile(1.0)},
+            {"period_s", period_s},
+            {"median_share", static_cast<double>(med) * 1e-9 / period_s},
+            {"p99_share", static_cast<double>(p99) * 1e-9 / period_s}};
   }
 };
 
@@ -361,14 +372,15 @@ StepFigures steps(const daemon::DaemonConfig& shipped, long cycles) {
 
 // --- the CAN bus ------------------------------------------------------------
 
-std::string bus_json(const hal::BusLoad& L) {
-  std::ostringstream o;
-  o << "{\"frames_per_cycle\": " << L.frames_per_cycle << ", \"bits_per_cycle\": " << L.bits_per_cycle
-    << ", \"periodic_bits_per_cycle\": " << json_num(L.periodic_bits_per_cycle)
-    << ", \"bits_available\": " << json_num(L.bits_available) << ", \"load\": " << json_num(L.load)
-    << ", \"worst_cycle_load\": " << json_num(L.worst_cycle_load) << ", \"max_rate_hz\": " << json_num(L.max_rate_hz)
-    << ", \"fits\": " << (L.fits ? "true" : "false") << "}";
-  return o.str();
+Json bus_json(const hal::BusLoad& L) {
+  return {{"frames_per_cycle", L.frames_per_cycle},
+          {"bits_per_cycle", L.bits_per_cycle},
+          {"periodic_bits_per_cycle", L.periodic_bits_per_cycle},
+          {"bits_available", L.bits_available},
+          {"load", L.load},
+          {"worst_cycle_load", L.worst_cycle_load},
+          {"max_rate_hz", L.max_rate_hz},
+          {"fits", L.fits}};
 }
 
 // The master and three virtual drives on the fake bus, in operation
@@ -417,9 +429,18 @@ WireCount count_on_fake_bus(const hal::MasterConfig& cfg, long cycles) {
   return w;
 }
 
-std::string bus(const std::string& source) {
+Json frame_bits_json() {
+  return {{"sync", hal::can_frame_bits_worst(0)},
+          {"rpdo1", hal::can_frame_bits_worst(hal::pdo::kRpdo1.bytes())},
+          {"tpdo1", hal::can_frame_bits_worst(hal::pdo::kTpdo1.bytes())},
+          {"tpdo2", hal::can_frame_bits_worst(hal::pdo::kTpdo2.bytes())},
+          {"heartbeat", hal::can_frame_bits_worst(1)}};
+}
+
+Json bus(const std::string& source) {
   const daemon::DaemonConfig cfg = daemon::load_config(source + "/config/canopen.yaml");
   const hal::MasterConfig& m = cfg.canopen.master;
+  const hal::BusLoad& load = cfg.canopen.load;
   hal::MasterConfig with_velocity = m;
   with_velocity.velocity_from_drive = !m.velocity_from_drive;
   // The same frames without a single stuff bit: the best case of the wire
@@ -429,89 +450,101 @@ std::string bus(const std::string& source) {
     best_bits += (8 * hal::pdo::kRpdo1.bytes() + 47) + (8 * hal::pdo::kTpdo1.bytes() + 47) +
                  (m.velocity_from_drive ? 8 * hal::pdo::kTpdo2.bytes() + 47 : 0);
   const WireCount w = count_on_fake_bus(m, 2000);
-  std::ostringstream o;
-  o << "{\"config\": " << json_string("config/canopen.yaml") << ", \"drives\": " << m.drives.size()
-    << ", \"bitrate\": " << json_num(m.bitrate) << ", \"rate_hz\": " << json_num(m.rate_hz)
-    << ", \"max_bus_load\": " << json_num(m.max_bus_load)
-    << ", \"velocity_from_drive\": " << (m.velocity_from_drive ? "true" : "false")
-    << ", \"frame_bits_worst\": {\"sync\": " << hal::can_frame_bits_worst(0)
-    << ", \"rpdo1\": " << hal::can_frame_bits_worst(hal::pdo::kRpdo1.bytes())
-    << ", \"tpdo1\": " << hal::can_frame_bits_worst(hal::pdo::kTpdo1.bytes())
-    << ", \"tpdo2\": " << hal::can_frame_bits_worst(hal::pdo::kTpdo2.bytes())
-    << ", \"heartbeat\": " << hal::can_frame_bits_worst(1) << "}"
-    << ", \"shipped\": " << bus_json(cfg.canopen.load) << ", \"alternative\": " << bus_json(hal::bus_load(with_velocity))
-    << ", \"best_case_bits_per_cycle\": " << best_bits
-    << ", \"rate_at_full_load_hz\": "
-    << json_num((m.bitrate - cfg.canopen.load.periodic_bits_per_cycle * m.rate_hz) / cfg.canopen.load.bits_per_cycle)
-    << ", \"fake_bus\": {\"cycles\": " << w.cycles << ", \"frames_per_cycle\": " << json_num(w.frames_per_cycle)
-    << ", \"bits_per_cycle\": " << json_num(w.bits_per_cycle)
-    << ", \"load\": " << json_num(w.bits_per_cycle / cfg.canopen.load.bits_available) << "}}";
-  return o.str();
+  return {{"config", "config/canopen.yaml"},
+          {"drives", m.drives.size()},
+          {"bitrate", m.bitrate},
+          {"rate_hz", m.rate_hz},
+          {"max_bus_load", m.max_bus_load},
+          {"velocity_from_drive", m.velocity_from_drive},
+          {"frame_bits_worst", frame_bits_json()},
+          {"shipped", bus_json(load)},
+          {"alternative", bus_json(hal::bus_load(with_velocity))},
+          {"best_case_bits_per_cycle", best_bits},
+          {"rate_at_full_load_hz", (m.bitrate - load.periodic_bits_per_cycle * m.rate_hz) / load.bits_per_cycle},
+          {"fake_bus",
+           {{"cycles", w.cycles},
+            {"frames_per_cycle", w.frames_per_cycle},
+            {"bits_per_cycle", w.bits_per_cycle},
+            {"load", w.bits_per_cycle / load.bits_available}}}};
 }
 
 // --- Kim's 32-point ball-bar calibration -------------------------------------
 
-std::string vec_json(const cal::VecX& v) {
-  std::string s = "[";
-  for (Eigen::Index i = 0; i < v.size(); ++i) s += (i ? ", " : "") + json_num(v[i]);
-  return s + "]";
-}
+// Kim's data, the solver's start and tolerances, and what it found, timed.
+struct KimFigures {
+  kin::KinematicModel nominal = kin::KinematicModel::nominal();
+  std::vector<Vec3> d;
+  std::vector<double> length;
+  Vec3 pivot = cal::kim_pivot();
+  cal::LmOptions lm;
+  cal::VecX eta0 = cal::BallbarParameters{}.vector(false), eta, residual;
+  cal::LmReport report;
+  cal::BallbarFit full;
+  Timing solve, fit;
+};
 
-std::string kim(int repeat, const std::string& problem_path) {
+KimFigures kim_timed(int repeat) {
   cal::KimOptions ko;
   ko.circular_test = false;
   const cal::KimReproduction k = cal::reproduce_kim(ko);
-  const kin::KinematicModel nominal = kin::KinematicModel::nominal();
-  const std::vector<Vec3>& d = k.data.d;
-  const std::vector<double>& len = k.data.length;
-  const Vec3 pivot = cal::kim_pivot();
-  const cal::LmOptions lm;
-  const cal::VecX eta0 = cal::BallbarParameters{}.vector(false);
+  KimFigures K;
+  K.d = k.data.d;
+  K.length = k.data.length;
   const cal::ResidualFunction f = [&](const cal::VecX& x, cal::VecX& r, cal::MatX* J) {
-    cal::ballbar_residuals(x, nominal.d0, d, len, pivot, r, J);
+    cal::ballbar_residuals(x, K.nominal.d0, K.d, K.length, K.pivot, r, J);
   };
   // The solve alone (what SciPy's least_squares does), then the whole fit
   // (pose check, solve, identifiability, frame transform: what `cpm calibrate` does).
-  Timing solve, fit;
-  cal::VecX eta;
-  cal::LmReport rep;
   for (int i = 0; i < repeat; ++i) {
-    eta = eta0;
+    K.eta = K.eta0;
     const std::int64_t a = now_ns();
-    rep = cal::levenberg_marquardt(f, eta, lm);
-    solve.ns.push_back(now_ns() - a);
+    K.report = cal::levenberg_marquardt(f, K.eta, K.lm);
+    K.solve.ns.push_back(now_ns() - a);
   }
-  cal::BallbarFit full;
   for (int i = 0; i < repeat; ++i) {
     const std::int64_t a = now_ns();
-    full = cal::fit_ballbar(nominal, d, len, pivot);
-    fit.ns.push_back(now_ns() - a);
+    K.full = cal::fit_ballbar(K.nominal, K.d, K.length, K.pivot);
+    K.fit.ns.push_back(now_ns() - a);
   }
-  cal::VecX r;
-  f(eta, r, nullptr);
-  const auto names = cal::ballbar_parameter_names(false);
-  std::ostringstream p;  // the problem, for bench/scipy_ballbar.py
-  p << "{\"what\": \"Kim's 32-point ball-bar calibration (reproduce_kim), bar length known: 9 unknowns\",\n"
-    << " \"names\": [";
-  for (std::size_t i = 0; i < names.size(); ++i) p << (i ? ", " : "") << json_string(names[i]);
-  p << "],\n \"d0\": " << vec_json(nominal.d0) << ",\n \"pivot\": " << vec_json(pivot) << ",\n \"d\": [";
-  for (std::size_t j = 0; j < d.size(); ++j) p << (j ? ",\n  " : "") << vec_json(d[j]);
-  p << "],\n \"length\": [";
-  for (std::size_t j = 0; j < len.size(); ++j) p << (j ? ", " : "") << json_num(len[j]);
-  p << "],\n \"eta0\": " << vec_json(eta0) << ",\n \"tolerances\": {\"gradient\": " << json_num(lm.gradient_tolerance)
-    << ", \"step\": " << json_num(lm.step_tolerance) << ", \"cost\": " << json_num(lm.cost_tolerance) << "},\n"
-    << " \"cpp\": {\"eta\": " << vec_json(eta) << ", \"std_error\": " << vec_json(full.identifiability.std_error)
-    << ", \"cost\": " << json_num(rep.final_cost) << ", \"residual\": " << vec_json(r) << "}}\n";
-  std::ofstream(problem_path) << p.str();
-  std::ostringstream o;
-  o << "{\"poses\": " << d.size() << ", \"unknowns\": " << eta.size() << ", \"repeat\": " << repeat
-    << ", \"problem_file\": " << json_string(problem_path) << ", \"solve\": {" << solve.json(1.0)
-    << ", \"iterations\": " << rep.iterations << ", \"evaluations\": " << rep.evaluations
-    << ", \"converged\": " << (rep.converged ? "true" : "false") << ", \"reason\": " << json_string(rep.reason)
-    << ", \"cost\": " << json_num(rep.final_cost) << "}, \"fit\": {" << fit.json(1.0) << "}, \"eta\": " << vec_json(eta)
-    << ", \"fit_eta\": " << vec_json(full.params.vector(false))
-    << ", \"std_error\": " << vec_json(full.identifiability.std_error) << "}";
-  return o.str();
+  f(K.eta, K.residual, nullptr);
+  return K;
+}
+
+// The problem, for bench/scipy_ballbar.py.
+Json kim_problem_json(const KimFigures& K) {
+  Json d = Json::array();
+  for (const Vec3& x : K.d) d.push_back(vec_json(x));
+  return {{"what", "Kim's 32-point ball-bar calibration (reproduce_kim), bar length known: 9 unknowns"},
+          {"names", cal::ballbar_parameter_names(false)},
+          {"d0", vec_json(K.nominal.d0)},
+          {"pivot", vec_json(K.pivot)},
+          {"d", d},
+          {"length", K.length},
+          {"eta0", vec_json(K.eta0)},
+          {"tolerances", {{"gradient", K.lm.gradient_tolerance}, {"step", K.lm.step_tolerance},
+                          {"cost", K.lm.cost_tolerance}}},
+          {"cpp", {{"eta", vec_json(K.eta)}, {"std_error", vec_json(K.full.identifiability.std_error)},
+                   {"cost", K.report.final_cost}, {"residual", vec_json(K.residual)}}}};
+}
+
+Json kim(int repeat, const std::string& problem_path) {
+  const KimFigures K = kim_timed(repeat);
+  std::ofstream(problem_path) << dumped(kim_problem_json(K));
+  Json solve = K.solve.json(1.0);
+  solve["iterations"] = K.report.iterations;
+  solve["evaluations"] = K.report.evaluations;
+  solve["converged"] = K.report.converged;
+  solve["reason"] = K.report.reason;
+  solve["cost"] = K.report.final_cost;
+  return {{"poses", K.d.size()},
+          {"unknowns", K.eta.size()},
+          {"repeat", repeat},
+          {"problem_file", problem_path},
+          {"solve", solve},
+          {"fit", K.fit.json(1.0)},
+          {"eta", vec_json(K.eta)},
+          {"fit_eta", vec_json(K.full.params.vector(false))},
+          {"std_error", vec_json(K.full.identifiability.std_error)}};
 }
 
 // --- main -------------------------------------------------------------------
@@ -532,50 +565,90 @@ int pin_to_last_cpu(bool& pinned) {
   return cpu;
 }
 
-}  // namespace
-
-int main(int argc, char** argv) try {
-  cli::Args args("cpm_perf", std::vector<std::string>(argv + 1, argv + argc));
-  const std::string source = args.option_or("source", ".");
-  const std::string json_path = args.option_or("json", "");
-  const std::string problem = args.option_or("kim-problem", "kim_ballbar_problem.json");
-  const long cycles = args.integer("cycles", 100000);
-  const int repeat = static_cast<int>(args.integer("repeat", 200));
-  args.finish();
-  if (cycles < 1000 || repeat < 1) throw Error("cpm_perf: --cycles must be >= 1000 and --repeat >= 1");
-  bool pinned = false;
-  const int cpu = pin_to_last_cpu(pinned);
-  const std::int64_t overhead = timer_overhead_ns(100000);
-  const CycleFigures c = control_cycle(source, cycles);
-  const StepFigures s = steps(daemon::load_config(source + "/config/sim.yaml"), cycles);
+// The figures of the control cycle, replayed, and of its phases.
+Json control_cycle_json(const CycleFigures& c) {
   static const char* phase[daemon::kSeries] = {"wakeup_latency", "read", "estimate", "trajectory",
                                                 "inverse_kinematics", "controller", "safety", "write",
                                                 "publish", "cycle"};
-  std::ostringstream o;
-  o << "{\"driver\": {\"cycles\": " << cycles << ", \"cpu\": " << cpu << ", \"pinned\": " << (pinned ? "true" : "false")
-    << ", \"timer_overhead_ns\": " << overhead << "},\n"
-    << "\"control_cycle\": {" << c.cycle.json(1e-3) << ", \"allocations\": " << c.allocations
-    << ", \"replay_mismatches\": " << c.mismatches << ", \"rejected_commands\": " << c.rejected
-    << ", \"mode_at_end\": " << json_string(c.mode_at_end) << ", \"phase_mean_ns\": {";
-  for (int i = 1; i < daemon::kSeries; ++i)
-    o << (i > 1 ? ", " : "") << '"' << phase[i] << "\": " << json_num(c.phase_mean_ns[static_cast<std::size_t>(i)]);
-  o << "}},\n\"controller_step\": {" << s.controller.json(1e-3) << "},\n"
-    << "\"plant_step\": {" << s.plant.json(1e-3) << ", \"substeps\": " << s.substeps << ", \"substeps_sweep\": [";
-  for (std::size_t i = 0; i < s.sweep.size(); ++i)
-    o << (i ? ", " : "") << "{\"substeps\": " << s.sweep[i].substeps << ", \"rtf\": " << json_num(s.sweep[i].rtf)
-      << ", \"max_step_error_m\": " << json_num(s.sweep[i].max_step_error_m) << "}";
-  o << "]},\n"
-    << "\"rtf\": {\"plant\": " << json_num(s.plant_rtf) << ", \"plant_shipped\": " << json_num(s.shipped_plant_rtf)
-    << ", \"closed_loop\": " << json_num(s.closed_loop_rtf)
-    << ", \"daemon_loop_sim\": " << json_num(c.daemon_rtf) << ", \"closed_loop_rmse_m\": " << json_num(s.tracking_rmse_m)
-    << "},\n\"bus\": " << bus(source) << ",\n\"kim\": " << kim(repeat, problem) << "}\n";
-  if (json_path.empty()) std::fputs(o.str().c_str(), stdout);
-  else std::ofstream(json_path) << o.str();
-  return 0;
-} catch (const std::exception& e) {
-  std::fprintf(stderr,
-               "cpm_perf: %s\nusage: cpm_perf --source DIR [--cycles N] [--repeat R] [--kim-problem FILE] "
-               "[--json FILE]\n",
-               e.what());
-  return 1;
+  Json o = c.cycle.json(1e-3);
+  o["allocations"] = c.allocations;
+  o["replay_mismatches"] = c.mismatches;
+  o["rejected_commands"] = c.rejected;
+  o["mode_at_end"] = c.mode_at_end;
+  Json phases = Json::object();
+  for (int i = 1; i < daemon::kSeries; ++i) phases[phase[i]] = c.phase_mean_ns[static_cast<std::size_t>(i)];
+  o["phase_mean_ns"] = std::move(phases);
+  return o;
+}
+
+Json plant_step_json(const StepFigures& s) {
+  Json o = s.plant.json(1e-3);
+  o["substeps"] = s.substeps;
+  Json sweep = Json::array();
+  for (const SubstepFigures& f : s.sweep)
+    sweep.push_back({{"substeps", f.substeps}, {"rtf", f.rtf}, {"max_step_error_m", f.max_step_error_m}});
+  o["substeps_sweep"] = std::move(sweep);
+  return o;
+}
+
+struct PerfOptions {
+  std::string source = ".", json_path, kim_problem = "kim_ballbar_problem.json";
+  long cycles = 100000;
+  int repeat = 200;
+};
+
+void add_options(CLI::App& app, PerfOptions& o) {
+  app.add_option("--source", o.source, "the source tree, for config/sim.yaml and config/canopen.yaml (default .)")
+      ->type_name("DIR");
+  app.add_option("--cycles", o.cycles, "control cycles timed, >= 1000 (default 100000)")
+      ->type_name("N")
+      ->check(CLI::Range(1000L, 1000000000L));
+  app.add_option("--repeat", o.repeat, "times Kim's calibration is solved and fitted, >= 1 (default 200)")
+      ->type_name("R")
+      ->check(CLI::Range(1, 1000000));
+  app.add_option("--kim-problem", o.kim_problem,
+                 "where to write Kim's ball-bar problem for bench/scipy_ballbar.py (default kim_ballbar_problem.json)")
+      ->type_name("FILE");
+  app.add_option("--json", o.json_path, "write the figures to FILE instead of standard output")->type_name("FILE");
+}
+
+Json measure(const PerfOptions& o) {
+  bool pinned = false;
+  const int cpu = pin_to_last_cpu(pinned);
+  const std::int64_t overhead = timer_overhead_ns(100000);
+  const CycleFigures c = control_cycle(o.source, o.cycles);
+  const StepFigures s = steps(daemon::load_config(o.source + "/config/sim.yaml"), o.cycles);
+  return {{"driver", {{"cycles", o.cycles}, {"cpu", cpu}, {"pinned", pinned}, {"timer_overhead_ns", overhead}}},
+          {"control_cycle", control_cycle_json(c)},
+          {"controller_step", s.controller.json(1e-3)},
+          {"plant_step", plant_step_json(s)},
+          {"rtf", {{"plant", s.plant_rtf}, {"plant_shipped", s.shipped_plant_rtf}, {"closed_loop", s.closed_loop_rtf},
+                   {"daemon_loop_sim", c.daemon_rtf}, {"closed_loop_rmse_m", s.tracking_rmse_m}}},
+          {"bus", bus(o.source)},
+          {"kim", kim(o.repeat, o.kim_problem)}};
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  PerfOptions o;
+  CLI::App app("cpm_perf: per-call percentiles of cpmd's control cycle, the controller's and the plant's steps, "
+               "real-time factors, CAN bus figures and Kim's calibration timed (bench/run.sh runs it)");
+  add_options(app, o);
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    if (e.get_exit_code() == 0) return app.exit(e);  // --help
+    std::fprintf(stderr, "cpm_perf: %s\n(cpm_perf --help lists the options)\n", e.what());
+    return 1;
+  }
+  try {
+    const std::string text = dumped(measure(o));
+    if (o.json_path.empty()) std::fputs(text.c_str(), stdout);
+    else std::ofstream(o.json_path) << text;
+    return 0;
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "cpm_perf: %s\n", e.what());
+    return 1;
+  }
 }

@@ -5,6 +5,8 @@
 #include <numbers>
 #include <sstream>
 
+#include <nlohmann/json.hpp>
+
 #include "cpm/calibration/simulate.hpp"
 #include "cpm/calibration/workflow.hpp"
 
@@ -133,30 +135,25 @@ std::string KimReproduction::report() const {
 }
 
 std::string KimReproduction::json() const {
-  std::ostringstream o;
-  const Identifiability& id = fit.identifiability;
-  o << "{\n  \"poses\": " << poses.size() << ",\n  \"residual_rms\": " << json_num(id.residual_rms)
-    << ",\n  \"all_within_3sigma\": " << (all_within_3sigma ? "true" : "false") << ",\n  \"parameters\": {";
-  for (std::size_t j = 0; j < checks.size(); ++j) {
-    const ParameterCheck& c = checks[j];
-    o << (j ? ",\n" : "\n") << "    " << json_string(c.name) << ": {\"truth\": " << json_num(c.truth)
-      << ", \"value\": " << json_num(c.fitted) << ", \"stderr\": " << json_num(c.std_error)
-      << ", \"within_3sigma\": " << (c.within_3sigma() ? "true" : "false") << "}";
-  }
-  o << "\n  }";
+  using Json = nlohmann::ordered_json;
+  Json params = Json::object();
+  for (const ParameterCheck& c : checks)
+    params[c.name] = {{"truth", c.truth}, {"value", c.fitted}, {"stderr", c.std_error}, {"within_3sigma", c.within_3sigma()}};
+  Json o = {{"poses", poses.size()},
+            {"residual_rms", fit.identifiability.residual_rms},
+            {"all_within_3sigma", all_within_3sigma},
+            {"parameters", params}};
   if (has_circular_test) {
-    auto ct = [&](const char* name, const CircularTestResult& r) {
-      o << ",\n  \"" << name << "\": {\"max_abs_error\": " << json_num(r.max_abs_error)
-        << ", \"G\": " << json_num(r.G_bidirectional) << ", \"H\": " << json_num(r.H)
-        << ", \"F_max\": " << json_num(r.F_max) << ", \"F_min\": " << json_num(r.F_min) << "}";
+    auto ct = [](const CircularTestResult& r) {
+      return Json{{"max_abs_error", r.max_abs_error}, {"G", r.G_bidirectional}, {"H", r.H}, {"F_max", r.F_max},
+                  {"F_min", r.F_min}};
     };
-    ct("circular_test_before", before);
-    ct("circular_test_after", after);
-    o << ",\n  \"kim_max_error_before\": " << json_num(kKimMaxErrorBefore)
-      << ",\n  \"kim_max_error_after\": " << json_num(kKimMaxErrorAfter);
+    o["circular_test_before"] = ct(before);
+    o["circular_test_after"] = ct(after);
+    o["kim_max_error_before"] = kKimMaxErrorBefore;
+    o["kim_max_error_after"] = kKimMaxErrorAfter;
   }
-  o << "\n}\n";
-  return o.str();
+  return o.dump(2, ' ', false, Json::error_handler_t::replace) + "\n";
 }
 
 }  // namespace cpm::cal

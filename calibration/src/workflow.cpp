@@ -2,9 +2,12 @@
 
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <numbers>
 #include <sstream>
+
+#include <nlohmann/json.hpp>
 
 #include "cpm/kinematics/workspace.hpp"
 
@@ -187,42 +190,7 @@ std::string shown(const std::string& unit, const std::string& name, double v, bo
   return fmt("%g", v);
 }
 
-std::string json_vec(const Vec3& v) {
-  return "[" + json_num(v[0]) + ", " + json_num(v[1]) + ", " + json_num(v[2]) + "]";
-}
-
 }  // namespace
-
-std::string json_string(const std::string& s) {
-  std::string o = "\"";
-  for (char ch : s) {
-    switch (ch) {
-      case '"': o += "\\\""; break;
-      case '\\': o += "\\\\"; break;
-      case '\n': o += "\\n"; break;
-      case '\t': o += "\\t"; break;
-      default:
-        if (static_cast<unsigned char>(ch) < 0x20) {
-          char buf[8];
-          std::snprintf(buf, sizeof buf, "\\u%04x", ch);
-          o += buf;
-        } else {
-          o += ch;
-        }
-    }
-  }
-  return o + "\"";
-}
-
-std::string json_num(double v) {
-  if (!std::isfinite(v)) return "null";
-  char buf[32];
-  for (int prec = 15; prec <= 17; ++prec) {
-    std::snprintf(buf, sizeof buf, "%.*g", prec, v);
-    if (std::strtod(buf, nullptr) == v) break;
-  }
-  return buf;
-}
 
 const Identifiability& CalibrationResult::identifiability() const {
   return ballbar ? ballbar->identifiability : position->identifiability;
@@ -398,99 +366,115 @@ std::string CalibrationResult::summary() const {
   return o.str();
 }
 
-std::string CalibrationResult::json() const {
-  const Identifiability& id = identifiability();
-  const LmReport& lm = convergence();
-  std::ostringstream o;
-  o << "{\n  \"kind\": " << json_string(kind) << ",\n  \"rows\": " << rows
-    << ",\n  \"data_file\": " << json_string(data_path) << ",\n  \"data_sha256\": " << json_string(data_sha256)
-    << ",\n  \"residual_rms\": " << json_num(id.residual_rms)
-    << ",\n  \"residual_sigma\": " << json_num(id.residual_sigma) << ",\n  \"parameters\": {";
-  bool first = true;
-  auto param = [&](const std::string& name, const std::string& value, const std::string& se,
-                   const std::string& extra = "") {
-    o << (first ? "\n" : ",\n") << "    " << json_string(name) << ": {\"value\": " << value
-      << ", \"stderr\": " << se << extra << "}";
-    first = false;
-  };
-  auto scalar = [&](const std::string& name, int j) {
-    param(name, json_num(id.value[j]), json_num(id.std_error[j]),
-          ", \"ci_low\": " + json_num(id.ci_low[j]) + ", \"ci_high\": " + json_num(id.ci_high[j]) +
-              ", \"unit\": " + json_string(id.units[static_cast<std::size_t>(j)]));
-  };
-  if (ballbar) {
-    for (int i = 0; i < 3; ++i) {
-      const std::string c = "c" + std::to_string(i + 1);
-      const int j = id.index(c);
-      const auto [g, gs] = gamma_of(id.value[j], id.std_error[j]);
-      param("gamma" + std::to_string(i + 1), json_num(g), json_num(gs), ", \"unit\": \"rad\"");
-    }
-    for (const char* n : {"c1", "c2", "c3", "theta_z", "theta_x", "theta_y", "dq_x", "dq_y", "dq_z"})
-      scalar(n, id.index(n));
-    if (id.index("dl") >= 0)
-      scalar("dl", id.index("dl"));
-    else
-      param("dl", "0", "0", ", \"fixed\": true, \"unit\": \"m\"");
+namespace {
+
+using Json = nlohmann::ordered_json;
+
+Json vec_json(const Vec3& v) { return Json::array({v[0], v[1], v[2]}); }
+
+// The correlation matrix to 4 decimals (what a person compares), rounded as printf rounds.
+Json correlation_json(const MatX& c) {
+  Json rows = Json::array();
+  for (Eigen::Index a = 0; a < c.rows(); ++a) {
+    Json row = Json::array();
+    for (Eigen::Index b = 0; b < c.cols(); ++b) row.push_back(std::strtod(fmt("%.4f", c(a, b)).c_str(), nullptr));
+    rows.push_back(std::move(row));
   }
-  const kin::KinematicModel& km = model.model.kinematics;
-  std::array<Vec3, 3> se_u{};
-  Vec3 se_c, se_n;
-  if (ballbar) {
-    se_u = ballbar->normal_std_error;
-    se_c = ballbar->scale_std_error;
-    se_n = ballbar->offset_std_error;
-  } else {
-    se_u = position->normal_std_error;
-    for (int i = 0; i < 3; ++i) {
-      se_c[i] = id.std_error[4 * i + 2];
-      se_n[i] = id.std_error[4 * i + 3];
-    }
+  return rows;
+}
+
+Json identifiability_json(const Identifiability& id) {
+  Json pairs = Json::array();
+  for (const CorrelatedPair& c : id.strong_pairs)
+    pairs.push_back({{"a", id.names[static_cast<std::size_t>(c.a)]},
+                     {"b", id.names[static_cast<std::size_t>(c.b)]},
+                     {"correlation", c.correlation}});
+  return {{"names", id.names},
+          {"singular_values", std::vector<double>(id.singular_values.begin(), id.singular_values.end())},
+          {"condition_number", id.condition_number},
+          {"confidence", id.confidence},
+          {"dof", id.dof},
+          {"correlation", correlation_json(id.correlation)},
+          {"strong_pairs", pairs}};
+}
+
+Json convergence_json(const LmReport& lm) {
+  return {{"converged", lm.converged},         {"reason", lm.reason},
+          {"iterations", lm.iterations},       {"evaluations", lm.evaluations},
+          {"initial_cost", lm.initial_cost},   {"final_cost", lm.final_cost},
+          {"gradient_norm", lm.gradient_norm}, {"gradient_cosine", lm.gradient_cosine},
+          {"last_step_norm", lm.last_step_norm}};
+}
+
+// One fitted parameter j of the identifiability analysis, with its interval.
+Json fitted_json(const Identifiability& id, int j) {
+  return {{"value", id.value[j]}, {"stderr", id.std_error[j]}, {"ci_low", id.ci_low[j]},
+          {"ci_high", id.ci_high[j]}, {"unit", id.units[static_cast<std::size_t>(j)]}};
+}
+
+Json derived_json(const Json& value, const Json& std_error, const char* unit) {
+  return {{"value", value}, {"stderr", std_error}, {"unit", unit}};
+}
+
+// A ball-bar fit's own parameters: the limb angles gamma (from the scales),
+// the scales, the frame's rotation and the pivot's offset, the bar's offset.
+void add_ballbar_parameters(Json& params, const Identifiability& id) {
+  for (int i = 0; i < 3; ++i) {
+    const int j = id.index("c" + std::to_string(i + 1));
+    const auto [g, gs] = gamma_of(id.value[j], id.std_error[j]);
+    params["gamma" + std::to_string(i + 1)] = derived_json(g, gs, "rad");
   }
-  // The machine-frame planes (for a ball-bar: after the frame choice).
-  const std::string pre = ballbar ? "machine." : "";
+  for (const char* n : {"c1", "c2", "c3", "theta_z", "theta_x", "theta_y", "dq_x", "dq_y", "dq_z"})
+    params[n] = fitted_json(id, id.index(n));
+  if (id.index("dl") >= 0) params["dl"] = fitted_json(id, id.index("dl"));
+  else params["dl"] = {{"value", 0}, {"stderr", 0}, {"fixed", true}, {"unit", "m"}};
+}
+
+// The machine-frame planes (for a ball-bar: after the frame choice, named
+// "machine.c1" ...), and for full positions the plane rotations fitted.
+Json parameters_json(const CalibrationResult& r) {
+  const Identifiability& id = r.identifiability();
+  Json params = Json::object();
+  if (r.ballbar) add_ballbar_parameters(params, id);
+  const kin::KinematicModel& km = r.model.model.kinematics;
+  const std::string pre = r.ballbar ? "machine." : "";
   for (int i = 0; i < 3; ++i) {
     const std::string s = std::to_string(i + 1);
-    if (!ballbar) {
-      scalar("c" + s, 4 * i + 2);
-      scalar("n" + s, 4 * i + 3);
+    if (r.ballbar) {
+      params[pre + "c" + s] = derived_json(km.planes[i].scale, r.ballbar->scale_std_error[i], "1");
+      params[pre + "n" + s] = derived_json(km.planes[i].offset, r.ballbar->offset_std_error[i], "m");
     } else {
-      param(pre + "c" + s, json_num(km.planes[i].scale), json_num(se_c[i]), ", \"unit\": \"1\"");
-      param(pre + "n" + s, json_num(km.planes[i].offset), json_num(se_n[i]), ", \"unit\": \"m\"");
+      params["c" + s] = fitted_json(id, 4 * i + 2);
+      params["n" + s] = fitted_json(id, 4 * i + 3);
     }
-    param(pre + "u" + s, json_vec(km.planes[i].normal), json_vec(se_u[i]), ", \"unit\": \"1\"");
+    const Vec3& se_u = r.ballbar ? r.ballbar->normal_std_error[i] : r.position->normal_std_error[i];
+    params[pre + "u" + s] = derived_json(vec_json(km.planes[i].normal), vec_json(se_u), "1");
   }
-  if (!ballbar)
+  if (!r.ballbar)
     for (int j = 0; j < 12; ++j)
-      if (id.units[static_cast<std::size_t>(j)] == "rad") scalar(id.names[static_cast<std::size_t>(j)], j);
-  o << "\n  },\n  \"convergence\": {\"converged\": " << (lm.converged ? "true" : "false")
-    << ", \"reason\": " << json_string(lm.reason) << ", \"iterations\": " << lm.iterations
-    << ", \"evaluations\": " << lm.evaluations << ", \"initial_cost\": " << json_num(lm.initial_cost)
-    << ", \"final_cost\": " << json_num(lm.final_cost) << ", \"gradient_norm\": " << json_num(lm.gradient_norm)
-    << ", \"gradient_cosine\": " << json_num(lm.gradient_cosine)
-    << ", \"last_step_norm\": " << json_num(lm.last_step_norm) << "},\n";
-  o << "  \"identifiability\": {\"names\": [";
-  for (std::size_t j = 0; j < id.names.size(); ++j) o << (j ? ", " : "") << json_string(id.names[j]);
-  o << "], \"singular_values\": [";
-  for (Eigen::Index k = 0; k < id.singular_values.size(); ++k) o << (k ? ", " : "") << json_num(id.singular_values[k]);
-  o << "], \"condition_number\": " << json_num(id.condition_number) << ", \"confidence\": "
-    << json_num(id.confidence) << ", \"dof\": " << id.dof << ",\n    \"correlation\": [";
-  for (Eigen::Index a = 0; a < id.correlation.rows(); ++a) {
-    o << (a ? ",\n      [" : "\n      [");
-    for (Eigen::Index b = 0; b < id.correlation.cols(); ++b)
-      o << (b ? ", " : "") << fmt("%.4f", id.correlation(a, b));
-    o << "]";
-  }
-  o << "],\n    \"strong_pairs\": [";
-  for (std::size_t k = 0; k < id.strong_pairs.size(); ++k) {
-    const CorrelatedPair& c = id.strong_pairs[k];
-    o << (k ? ", " : "") << "{\"a\": " << json_string(id.names[static_cast<std::size_t>(c.a)])
-      << ", \"b\": " << json_string(id.names[static_cast<std::size_t>(c.b)])
-      << ", \"correlation\": " << json_num(c.correlation) << "}";
-  }
-  o << "]},\n  \"warnings\": [";
-  for (std::size_t k = 0; k < warnings.size(); ++k) o << (k ? ",\n    " : "\n    ") << json_string(warnings[k]);
-  o << (warnings.empty() ? "]\n}\n" : "\n  ]\n}\n");
-  return o.str();
+      if (id.units[static_cast<std::size_t>(j)] == "rad") params[id.names[static_cast<std::size_t>(j)]] = fitted_json(id, j);
+  return params;
+}
+
+}  // namespace
+
+std::string json_string(const std::string& s) { return Json(s).dump(-1, ' ', false, Json::error_handler_t::replace); }
+
+std::string json_num(double v) { return Json(v).dump(); }
+
+std::string CalibrationResult::json() const {
+  const Identifiability& id = identifiability();
+  const Json o = {{"kind", kind},
+                  {"rows", rows},
+                  {"data_file", data_path},
+                  {"data_sha256", data_sha256},
+                  {"residual_rms", id.residual_rms},
+                  {"residual_sigma", id.residual_sigma},
+                  {"parameters", parameters_json(*this)},
+                  {"convergence", convergence_json(convergence())},
+                  {"identifiability", identifiability_json(id)},
+                  {"warnings", warnings}};
+  return o.dump(2, ' ', false, Json::error_handler_t::replace) + "\n";
 }
 
 }  // namespace cpm::cal

@@ -18,9 +18,11 @@
 #include <thread>
 
 #include "cpm/daemon/canopen_backend.hpp"
+#include "cpm/daemon/log.hpp"
 #include "cpm/daemon/rt.hpp"
 #include "cpm/daemon/server.hpp"
 #include "cpm/daemon/sim_backend.hpp"
+#include "cpm/daemon/stats_json.hpp"
 
 namespace {
 
@@ -39,42 +41,6 @@ void usage() {
                "                     security.operators_dir; re-read on SIGHUP and when it changes\n");
 }
 
-// `fine`: the wake-up latency in 1 us bins (ControlLoop::fine_latency_histogram),
-// written beside series 0's coarse histogram as "histogram_1us" (bench/report.py).
-std::string stats_json(const cpm_msgs::loop_stats_t& s, const FineLatencyHistogram& fine) {
-  static const char* names[kSeries] = {"wakeup_latency", "read", "estimate", "trajectory", "inverse_kinematics",
-                                       "controller", "safety", "write", "publish", "cycle"};
-  std::ostringstream os;
-  os << "{\"rate_hz\": " << s.rate_hz << ", \"cycles\": " << s.cycles << ", \"overruns\": " << s.overruns
-     << ", \"skipped\": " << s.skipped << ", \"realtime\": " << (s.realtime ? "true" : "false")
-     << ", \"memory_locked\": " << (s.memory_locked ? "true" : "false") << ", \"series\": {";
-  for (int i = 0; i < kSeries; ++i) {
-    os << (i ? ", " : "") << '"' << names[i] << "\": {\"count\": " << s.count[i] << ", \"min_ns\": " << s.min_ns[i]
-       << ", \"max_ns\": " << s.max_ns[i] << ", \"mean_ns\": " << (s.count[i] ? s.sum_ns[i] / s.count[i] : 0.0)
-       << ", \"histogram_us\": {";
-    bool first = true;
-    for (int b = 0; b < kBins; ++b)
-      if (s.histogram[i][b]) {
-        os << (first ? "" : ", ") << '"' << histogram_bin_floor(b) / 1000 << "\": " << s.histogram[i][b];
-        first = false;
-      }
-    os << "}";
-    if (i == kSeriesLatency) {
-      os << ", \"histogram_1us\": {";
-      first = true;
-      for (int b = 0; b < kFineLatencyBins; ++b)
-        if (fine[static_cast<std::size_t>(b)]) {
-          os << (first ? "" : ", ") << '"' << b << "\": " << fine[static_cast<std::size_t>(b)];
-          first = false;
-        }
-      os << "}";
-    }
-    os << "}";
-  }
-  os << "}}\n";
-  return os.str();
-}
-
 // Temporary file, fsync, rename: a crash leaves the old file or the new one
 // (cpmd does not link cpm_io's write_file_atomically).
 void write_atomically(const std::string& path, const std::string& text) {
@@ -91,7 +57,7 @@ void write_atomically(const std::string& path, const std::string& text) {
   if (fd >= 0) ::close(fd);
   if (ok && std::rename(tmp.c_str(), path.c_str()) == 0) return;
   ::unlink(tmp.c_str());
-  std::fprintf(stderr, "cpmd: cannot write %s: %s\n", path.c_str(), std::strerror(errno));
+  log::error("cannot write %s: %s", path.c_str(), std::strerror(errno));
 }
 
 // With the loop pinned, every other thread of cpmd (this one and all it
@@ -105,7 +71,7 @@ void keep_off_the_loops_cpu(int loop_cpu) {
   if (sched_getaffinity(0, sizeof set, &set) != 0 || !CPU_ISSET(loop_cpu, &set) || CPU_COUNT(&set) < 2) return;
   CPU_CLR(loop_cpu, &set);
   if (sched_setaffinity(0, sizeof set, &set) != 0)
-    std::fprintf(stderr, "cpmd: warning: cannot keep the other threads off CPU %d: %s\n", loop_cpu, std::strerror(errno));
+    log::warning("cannot keep the other threads off CPU %d: %s", loop_cpu, std::strerror(errno));
 }
 
 // --loop-cpu: a CPU this machine has, or -1 (any); the loop.cpu key, for one run.
@@ -167,7 +133,7 @@ int run(int argc, char** argv) {
     backend = std::make_unique<SimBackend>(std::make_unique<ctl::Machine>(load_model(cfg.sim.truth_model_file)), so);
   } else {
     backend = std::make_unique<CanopenBackend>(cfg.canopen);
-    std::fprintf(stderr, "cpmd: CAN %s: %s\n", cfg.canopen.interface.c_str(), cfg.canopen.load.describe().c_str());
+    log::info("CAN %s: %s", cfg.canopen.interface.c_str(), cfg.canopen.load.describe().c_str());
   }
   if (check) {
     try {
@@ -206,13 +172,12 @@ int run(int argc, char** argv) {
   auto reload_operators = [&](const char* why) {
     try {
       const auto t = load_operators(cfg.security.operators_dir);
-      for (const auto& p : t->problems) std::fprintf(stderr, "cpmd: operators: %s\n", p.c_str());
+      for (const auto& p : t->problems) log::warning("operators: %s", p.c_str());
       server.set_operators(t);
-      std::fprintf(stderr, "cpmd: operators: %zu may command (%s, %s)\n", t->operators.size(),
-                   cfg.security.operators_dir.c_str(), why);
+      log::info("operators: %zu may command (%s, %s)", t->operators.size(), cfg.security.operators_dir.c_str(), why);
     } catch (const Error& e) {
       server.note_reload_failure();
-      std::fprintf(stderr, "cpmd: operators: %s; %s\n", e.what(),
+      log::warning("operators: %s; %s", e.what(),
                    server.operators() ? "the operators loaded before stay"
                                       : "nobody can command this cpmd but stop (docs/security.md)");
     }
@@ -221,16 +186,15 @@ int run(int argc, char** argv) {
   reload_operators("at start");
   RtThread rt(*loop, cfg.loop);
   rt.start();
-  for (const auto& w : rt.setup().warnings) std::fprintf(stderr, "cpmd: warning: %s\n", w.c_str());
-  std::fprintf(stderr, "cpmd: %s backend, %.0f Hz, %s, model %s, LCM %s\n", backend->name(), cfg.loop.rate_hz,
-               rt.setup().realtime ? "SCHED_FIFO" : "normal scheduling", cfg.model_file.c_str(),
-               cfg.lcm.url.c_str());
+  for (const auto& w : rt.setup().warnings) log::warning("%s", w.c_str());
+  log::info("%s backend, %.0f Hz, %s, model %s, LCM %s", backend->name(), cfg.loop.rate_hz,
+            rt.setup().realtime ? "SCHED_FIFO" : "normal scheduling", cfg.model_file.c_str(), cfg.lcm.url.c_str());
   std::atomic<bool> stop_server{false};
   std::thread lcm_thread([&] {
     try {
       server.run(stop_server);
     } catch (const std::exception& e) {
-      std::fprintf(stderr, "cpmd: LCM thread: %s\n", e.what());
+      log::error("LCM thread: %s", e.what());
     }
   });
 
@@ -247,7 +211,7 @@ int run(int argc, char** argv) {
     ts.tv_nsec = static_cast<long>((tick - static_cast<double>(ts.tv_sec)) * 1e9);
     const int sig = sigtimedwait(&sigs, nullptr, &ts);
     if (sig == SIGINT || sig == SIGTERM) {
-      std::fprintf(stderr, "cpmd: %s: disabling the drives and stopping\n", strsignal(sig));
+      log::notice("%s: disabling the drives and stopping", strsignal(sig));
       break;
     }
     if (sig == SIGHUP) reload_operators("SIGHUP");
@@ -274,9 +238,8 @@ int run(int argc, char** argv) {
   backend->stop();
   const cpm_msgs::loop_stats_t& st = loop->current_stats();
   if (!stats_path.empty()) write_atomically(stats_path, stats_json(st, loop->fine_latency_histogram()));
-  std::fprintf(stderr, "cpmd: stopped after %lld cycles, %lld overruns, worst wake-up latency %.1f us\n",
-               static_cast<long long>(st.cycles), static_cast<long long>(st.overruns),
-               st.max_ns[kSeriesLatency] * 1e-3);
+  log::info("stopped after %lld cycles, %lld overruns, worst wake-up latency %.1f us", static_cast<long long>(st.cycles),
+            static_cast<long long>(st.overruns), st.max_ns[kSeriesLatency] * 1e-3);
   return 0;
 }
 
@@ -291,7 +254,7 @@ int main(int argc, char** argv) {
   try {
     return run(argc, argv);
   } catch (const std::exception& e) {
-    std::fprintf(stderr, "cpmd: error: %s\n", e.what());
+    cpm::daemon::log::error("%s", e.what());
     return 1;
   }
 }

@@ -16,6 +16,8 @@
 #include <random>
 #include <sstream>
 
+#include "cpm/daemon/log.hpp"
+
 namespace cpm::daemon {
 
 using cpm_msgs::ack_t;
@@ -298,7 +300,7 @@ bool Server::receive(const std::string& channel, const void* data, std::size_t s
   } catch (const std::exception& e) {
     // Nothing a sender writes may end the daemon; a message that cannot be
     // handled is dropped, loudly.
-    std::fprintf(stderr, "cpmd: dropped a message on %s: %s\n", channel.c_str(), e.what());
+    log::warning("dropped a message on %s: %s", channel.c_str(), e.what());
     ++undecodable_;
     return false;
   }
@@ -582,11 +584,10 @@ void Server::on_control(const std::uint8_t* raw, std::size_t size, const control
         c.controller.emplace(*machine, law_, gains_);
         c.machine = models_.add(std::move(machine));
       } catch (const ModelLoadError& e) {
-        std::fprintf(stderr, "cpmd: operator %s: %s\n", printable(session_operator_).c_str(),
-                     printable(e.what(), 1024).c_str());
+        log::warning("operator %s: %s", printable(session_operator_).c_str(), printable(e.what(), 1024).c_str());
         return refuse(ack_t::REASON_LOAD_FAILED, "load_model: " + e.summary);
       } catch (const std::exception& e) {
-        std::fprintf(stderr, "cpmd: operator %s: load_model: %s\n", printable(session_operator_).c_str(),
+        log::warning("operator %s: load_model: %s", printable(session_operator_).c_str(),
                      printable(e.what(), 1024).c_str());
         return refuse(ack_t::REASON_LOAD_FAILED, "load_model: the model cannot be used on this machine (cpmd's journal says why)");
       }
@@ -653,9 +654,8 @@ void Server::log_security(double now) {
                      junk = s.undecodable - logged_.undecodable,
                      quiet = s.refusals_unanswered - logged_.refusals_unanswered;
   if (no_op + mac + role + replay + holder + junk == 0) return;
-  std::fprintf(stderr,
-               "cpmd: security: refused %lld without an operator, %lld with a wrong MAC (last: %s), %lld beyond the "
-               "role, %lld replayed, %lld not from the holder; %lld undecodable; %lld refusals not answered (rate limit)\n",
+  log::warning("security: refused %lld without an operator, %lld with a wrong MAC (last: %s), %lld beyond the "
+               "role, %lld replayed, %lld not from the holder; %lld undecodable; %lld refusals not answered (rate limit)",
                static_cast<long long>(no_op), static_cast<long long>(mac), printable(last_stranger_).c_str(),
                static_cast<long long>(role), static_cast<long long>(replay), static_cast<long long>(holder),
                static_cast<long long>(junk), static_cast<long long>(quiet));

@@ -30,7 +30,8 @@ echo "== 3. the controller with the model the loop left, same circle, same machi
 "$CPM" sim "${COMMON[@]}" "${TRUTH[@]}" --model "$OUT/fitted.yaml" --log "$OUT/run_fitted.csv" \
   --json "$OUT/sim_fitted.json"
 
-rmse() { sed -n 's/.*"position_rmse": \([0-9.eE+-]*\).*/\1/p' "$1"; }
+# The JSON read by a JSON parser (Python's), not by its layout.
+rmse() { python3 -c 'import json, sys; print(json.load(open(sys.argv[1]))["position_rmse"])' "$1"; }
 before=$(rmse "$OUT/sim_nominal.json")
 after=$(rmse "$OUT/sim_fitted.json")
 awk -v b="$before" -v a="$after" 'BEGIN { printf "\ntracking RMSE: %.4f mm with the nominal model, %.4f mm with the fitted one (%.0f %% less)\n", b*1e3, a*1e3, 100*(1-a/b) }'

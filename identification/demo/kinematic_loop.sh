@@ -53,10 +53,14 @@ echo "== 3. calibrate (Kim's ball-bar method)"
 echo "== 4. diagnose the calibrated model on the same data"
 "$CPM" diagnose --model "$OUT/calibrated.yaml" --data "$OUT/ballbar.csv" --json "$OUT/diagnose.json" \
   --report "$OUT/diagnose.html" | sed -n '/^VERDICT/,/^$/p'
-missing=$(sed -n 's/.*"verdict": {"missing": "\([a-z_]*\)", "axis": \([0-9null]*\).*/\1 \2/p' "$OUT/diagnose.json")
+# The JSON read by a JSON parser (Python's), not by its layout.
+json_get() { python3 -c 'import json, sys; v = json.load(open(sys.argv[1]))
+for k in sys.argv[2:]: v = v[k]
+print("null" if v is None else v)' "$@"; }
+missing="$(json_get "$OUT/diagnose.json" verdict missing) $(json_get "$OUT/diagnose.json" verdict axis)"
 name=${missing% *}
 axis=${missing#* }
-if [ -z "$name" ]; then echo "diagnose found nothing missing: nothing to fit"; exit 1; fi
+if [ "$name" = null ]; then echo "diagnose found nothing missing: nothing to fit"; exit 1; fi
 
 echo "== 5. fit $name:$axis (the planes are recalibrated with it)"
 "$CPM" fit --model "$OUT/calibrated.yaml" --data "$OUT/ballbar.csv" --add "$name:$axis" \
@@ -64,8 +68,7 @@ echo "== 5. fit $name:$axis (the planes are recalibrated with it)"
 "$CPM" circular-test --kinematic --truth "$OUT/truth.yaml" --model "$OUT/fitted.yaml" \
   --svg "$OUT/circle_fitted.svg" --json "$OUT/circle_fitted.json" > /dev/null
 
-G() { sed -n 's/.*"G": \([0-9.eE+-]*\).*/\1/p' "$1" | head -n 1; }
-before=$(G "$OUT/circle_calibrated.json")
-after=$(G "$OUT/circle_fitted.json")
+before=$(json_get "$OUT/circle_calibrated.json" G)
+after=$(json_get "$OUT/circle_fitted.json" G)
 awk -v b="$before" -v a="$after" 'BEGIN { printf "\ncircular test G (150 mm, XY, both directions): %.2f µm calibrated, %.2f µm with the fitted effect (%.0f %% less)\n", b*1e6, a*1e6, 100*(1-a/b) }'
 echo "reports: $OUT/diagnose.html, $OUT/circle_calibrated.svg, $OUT/circle_fitted.svg   new model: $OUT/fitted.yaml"

@@ -6,6 +6,8 @@
 #include <optional>
 #include <sstream>
 
+#include <nlohmann/json.hpp>
+
 #include "cpm/identification/kinematic.hpp"
 #include "cpm/identification/report.hpp"
 
@@ -178,27 +180,23 @@ std::string loop_text(const LoopResult& R) {
 }
 
 std::string loop_json(const LoopResult& R, const std::string& data_file, const std::string& out_file) {
-  std::ostringstream o;
-  o << "{\"kind\": " << json_string(R.kind) << ", \"units\": " << json_string(R.units) << ", \"data_file\": "
-    << json_string(data_file) << ", \"out\": " << json_string(out_file) << ",\n \"waterfall\": [";
+  using Json = nlohmann::ordered_json;
+  Json waterfall = Json::array();
   for (std::size_t j = 0; j < R.steps.size(); ++j) {
     const LoopStep& s = R.steps[j];
-    o << (j ? "," : "") << "\n  {\"step\": " << j << ", \"added\": " << (s.added.empty() ? "null" : json_string(s.added))
-      << ", \"rms\": " << json_num(s.rms) << ", \"noise_floor\": " << json_num(s.noise_floor)
-      << ", \"verdict\": " << json_string(s.verdict) << "}";
+    waterfall.push_back({{"step", j}, {"added", s.added.empty() ? Json() : Json(s.added)}, {"rms", s.rms},
+                         {"noise_floor", s.noise_floor}, {"verdict", s.verdict}});
   }
-  o << "],\n \"effects\": [";
-  for (std::size_t j = 0; j < R.effects.size(); ++j) {
-    const CandidateResult& c = R.effects[j];
-    o << (j ? ", " : "") << "{\"effect\": " << json_string(c.effect) << ", \"axis\": "
-      << (c.axis >= 0 ? std::to_string(c.axis + 1) : "null") << ", \"params\": {";
-    for (std::size_t q = 0; q < c.params.size(); ++q)
-      o << (q ? ", " : "") << json_string(c.params[q].name) << ": " << json_num(c.params[q].value);
-    o << "}}";
+  Json effects = Json::array();
+  for (const CandidateResult& c : R.effects) {
+    Json params = Json::object();
+    for (const auto& p : c.params) params[p.name] = p.value;
+    effects.push_back({{"effect", c.effect}, {"axis", c.axis >= 0 ? Json(c.axis + 1) : Json()}, {"params", params}});
   }
-  o << "],\n \"outside_library\": " << (R.outside_library ? "true" : "false") << ", \"stop\": " << json_string(R.stop)
-    << "}\n";
-  return o.str();
+  const Json o = {{"kind", R.kind}, {"units", R.units}, {"data_file", data_file}, {"out", out_file},
+                  {"waterfall", waterfall}, {"effects", effects}, {"outside_library", R.outside_library},
+                  {"stop", R.stop}};
+  return o.dump(2, ' ', false, Json::error_handler_t::replace) + "\n";
 }
 
 std::string loop_html(const LoopResult& R, const std::string& data_file) {

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <optional>
 #include <sstream>
 
 #include "cpm/identification/kinematic.hpp"
@@ -272,24 +273,6 @@ std::string kinematic_plots(const KinematicProblem& P, const Eigen::VectorXd& be
 
 }  // namespace
 
-std::string json_string(const std::string& s) {
-  std::string o = "\"";
-  for (char c : s) {
-    if (c == '"' || c == '\\') { o += '\\'; o += c; }
-    else if (c == '\n') o += "\\n";
-    else if (static_cast<unsigned char>(c) < 0x20) { char b[8]; std::snprintf(b, sizeof b, "\\u%04x", c); o += b; }
-    else o += c;
-  }
-  return o + "\"";
-}
-
-std::string json_num(double v) {
-  if (!std::isfinite(v)) return "null";
-  char b[64];
-  std::snprintf(b, sizeof b, "%.10g", v);
-  return b;
-}
-
 ResidualSummary summarize(const MotionProblem& P, const Eigen::VectorXd& res, int bins) {
   ResidualSummary s;
   const int R = P.rows();
@@ -362,34 +345,6 @@ std::string summary_text(const ResidualSummary& s, const MotionProblem& P) {
   return o.str();
 }
 
-std::string summary_json(const ResidualSummary& s, const MotionProblem& P, const std::string& data_file,
-                         const std::string& model_file, int samples) {
-  std::ostringstream o;
-  auto vec = [&](const Vec3& v) { return "[" + json_num(v[0]) + ", " + json_num(v[1]) + ", " + json_num(v[2]) + "]"; };
-  auto arr = [&](const std::vector<double>& v, double scale = 1.0) {
-    std::string t = "[";
-    for (std::size_t k = 0; k < v.size(); ++k) t += (k ? ", " : "") + json_num(v[k] * scale);
-    return t + "]";
-  };
-  o << "{\"kind\": \"motion\", \"data_file\": " << json_string(data_file) << ", \"model_file\": " << json_string(model_file)
-    << ", \"samples\": " << samples << ", \"rows\": " << 3 * P.rows() << ", \"units\": \"N\",\n"
-    << " \"acceleration\": {\"source\": " << json_string(P.accel_source) << ", \"filter_half_width_samples\": " << P.half_width
-    << ", \"force_noise\": " << vec(P.force_noise) << "},\n"
-    << " \"rms\": " << json_num(s.rms) << ", \"max\": " << json_num(s.max) << ", \"axis_rms\": " << vec(s.axis_rms)
-    << ", \"axis_max\": " << vec(s.axis_max) << ",\n \"rms_forward\": " << vec(s.rms_forward)
-    << ", \"rms_backward\": " << vec(s.rms_backward) << ", \"mean_forward\": " << vec(s.mean_forward)
-    << ", \"mean_backward\": " << vec(s.mean_backward) << ",\n \"along_position\": [";
-  for (int i = 0; i < 3; ++i)
-    o << (i ? ", " : "") << "{\"centre\": " << arr(s.along_position[i].centre) << ", \"mean\": " << arr(s.along_position[i].mean)
-      << ", \"rms\": " << arr(s.along_position[i].rms) << "}";
-  o << "],\n \"over_time\": [";
-  for (int i = 0; i < 3; ++i)
-    o << (i ? ", " : "") << "{\"centre\": " << arr(s.over_time[i].centre) << ", \"mean\": " << arr(s.over_time[i].mean)
-      << ", \"rms\": " << arr(s.over_time[i].rms) << "}";
-  o << "]}\n";
-  return o.str();
-}
-
 std::string diagnosis_text(const Diagnosis& D) {
   std::ostringstream o;
   const bool motion = D.kind == "motion";
@@ -452,106 +407,6 @@ std::string diagnosis_text(const Diagnosis& D) {
   }
   for (const auto& n : D.notes) o << "note: " << n << "\n";
   for (const auto& w : D.warnings) o << "warning: " << w << "\n";
-  return o.str();
-}
-
-std::string diagnosis_json(const Diagnosis& D) {
-  std::ostringstream o;
-  auto axis = [](int a) { return a >= 0 ? std::to_string(a + 1) : std::string("null"); };
-  const MotionProblem& P = D.motion;
-  // "params": {...}, "std_errors": {...} of a candidate (SI units).
-  auto params_json = [&o](const CandidateResult& c) {
-    o << "\"params\": {";
-    for (std::size_t j = 0; j < c.params.size(); ++j)
-      o << (j ? ", " : "") << json_string(c.params[j].name) << ": " << json_num(c.params[j].value);
-    o << "}, \"std_errors\": {";
-    for (std::size_t j = 0; j < c.params.size(); ++j)
-      o << (j ? ", " : "") << json_string(c.params[j].name) << ": "
-        << (c.params[j].std_error >= 0 ? json_num(c.params[j].std_error) : "null");
-    o << "}";
-  };
-  o << "{\n \"kind\": " << json_string(D.kind) << ",\n \"samples\": " << D.samples << ",\n \"rows\": " << D.rows
-    << ",\n \"units\": " << json_string(D.units) << ",\n \"data_file\": " << json_string(D.data_file) << ",\n \"model_file\": "
-    << json_string(D.model_file) << ",\n";
-  if (D.kind == "motion")
-    o << " \"acceleration\": {\"source\": " << json_string(P.accel_source)
-      << ", \"filter_half_width_samples\": " << P.half_width << ", \"force_noise\": " << json_num(P.force_noise.maxCoeff())
-      << "},\n \"alignment\": {\"tau\": " << json_num(D.alignment.tau) << ", \"std_error\": "
-      << (D.alignment.std_error >= 0 ? json_num(D.alignment.std_error) : "null")
-      << ", \"periods\": " << json_num(D.alignment.tau / D.alignment.period) << ", \"period\": " << json_num(D.alignment.period)
-      << ", \"model_tau\": " << json_num(D.alignment.model_tau) << ", \"missing_tau\": " << json_num(D.alignment.missing())
-      << ", \"convention\": " << json_string(D.alignment.convention()) << "},\n";
-  o << " \"baseline\": {\"rms\": " << json_num(D.baseline_rms) << ", \"max\": " << json_num(D.baseline_max)
-    << ", \"axis_rms\": [" << json_num(D.baseline_axis_rms[0]) << ", " << json_num(D.baseline_axis_rms[1]) << ", "
-    << json_num(D.baseline_axis_rms[2]) << "]},\n \"base_refit\": {\"rms\": " << json_num(D.base_refit_rms)
-    << "},\n \"noise_floor\": " << json_num(D.noise_floor) << ",\n \"candidates\": [";
-  for (std::size_t k = 0; k < D.candidates.size(); ++k) {
-    const auto& c = D.candidates[k];
-    o << (k ? ",\n" : "\n") << "  {\"effect\": " << json_string(c.effect) << ", \"axis\": " << axis(c.axis)
-      << ", ";
-    params_json(c);
-    o << ", \"units\": {";
-    for (std::size_t j = 0; j < c.params.size(); ++j)
-      o << (j ? ", " : "") << json_string(c.params[j].name) << ": " << json_string(c.params[j].unit);
-    o << "}, \"rms_after\": " << json_num(c.rms_after) << ", \"explained\": " << json_num(c.explained)
-      << ", \"explained_beyond_base\": " << json_num(c.explained_beyond_base)
-      << ", \"significant\": " << (c.significant ? "true" : "false")
-      << ", \"identifiable\": " << (c.identifiable ? "true" : "false") << ", \"f_stat\": " << json_num(c.f_stat)
-      << ", \"p_value\": " << json_num(c.p_value) << ", \"p_adjusted\": " << json_num(c.p_adjusted)
-      << ", \"delta_bic\": " << json_num(c.delta_bic) << ", \"n_params\": " << c.n_params
-      << ", \"refits_base\": " << (c.refits_base ? "true" : "false") << ", \"note\": " << json_string(c.note)
-      << ", \"confounded_with\": [";
-    for (std::size_t j = 0; j < c.confounded.size(); ++j) {
-      const auto& cf = c.confounded[j];
-      o << (j ? ", " : "") << "{\"with\": " << json_string(cf.with) << ", \"effect\": "
-        << (cf.effect.empty() ? "null" : json_string(cf.effect)) << ", \"axis\": " << axis(cf.axis)
-        << ", \"correlation\": " << json_num(cf.correlation) << ", \"separate_by\": " << json_string(cf.separate_by) << "}";
-    }
-    o << "]}";
-  }
-  o << "\n ],\n \"verdict\": {\"missing\": ";
-  if (!D.outside_library.empty()) {
-    o << "\"outside_library\", \"axis\": " << axis(D.outside_library.front().axis);
-  } else if (D.verdict >= 0) {
-    const auto& v = D.candidates[D.verdict];
-    o << json_string(v.effect) << ", \"axis\": " << axis(v.axis);
-  } else {
-    o << "null, \"axis\": null";
-  }
-  o << ", \"ambiguous\": " << (D.ambiguous ? "true" : "false") << ", \"also\": [";
-  for (std::size_t j = 0; j < D.also.size(); ++j)
-    o << (j ? ", " : "") << "{\"effect\": " << json_string(D.candidates[D.also[j]].effect) << ", \"axis\": "
-      << axis(D.candidates[D.also[j]].axis) << "}";
-  // Every effect named, best first, with its parameters (SI units).
-  o << "], \"effects\": [";
-  const std::vector<int> found = D.found();
-  for (std::size_t j = 0; j < found.size(); ++j) {
-    const auto& c = D.candidates[static_cast<std::size_t>(found[j])];
-    o << (j ? ", " : "") << "{\"effect\": " << json_string(c.effect) << ", \"axis\": " << axis(c.axis) << ", ";
-    params_json(c);
-    o << ", \"implausible\": " << (detail::implausible(c).empty() ? "null" : json_string(detail::implausible(c)))
-      << ", \"alternatives\": [";
-    for (std::size_t q = 0; q < c.alternatives.size(); ++q) o << (q ? ", " : "") << json_string(c.alternatives[q]);
-    o << "]}";
-  }
-  auto structure_json = [&](const std::vector<StructureFinding>& items) {
-    for (std::size_t j = 0; j < items.size(); ++j) {
-      const auto& f = items[j];
-      o << (j ? ", " : "") << "\n  {\"kind\": " << json_string(f.kind) << ", \"axis\": " << axis(f.axis)
-        << ", \"coordinate\": " << json_string(f.coordinate) << ", \"location\": " << json_num(f.location)
-        << ", \"size\": " << json_num(f.size) << ", \"z\": " << json_num(f.z) << ", \"text\": " << json_string(f.text) << "}";
-    }
-  };
-  // Structure no library effect describes that leads the verdict (verdict.missing = "outside_library").
-  o << "], \"outside_library\": [";
-  structure_json(D.outside_library);
-  o << "], \"text\": " << json_string(D.verdict_text) << "},\n \"structure\": [";
-  structure_json(D.structure);
-  o << "],\n \"notes\": [";
-  for (std::size_t j = 0; j < D.notes.size(); ++j) o << (j ? ", " : "") << json_string(D.notes[j]);
-  o << "],\n \"warnings\": [";
-  for (std::size_t j = 0; j < D.warnings.size(); ++j) o << (j ? ", " : "") << json_string(D.warnings[j]);
-  o << "]\n}\n";
   return o.str();
 }
 
@@ -648,6 +503,134 @@ std::string diagnosis_html(const Diagnosis& D) {
 // ---------------------------------------------------------------------------
 // Kinematic data (ball-bar, positions): cpm compare
 
+namespace {
+
+constexpr double kPi = 3.141592653589793;
+
+// RMS and mean of the residual by the direction each axis approached from.
+void summarize_by_direction(const KinematicProblem& P, const Eigen::VectorXd& res, KinematicSummary& s) {
+  const int per = P.per_sample;
+  for (int i = 0; i < 3; ++i) {
+    double sf = 0, sb = 0, mf = 0, mb = 0;
+    int nf = 0, nb = 0;
+    for (int r = 0; r < P.rows(); ++r) {
+      const double e = res(r);
+      if (P.inputs[static_cast<std::size_t>(r / per)].dir[i] > 0) { sf += e * e; mf += e; ++nf; }
+      else { sb += e * e; mb += e; ++nb; }
+    }
+    s.rms_forward[i] = nf ? std::sqrt(sf / nf) : 0.0;
+    s.rms_backward[i] = nb ? std::sqrt(sb / nb) : 0.0;
+    s.mean_forward[i] = nf ? mf / nf : 0.0;
+    s.mean_backward[i] = nb ? mb / nb : 0.0;
+  }
+}
+
+// The measured bar ends relative to the pivot (the given model's forward
+// kinematics), their mean distance R, and the machine plane they lie in when
+// they lie on a circle about the pivot: within 2 % of R of the plane, their
+// distance within 1 % of R (RMS). Nothing otherwise.
+struct CirclePoints {
+  std::vector<Vec3> v;
+  double R = 0.0;
+  ctl::CirclePlane plane = ctl::CirclePlane::xy;
+};
+
+std::optional<CirclePoints> circle_points(const KinematicProblem& P) {
+  CirclePoints c;
+  c.v.resize(static_cast<std::size_t>(P.samples()));
+  double rsum = 0.0;
+  for (int j = 0; j < P.samples(); ++j) {
+    const auto u = static_cast<std::size_t>(j);
+    Vec3 p;
+    if (!kin::forward(P.given, P.d[u], P.inputs[u], p)) return std::nullopt;
+    c.v[u] = p - P.pivot;
+    rsum += c.v[u].norm();
+  }
+  c.R = rsum / P.samples();
+  Vec3 mean = Vec3::Zero(), sq = Vec3::Zero();
+  double rs = 0.0;
+  for (const auto& x : c.v) { mean += x; rs += (x.norm() - c.R) * (x.norm() - c.R); }
+  mean /= P.samples();
+  for (const auto& x : c.v) sq += (x - mean).cwiseAbs2();
+  Eigen::Index normal = 0;
+  sq.minCoeff(&normal);
+  if (std::sqrt(sq[normal] / P.samples()) > 0.02 * c.R || std::sqrt(rs / P.samples()) > 0.01 * c.R) return std::nullopt;
+  c.plane = normal == 2 ? ctl::CirclePlane::xy : (normal == 0 ? ctl::CirclePlane::yz : ctl::CirclePlane::zx);
+  return c;
+}
+
+// Each point's angle in the plane, in [0, 2 pi).
+std::vector<double> angles_in_plane(const CirclePoints& c) {
+  const auto [a, b] = cal::plane_axes(c.plane);
+  std::vector<double> ang(c.v.size());
+  for (std::size_t j = 0; j < c.v.size(); ++j) {
+    double t = std::atan2(c.v[j][b], c.v[j][a]);
+    if (t < 0) t += 2.0 * kPi;
+    ang[j] = t;
+  }
+  return ang;
+}
+
+// The angle the points cover: the full turn less the widest gap between them.
+double angular_cover(std::vector<double> all) {
+  std::sort(all.begin(), all.end());
+  double gap = all.front() + 2.0 * kPi - all.back();
+  for (std::size_t k = 1; k < all.size(); ++k) gap = std::max(gap, all[k] - all[k - 1]);
+  return 2.0 * kPi - gap;
+}
+
+// Each reading into the CCW or CW trace, by the direction of travel: the
+// angle's progression to the next sample of the same run (the previous one
+// at a run's end).
+void split_by_travel(const KinematicProblem& P, const Eigen::VectorXd& res, const std::vector<double>& ang,
+                     cal::CircularTestResult& c) {
+  for (int j = 0; j < P.samples(); ++j) {
+    const auto u = static_cast<std::size_t>(j);
+    const long run = P.run.empty() ? 0 : P.run[u];
+    int nb = j + 1 < P.samples() && (P.run.empty() || P.run[u + 1] == run) ? j + 1 : j - 1;
+    if (nb < 0 || (!P.run.empty() && P.run[static_cast<std::size_t>(nb)] != run)) nb = j;
+    double dth = std::remainder(ang[static_cast<std::size_t>(nb)] - ang[u], 2.0 * kPi);
+    if (nb < j) dth = -dth;
+    auto& tr = dth >= 0.0 ? c.ccw : c.cw;
+    tr.angle.push_back(ang[u]);
+    tr.deviation.push_back(-res(j));  // bar reading minus the model's distance
+  }
+}
+
+void sort_by_angle(cal::CircularTrace& t) {
+  std::vector<std::size_t> idx(t.angle.size());
+  for (std::size_t k = 0; k < idx.size(); ++k) idx[k] = k;
+  std::sort(idx.begin(), idx.end(), [&](std::size_t x, std::size_t y) { return t.angle[x] < t.angle[y]; });
+  cal::CircularTrace o;
+  for (auto k : idx) { o.angle.push_back(t.angle[k]); o.deviation.push_back(t.deviation[k]); }
+  t = o;
+}
+
+// Ball-bar readings on a circle about the pivot in a machine plane, over at
+// least 3/4 of a turn: the polar trace with G, H, F (ISO 230-4).
+void summarize_circle(const KinematicProblem& P, const Eigen::VectorXd& res, KinematicSummary& s) {
+  if (P.kind != "ballbar" || P.samples() < 16) return;
+  const std::optional<CirclePoints> pts = circle_points(P);
+  if (!pts) return;
+  const std::vector<double> ang = angles_in_plane(*pts);
+  cal::CircularTestResult c;
+  c.spec.radius = pts->R;
+  c.spec.plane = pts->plane;
+  c.pivot = P.pivot;
+  split_by_travel(P, res, ang, c);
+  if (angular_cover(ang) < 1.5 * kPi) return;
+  if (c.ccw.angle.empty() || c.cw.angle.empty()) {
+    (c.ccw.angle.empty() ? c.ccw : c.cw) = c.ccw.angle.empty() ? c.cw : c.ccw;
+    s.circle_note = "one direction of travel only: the hysteresis H is not measured (shown as 0)";
+  }
+  sort_by_angle(c.ccw);
+  sort_by_angle(c.cw);
+  cal::evaluate_circular_traces(c);
+  s.circle = c;
+}
+
+}  // namespace
+
 KinematicSummary summarize_kinematic(const KinematicProblem& P, const Eigen::VectorXd& res) {
   KinematicSummary s;
   const int per = P.per_sample;
@@ -658,88 +641,8 @@ KinematicSummary summarize_kinematic(const KinematicProblem& P, const Eigen::Vec
     for (int j = 0; j < P.samples(); ++j) q += res(per * j + k) * res(per * j + k);
     s.component_rms[k] = std::sqrt(q / std::max(1, P.samples()));
   }
-  if (P.has_dir)
-    for (int i = 0; i < 3; ++i) {
-      double sf = 0, sb = 0, mf = 0, mb = 0;
-      int nf = 0, nb = 0;
-      for (int r = 0; r < P.rows(); ++r) {
-        const double e = res(r);
-        if (P.inputs[static_cast<std::size_t>(r / per)].dir[i] > 0) { sf += e * e; mf += e; ++nf; }
-        else { sb += e * e; mb += e; ++nb; }
-      }
-      s.rms_forward[i] = nf ? std::sqrt(sf / nf) : 0.0;
-      s.rms_backward[i] = nb ? std::sqrt(sb / nb) : 0.0;
-      s.mean_forward[i] = nf ? mf / nf : 0.0;
-      s.mean_backward[i] = nb ? mb / nb : 0.0;
-    }
-  // A circle about the pivot in a machine plane: the polar trace with G, H, F.
-  if (P.kind != "ballbar" || P.samples() < 16) return s;
-  std::vector<Vec3> v(static_cast<std::size_t>(P.samples()));
-  double rsum = 0.0;
-  for (int j = 0; j < P.samples(); ++j) {
-    Vec3 p;
-    if (!kin::forward(P.given, P.d[static_cast<std::size_t>(j)], P.inputs[static_cast<std::size_t>(j)], p)) return s;
-    v[static_cast<std::size_t>(j)] = p - P.pivot;
-    rsum += v[static_cast<std::size_t>(j)].norm();
-  }
-  const double R = rsum / P.samples();
-  Vec3 mean = Vec3::Zero(), sq = Vec3::Zero();
-  double rs = 0.0;
-  for (const auto& x : v) { mean += x; rs += (x.norm() - R) * (x.norm() - R); }
-  mean /= P.samples();
-  for (const auto& x : v) sq += (x - mean).cwiseAbs2();
-  Eigen::Index normal = 0;
-  sq.minCoeff(&normal);
-  if (std::sqrt(sq[normal] / P.samples()) > 0.02 * R || std::sqrt(rs / P.samples()) > 0.01 * R) return s;
-  const ctl::CirclePlane plane = normal == 2 ? ctl::CirclePlane::xy : (normal == 0 ? ctl::CirclePlane::yz : ctl::CirclePlane::zx);
-  const auto [a, b] = cal::plane_axes(plane);
-  std::vector<double> ang(static_cast<std::size_t>(P.samples()));
-  for (int j = 0; j < P.samples(); ++j) {
-    double t = std::atan2(v[static_cast<std::size_t>(j)][b], v[static_cast<std::size_t>(j)][a]);
-    if (t < 0) t += 2.0 * 3.141592653589793;
-    ang[static_cast<std::size_t>(j)] = t;
-  }
-  // Direction of travel from the angle's progression within each run.
-  cal::CircularTestResult c;
-  c.spec.radius = R;
-  c.spec.plane = plane;
-  c.pivot = P.pivot;
-  for (int j = 0; j < P.samples(); ++j) {
-    const auto u = static_cast<std::size_t>(j);
-    const long run = P.run.empty() ? 0 : P.run[u];
-    int nb = j + 1 < P.samples() && (P.run.empty() || P.run[u + 1] == run) ? j + 1 : j - 1;
-    if (nb < 0 || (!P.run.empty() && P.run[static_cast<std::size_t>(nb)] != run)) nb = j;
-    double dth = std::remainder(ang[static_cast<std::size_t>(nb)] - ang[u], 2.0 * 3.141592653589793);
-    if (nb < j) dth = -dth;
-    auto& tr = dth >= 0.0 ? c.ccw : c.cw;
-    tr.angle.push_back(ang[u]);
-    tr.deviation.push_back(-res(j));  // bar reading minus the model's distance
-  }
-  double cover = 0.0;
-  {
-    std::vector<double> all = ang;
-    std::sort(all.begin(), all.end());
-    double gap = all.front() + 2.0 * 3.141592653589793 - all.back();
-    for (std::size_t k = 1; k < all.size(); ++k) gap = std::max(gap, all[k] - all[k - 1]);
-    cover = 2.0 * 3.141592653589793 - gap;
-  }
-  if (cover < 1.5 * 3.141592653589793) return s;
-  if (c.ccw.angle.empty() || c.cw.angle.empty()) {
-    (c.ccw.angle.empty() ? c.ccw : c.cw) = c.ccw.angle.empty() ? c.cw : c.ccw;
-    s.circle_note = "one direction of travel only: the hysteresis H is not measured (shown as 0)";
-  }
-  auto sort_trace = [](cal::CircularTrace& t) {
-    std::vector<std::size_t> idx(t.angle.size());
-    for (std::size_t k = 0; k < idx.size(); ++k) idx[k] = k;
-    std::sort(idx.begin(), idx.end(), [&](std::size_t x, std::size_t y) { return t.angle[x] < t.angle[y]; });
-    cal::CircularTrace o;
-    for (auto k : idx) { o.angle.push_back(t.angle[k]); o.deviation.push_back(t.deviation[k]); }
-    t = o;
-  };
-  sort_trace(c.ccw);
-  sort_trace(c.cw);
-  cal::evaluate_circular_traces(c);
-  s.circle = c;
+  if (P.has_dir) summarize_by_direction(P, res, s);
+  summarize_circle(P, res, s);
   return s;
 }
 
@@ -766,27 +669,6 @@ std::string kinematic_summary_text(const KinematicProblem& P, const KinematicSum
       << num(c.F_max * 1e6, 3) << " µm\n";
     if (!s.circle_note.empty()) o << "  " << s.circle_note << "\n";
   }
-  return o.str();
-}
-
-std::string kinematic_summary_json(const KinematicProblem& P, const KinematicSummary& s, const std::string& model_file) {
-  std::ostringstream o;
-  auto vec = [](const Vec3& v) { return "[" + json_num(v[0]) + ", " + json_num(v[1]) + ", " + json_num(v[2]) + "]"; };
-  o << "{\"kind\": " << json_string(P.kind) << ", \"data_file\": " << json_string(P.data_file)
-    << ", \"model_file\": " << json_string(model_file) << ", \"samples\": " << P.samples() << ", \"rows\": " << P.rows()
-    << ", \"units\": \"m\",\n \"rms\": " << json_num(s.rms) << ", \"max\": " << json_num(s.max)
-    << ", \"component_rms\": " << vec(s.component_rms);
-  if (P.has_dir)
-    o << ",\n \"by_direction\": {\"rms_forward\": " << vec(s.rms_forward) << ", \"rms_backward\": " << vec(s.rms_backward)
-      << ", \"mean_forward\": " << vec(s.mean_forward) << ", \"mean_backward\": " << vec(s.mean_backward) << "}";
-  if (s.circle) {
-    const auto& c = *s.circle;
-    o << ",\n \"circle\": {\"plane\": " << json_string(cal::plane_name(c.spec.plane)) << ", \"radius\": "
-      << json_num(c.spec.radius) << ", \"G\": " << json_num(c.G_bidirectional) << ", \"G_ccw\": " << json_num(c.ccw_metrics.G)
-      << ", \"G_cw\": " << json_num(c.cw_metrics.G) << ", \"H\": " << json_num(c.H) << ", \"F_max\": " << json_num(c.F_max)
-      << ", \"F_min\": " << json_num(c.F_min) << "}";
-  }
-  o << "\n}\n";
   return o.str();
 }
 

@@ -9,6 +9,8 @@
 #include <numbers>
 #include <memory>
 
+#include <nlohmann/json.hpp>
+
 #include "cpm/identification/kinematic.hpp"
 #include "cpm/identification/report.hpp"
 #include "kin_data.hpp"
@@ -347,6 +349,7 @@ TEST(KinematicCircle, ACircularTestIsDiagnosedOnWhatItCanSee) {
     }
   }
   EXPECT_EQ(ident::diagnosis_json(B).find("nan"), std::string::npos);
+  EXPECT_TRUE(nlohmann::json::accept(ident::diagnosis_json(B)));
   // The fit recalibrates only what the circle determines (a tilt it cannot see stays put).
   const ident::KinematicFit F =
       ident::fit_kinematic(circle_data({{"backlash", 0, {6e-6, 0, 0}}}, true), nominal.kinematics, {{"backlash", 0}});
@@ -521,18 +524,24 @@ TEST(KinematicCompare, CircleDataGetTheCircularTestFigures) {
   EXPECT_NEAR(s.circle->G_bidirectional, ref.G_bidirectional, 2e-6 + 0.02 * ref.G_bidirectional);
   const std::string html = ident::kinematic_compare_html(P, s, "circle");
   EXPECT_NE(html.find("<svg"), std::string::npos);
-  EXPECT_NE(ident::kinematic_summary_json(P, s, "m.yaml").find("\"G\": "), std::string::npos);
+  const auto js = nlohmann::json::parse(ident::kinematic_summary_json(P, s, "m.yaml"));
+  EXPECT_EQ(js["circle"]["G"].get<double>(), s.circle->G_bidirectional) << "the JSON reads back exactly";
+  EXPECT_EQ(js["circle"]["plane"], cal::plane_name(ctl::CirclePlane::xy));
 }
 
 // The JSON contract of issue 4 for kinematic data.
 TEST(KinematicReport, JsonContractAndHtml) {
   const io::BallbarData b = test::kim_ballbar({{"cyclic_error", 2, {3e-6, 0.02, 1.0}}}, ballbar_poses());
   const Diagnosis D = diagnose(b);
-  const std::string js = ident::diagnosis_json(D);
-  for (const char* key : {"\"kind\": \"ballbar\"", "\"samples\": ", "\"units\": \"m\"", "\"baseline\": {\"rms\": ",
-                          "\"candidates\": [", "\"rms_after\": ", "\"explained\": ", "\"significant\": ",
-                          "\"verdict\": {\"missing\": \"cyclic_error\", \"axis\": 3"})
-    EXPECT_NE(js.find(key), std::string::npos) << key;
+  const auto js = nlohmann::json::parse(ident::diagnosis_json(D));
+  EXPECT_EQ(js["kind"], "ballbar");
+  EXPECT_EQ(js["samples"], D.samples);
+  EXPECT_EQ(js["units"], "m");
+  EXPECT_EQ(js["baseline"]["rms"].get<double>(), D.baseline_rms);
+  ASSERT_EQ(js["candidates"].size(), D.candidates.size());
+  for (const char* key : {"rms_after", "explained", "significant"}) EXPECT_TRUE(js["candidates"][0].contains(key)) << key;
+  EXPECT_EQ(js["verdict"]["missing"], "cyclic_error");
+  EXPECT_EQ(js["verdict"]["axis"], 3);
   const std::string html = ident::diagnosis_html(D);
   EXPECT_NE(html.find("cyclic_error[axis 3]"), std::string::npos);
   EXPECT_NE(html.find("<svg"), std::string::npos);

@@ -10,6 +10,8 @@
 #include <sstream>
 #include <thread>
 
+#include <nlohmann/json.hpp>
+
 #include "cpm/identification/engine.hpp"
 #include "cpm/identification/loop.hpp"
 #include "cpm/identification/motion.hpp"
@@ -39,27 +41,6 @@ bool is_delay_cell(Timing t) { return delay_periods(t) > 0.0; }
 std::uint64_t log_seed(int seed, int effect_index, int multiple_index) {
   return static_cast<std::uint64_t>(seed) * 1000ULL + static_cast<std::uint64_t>(effect_index + 1) * 10ULL +
          static_cast<std::uint64_t>(multiple_index);
-}
-
-std::string json_escape(const std::string& s) {
-  std::string o;
-  for (char c : s) {
-    if (c == '"' || c == '\\') o += '\\';
-    if (c == '\n') {
-      o += "\\n";
-      continue;
-    }
-    o += c;
-  }
-  return o;
-}
-
-std::string json_num(double x) {
-  if (!std::isfinite(x)) return "null";
-  std::ostringstream os;
-  os.precision(10);
-  os << x;
-  return os.str();
 }
 
 }  // namespace
@@ -717,104 +698,119 @@ std::string markdown_table(const MatrixResult& r) {
 
 namespace {
 
-template <class T, class F>
-std::string json_list(const std::vector<T>& v, F item) {
-  std::string s;
-  for (std::size_t i = 0; i < v.size(); ++i) s += (i ? ", " : "") + item(v[i]);
-  return "[" + s + "]";
+using Json = nlohmann::ordered_json;
+
+// Names of enum values, as a JSON array.
+template <class T, class Name>
+Json names_json(const std::vector<T>& v, Name name) {
+  Json a = Json::array();
+  for (const T& x : v) a.push_back(name(x));
+  return a;
 }
 
-std::string json_str(const std::string& s) { return "\"" + json_escape(s) + "\""; }
-
-std::string options_json(const MatrixOptions& o) {
-  std::ostringstream os;
-  os << "{\"seeds\": " << o.seeds << ", \"first_seed\": " << o.first_seed << ", \"duration_s\": " << json_num(o.duration)
-     << ", \"threads\": " << o.threads << ", \"rates\": " << json_list(o.rates, json_num)
-     << ", \"timings\": " << json_list(o.timings, [](Timing t) { return json_str(timing_name(t)); })
-     << ", \"noise\": " << json_list(o.noises, [](NoisePlacement n) { return json_str(noise_name(n)); })
-     << ", \"multiples\": " << json_list(o.multiples, json_num)
-     << ", \"combos\": " << json_list(o.combos, [](int n) { return std::to_string(n); }) << "}";
-  return os.str();
+Json options_json(const MatrixOptions& o) {
+  return {{"seeds", o.seeds},
+          {"first_seed", o.first_seed},
+          {"duration_s", o.duration},
+          {"threads", o.threads},
+          {"rates", o.rates},
+          {"timings", names_json(o.timings, timing_name)},
+          {"noise", names_json(o.noises, noise_name)},
+          {"multiples", o.multiples},
+          {"combos", o.combos}};
 }
 
-std::string cell_json(const CellSummary& c) {
-  std::ostringstream os;
-  os << "{\"timing\": \"" << timing_name(c.timing) << "\", \"noise\": \"" << noise_name(c.noise)
-     << "\", \"rate\": " << json_num(c.rate) << ", \"hits\": {";
-  for (std::size_t k = 0; k < c.hits_by_multiple.size(); ++k)
-    os << (k ? ", " : "") << "\"" << json_num(c.hits_by_multiple[k].first) << "\": ["
-       << c.hits_by_multiple[k].second.first << ", " << c.hits_by_multiple[k].second.second << "]";
-  os << "}, \"null_clean\": [" << c.null_clean << ", " << c.n_null << "], \"phantoms\": " << c.phantoms
-     << ", \"named\": " << c.named << ", \"logs\": " << c.logs << ", \"logs_with_phantom\": " << c.logs_with_phantom
-     << ", \"errors\": " << c.errors << ", \"median_tau_error_periods\": " << json_num(c.median_tau_error)
-     << ", \"tau_named\": " << c.tau_named << ", \"phantom_labels\": {";
-  for (std::size_t k = 0; k < c.top_phantoms.size(); ++k)
-    os << (k ? ", " : "") << json_str(c.top_phantoms[k].first) << ": " << c.top_phantoms[k].second;
-  os << "}";
+Json cell_json(const CellSummary& c) {
+  Json hits = Json::object();  // by multiple, "10": [named, planted]
+  for (const auto& [multiple, hn] : c.hits_by_multiple) hits[fmt(multiple, 10)] = {hn.first, hn.second};
+  Json phantoms = Json::object();
+  for (const auto& [label, n] : c.top_phantoms) phantoms[label] = n;
+  Json o = {{"timing", timing_name(c.timing)},
+            {"noise", noise_name(c.noise)},
+            {"rate", c.rate},
+            {"hits", hits},
+            {"null_clean", {c.null_clean, c.n_null}},
+            {"phantoms", c.phantoms},
+            {"named", c.named},
+            {"logs", c.logs},
+            {"logs_with_phantom", c.logs_with_phantom},
+            {"errors", c.errors},
+            {"median_tau_error_periods", c.median_tau_error},
+            {"tau_named", c.tau_named},
+            {"phantom_labels", phantoms}};
   if (c.n_combo)
-    os << ", \"combo\": {\"logs\": " << c.n_combo << ", \"all_named\": " << c.combo_all_named
-       << ", \"loop_within\": " << c.loop_within
-       << ", \"median_final_over_floor\": " << json_num(c.median_final_over_floor) << "}";
-  return os.str() + "}";
+    o["combo"] = {{"logs", c.n_combo},
+                  {"all_named", c.combo_all_named},
+                  {"loop_within", c.loop_within},
+                  {"median_final_over_floor", c.median_final_over_floor}};
+  return o;
 }
 
 // A combination log's planted list and waterfall.
-std::string combo_json(const LogResult& l) {
-  std::ostringstream os;
-  os << ", \"combo\": " << json_list(l.combo, [](const PlantedEffect& p) {
-    return "{\"effect\": " + json_str(p.name) + ", \"axis\": " + std::to_string(p.axis) +
-           ", \"values\": " + json_list(p.values, json_num) + "}";
-  });
-  os << ", \"planted_named\": " << l.planted_named << ", \"waterfall\": " << json_list(l.waterfall, [](const ident::LoopStep& s) {
-    return "{\"added\": " + (s.added.empty() ? std::string("null") : json_str(s.added)) + ", \"rms\": " +
-           json_num(s.rms) + ", \"noise_floor\": " + json_num(s.noise_floor) + ", \"verdict\": " + json_str(s.verdict) +
-           "}";
-  });
-  os << ", \"loop_within\": " << (l.loop_within ? "true" : "false") << ", \"loop_stop\": " << json_str(l.loop_stop)
-     << ", \"final_over_floor\": " << json_num(l.final_over_floor()) << ", \"loop_s\": " << json_num(l.loop_s);
-  return os.str();
+void add_combo(Json& o, const LogResult& l) {
+  Json combo = Json::array();
+  for (const PlantedEffect& p : l.combo) combo.push_back({{"effect", p.name}, {"axis", p.axis}, {"values", p.values}});
+  Json waterfall = Json::array();
+  for (const ident::LoopStep& s : l.waterfall)
+    waterfall.push_back({{"added", s.added.empty() ? Json() : Json(s.added)}, {"rms", s.rms},
+                         {"noise_floor", s.noise_floor}, {"verdict", s.verdict}});
+  o["combo"] = std::move(combo);
+  o["planted_named"] = l.planted_named;
+  o["waterfall"] = std::move(waterfall);
+  o["loop_within"] = l.loop_within;
+  o["loop_stop"] = l.loop_stop;
+  o["final_over_floor"] = l.final_over_floor();
+  o["loop_s"] = l.loop_s;
 }
 
-std::string log_json(const LogResult& l) {
-  std::ostringstream os;
-  os << "{\"timing\": \"" << timing_name(l.timing) << "\", \"noise\": \"" << noise_name(l.noise)
-     << "\", \"rate\": " << json_num(l.rate) << ", \"seed\": " << l.seed << ", \"log_seed\": " << l.log_seed
-     << ", \"planted\": " << (l.planted.empty() ? std::string("null") : json_str(l.planted)) << ", \"axis\": " << l.axis
-     << ", \"multiple\": " << json_num(l.multiple) << ", \"amplitude\": " << json_num(l.amplitude) << ", \"named\": "
-     << json_list(l.named, [](const NamedEffect& n) {
-          return "{\"effect\": " + json_str(n.effect) + ", \"axis\": " + std::to_string(n.axis) +
-                 (std::isfinite(n.tau) ? ", \"tau\": " + json_num(n.tau) : std::string()) + "}";
-        });
-  os << ", \"hit\": " << (l.hit ? "true" : "false") << ", \"phantoms\": " << json_list(l.phantoms, json_str)
-     << ", \"tau_error_periods\": " << json_num(l.tau_error_periods) << ", \"amplitude_z\": " << json_num(l.amplitude_z)
-     << ", \"error\": " << json_str(l.error)
-     << ", \"generate_s\": " << json_num(l.generate_s) << ", \"diagnose_s\": " << json_num(l.diagnose_s);
-  if (l.is_combo()) os << combo_json(l);
-  return os.str() + "}";
+Json log_json(const LogResult& l) {
+  Json named = Json::array();
+  for (const NamedEffect& n : l.named) {
+    Json e = {{"effect", n.effect}, {"axis", n.axis}};
+    if (std::isfinite(n.tau)) e["tau"] = n.tau;
+    named.push_back(std::move(e));
+  }
+  Json o = {{"timing", timing_name(l.timing)},
+            {"noise", noise_name(l.noise)},
+            {"rate", l.rate},
+            {"seed", l.seed},
+            {"log_seed", l.log_seed},
+            {"planted", l.planted.empty() ? Json() : Json(l.planted)},
+            {"axis", l.axis},
+            {"multiple", l.multiple},
+            {"amplitude", l.amplitude},
+            {"named", named},
+            {"hit", l.hit},
+            {"phantoms", l.phantoms},
+            {"tau_error_periods", l.tau_error_periods},
+            {"amplitude_z", l.amplitude_z},
+            {"error", l.error},
+            {"generate_s", l.generate_s},
+            {"diagnose_s", l.diagnose_s}};
+  if (l.is_combo()) add_combo(o, l);
+  return o;
 }
 
-std::string unit_json(const MatrixResult::Unit& u) {
-  return "{\"noise\": \"" + std::string(noise_name(u.noise)) + "\", \"rate\": " + json_num(u.rate) +
-         ", \"effect\": " + json_str(u.effect) + ", \"axis\": " + std::to_string(u.axis) + ", \"value\": " +
-         json_num(u.value) + "}";
+Json unit_json(const MatrixResult::Unit& u) {
+  return {{"noise", noise_name(u.noise)}, {"rate", u.rate}, {"effect", u.effect}, {"axis", u.axis}, {"value", u.value}};
 }
 
-// One item a line, indented under a top-level key.
 template <class T, class F>
-std::string json_rows(const std::vector<T>& v, F item) {
-  std::string s = "[\n";
-  for (std::size_t i = 0; i < v.size(); ++i) s += "    " + item(v[i]) + (i + 1 < v.size() ? ",\n" : "\n");
-  return s + "  ]";
+Json rows_json(const std::vector<T>& v, F item) {
+  Json a = Json::array();
+  for (const T& x : v) a.push_back(item(x));
+  return a;
 }
 
 }  // namespace
 
 std::string to_json(const MatrixResult& r) {
-  std::ostringstream os;
-  os << "{\n  \"options\": " << options_json(r.options) << ",\n  \"wall_s\": " << json_num(r.wall_s)
-     << ",\n  \"unit_amplitudes\": " << json_rows(r.units, unit_json) << ",\n  \"cells\": " << json_rows(r.cells, cell_json)
-     << ",\n  \"logs\": " << json_rows(r.logs, log_json) << "\n}\n";
-  return os.str();
+  const Json o = {{"options", options_json(r.options)},
+                  {"wall_s", r.wall_s},
+                  {"unit_amplitudes", rows_json(r.units, unit_json)},
+                  {"cells", rows_json(r.cells, cell_json)},
+                  {"logs", rows_json(r.logs, log_json)}};
+  return o.dump(2, ' ', false, Json::error_handler_t::replace) + "\n";
 }
 
 

@@ -33,11 +33,14 @@
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
+#include <functional>
 #include <iostream>
 #include <map>
 #include <sstream>
 #include <string>
 #include <vector>
+
+#include <CLI/CLI.hpp>
 
 #include "matrix.hpp"
 
@@ -58,16 +61,6 @@ std::vector<double> numbers(const std::string& s) {
   std::vector<double> out;
   for (const std::string& x : split(s)) out.push_back(std::stod(x));
   return out;
-}
-
-int usage(const char* msg) {
-  std::fprintf(stderr,
-               "%s\nusage: cpm_robustness [--seeds N] [--first-seed K] [--rates 250,1000,4000] "
-               "[--timings sampled,zoh,delay1,delay1_5] [--noise plant,command] [--effects NAME,...|none] "
-               "[--multiples 3,10] [--no-null] [--duration S] [--threads N] [--json FILE] [--write-logs DIR] "
-               "[--combos 2,3] [--quick] [--quick-combos] [--check] [--estimate] [--quiet]\n",
-               msg);
-  return 2;
 }
 
 int logs_per_cell(const MatrixOptions& o) {
@@ -118,7 +111,7 @@ void estimate(const MatrixOptions& o) {
 // What the command line asks beyond the matrix itself.
 struct Flags {
   std::string json_path;
-  bool check = false, estimate = false, quiet = false, help = false;
+  bool check = false, estimate = false, quiet = false;
   bool multiples_given = false;
 };
 
@@ -138,42 +131,60 @@ void quick_combos(MatrixOptions& o) {
   o.duration = 15.0;  // keeps the ctest at about 2 min on one core
 }
 
-// One option (and its value) at argv[i]; false when it is unknown.
-bool parse_option(int argc, char** argv, int& i, MatrixOptions& o, Flags& f) {
-  const std::string a = argv[i];
-  auto value = [&]() -> std::string {
-    if (i + 1 >= argc) throw cpm::Error(a + " needs a value");
-    return argv[++i];
-  };
-  if (a == "--seeds") o.seeds = std::stoi(value());
-  else if (a == "--first-seed") o.first_seed = std::stoi(value());
-  else if (a == "--rates") o.rates = numbers(value());
-  else if (a == "--timings") {
-    o.timings.clear();
-    for (const std::string& s : split(value())) o.timings.push_back(timing_from_name(s));
-  } else if (a == "--noise") {
-    o.noises.clear();
-    for (const std::string& s : split(value())) o.noises.push_back(noise_from_name(s));
-  } else if (a == "--effects") {
-    const std::string v = value();
-    o.effects = v == "none" ? std::vector<std::string>{"__none__"} : split(v);
-  } else if (a == "--multiples") o.multiples = numbers(value()), f.multiples_given = true;
-  else if (a == "--combos") {
-    o.combos.clear();
-    for (double n : numbers(value())) o.combos.push_back(static_cast<int>(n));
-  } else if (a == "--no-null") o.nulls = false;
-  else if (a == "--duration") o.duration = std::stod(value());
-  else if (a == "--threads") o.threads = std::stoi(value());
-  else if (a == "--json") f.json_path = value();
-  else if (a == "--write-logs") o.write_logs = value();
-  else if (a == "--quick") quick(o);
-  else if (a == "--quick-combos") quick_combos(o);
-  else if (a == "--check") f.check = true;
-  else if (a == "--estimate") f.estimate = true;
-  else if (a == "--quiet") f.quiet = true;
-  else if (a == "--help" || a == "-h") f.help = true;
-  else return false;
-  return true;
+// The options that shape the matrix. Every option takes effect where it
+// stands on the command line (trigger_on_parse), so options after --quick
+// or --quick-combos override the preset.
+template <class T>
+void option(CLI::App& app, const char* name, const char* value, const std::function<void(const T&)>& set,
+            const char* help) {
+  app.add_option_function<T>(name, set, help)->type_name(value)->trigger_on_parse();
+}
+
+void add_matrix_options(CLI::App& app, MatrixOptions& o, Flags& f) {
+  using S = std::string;
+  option<int>(app, "--seeds", "N", [&](int n) { o.seeds = n; }, "seeds per cell (default 1), e.g. --seeds 20");
+  option<int>(app, "--first-seed", "K", [&](int n) { o.first_seed = n; }, "the first seed: seeds K .. K+N-1 (default 1)");
+  option<S>(app, "--rates", "HZ,...", [&](const S& v) { o.rates = numbers(v); },
+      "sampling rates in Hz, comma-separated (default 250,1000,4000)");
+  option<S>(app, "--timings", "NAME,...", [&](const S& v) {
+        o.timings.clear();
+        for (const std::string& s : split(v)) o.timings.push_back(timing_from_name(s));
+      }, "when the logged force acts: sampled, zoh, delay1, delay1_5, comma-separated (default all four)");
+  option<S>(app, "--noise", "NAME,...", [&](const S& v) {
+        o.noises.clear();
+        for (const std::string& s : split(v)) o.noises.push_back(noise_from_name(s));
+      }, "where the noise enters: plant, command, comma-separated (default both)");
+  option<S>(app, "--effects", "NAME,...|none", [&](const S& v) { o.effects = v == "none" ? std::vector<std::string>{"__none__"} : split(v); },
+      "effects to plant, comma-separated names of effects.md, or none (default: the whole dynamic library), "
+      "e.g. --effects viscous_friction,coulomb_friction");
+  option<S>(app, "--multiples", "X,...", [&](const S& v) { o.multiples = numbers(v), f.multiples_given = true; },
+      "planted amplitudes in multiples of the effect's unit amplitude (default 3,10; with --combos 10)");
+  option<S>(app, "--combos", "N,...", [&](const S& v) {
+        o.combos.clear();
+        for (double n : numbers(v)) o.combos.push_back(static_cast<int>(n));
+      }, "combination logs instead: sizes N >= 2 of effects planted at once, e.g. --combos 2,3");
+  option<double>(app, "--duration", "S", [&](double s) { o.duration = s; }, "seconds of motion per log (default 20)");
+  option<int>(app, "--threads", "N", [&](int n) { o.threads = n; }, "logs run in parallel (default 1)");
+  option<S>(app, "--write-logs", "DIR", [&](const S& d) { o.write_logs = d; }, "directory: write every log as CSV");
+  app.add_flag_callback("--no-null", [&] { o.nulls = false; }, "no null logs (nothing planted)")->trigger_on_parse();
+  app.add_flag_callback("--quick", [&] { quick(o); },
+                        "the reduced matrix of the ctest: one seed, 1000 and 250 Hz, null + viscous, Coulomb and "
+                        "force gain at 10x, 15 s logs (options after it override it)")
+      ->trigger_on_parse();
+  app.add_flag_callback("--quick-combos", [&] { quick_combos(o); },
+                        "the reduced combination matrix of the ctest: one seed, 1000 and 250 Hz, zoh and delay1, "
+                        "combos 2 and 3 at 10x, 15 s logs (options after it override it)")
+      ->trigger_on_parse();
+}
+
+// What to do with the matrix.
+void add_run_options(CLI::App& app, Flags& f) {
+  app.add_option("--json", f.json_path, "write every log's result and the cells as JSON to FILE")->type_name("FILE");
+  app.add_flag("--check", f.check,
+               "exit 1 unless every cell meets the thresholds (planted named, null clean, phantoms <= 1 in 50; "
+               "combinations: all named and the loop within 20 % of the floor in >= 95 % of the logs)");
+  app.add_flag("--estimate", f.estimate, "time one log per rate and print how long the selected matrix would take");
+  app.add_flag("--quiet", f.quiet, "no progress line per log");
 }
 
 // The options after the command line: "" or what is wrong with them.
@@ -248,11 +259,22 @@ int check_thresholds(const MatrixResult& r) {
 int main(int argc, char** argv) {
   MatrixOptions o;
   Flags f;
+  CLI::App app("cpm_robustness: the robustness matrix of `cpm diagnose` on motion logs from the independent "
+               "generator; prints a markdown table (one row per cell)");
+  add_matrix_options(app, o, f);
+  add_run_options(app, f);
   try {
-    for (int i = 1; i < argc; ++i)
-      if (!parse_option(argc, argv, i, o, f)) return usage(("unknown option " + std::string(argv[i])).c_str());
-    if (f.help) return usage("");
-    if (const std::string bad = finish_options(o, f); !bad.empty()) return usage(bad.c_str());
+    try {
+      app.parse(argc, argv);
+    } catch (const CLI::ParseError& e) {
+      if (e.get_exit_code() == 0) return app.exit(e);  // --help
+      std::fprintf(stderr, "cpm_robustness: %s\n(cpm_robustness --help lists the options)\n", e.what());
+      return 2;
+    }
+    if (const std::string bad = finish_options(o, f); !bad.empty()) {
+      std::fprintf(stderr, "cpm_robustness: %s\n", bad.c_str());
+      return 2;
+    }
     if (f.estimate) {
       estimate(o);
       return 0;

@@ -1,0 +1,211 @@
+// The JSON that programs read (cpm compare / diagnose --json; docs/identification.md
+// documents the diagnosis' fields). Built with nlohmann::ordered_json, so keys
+// keep the order written here; numbers are written shortest-exact, and a number
+// that is not finite is written as null.
+#include <nlohmann/json.hpp>
+
+#include "cpm/identification/kinematic.hpp"
+#include "cpm/identification/report.hpp"
+#include "internal.hpp"
+
+namespace cpm::ident {
+namespace {
+
+using Json = nlohmann::ordered_json;
+
+// Pretty-printed; a byte that is not UTF-8 in a file name or a note becomes U+FFFD instead of an exception.
+std::string dumped(const Json& j) { return j.dump(2, ' ', false, Json::error_handler_t::replace) + "\n"; }
+
+// Axis numbers as people count them (1..3), null for none.
+Json axis_json(int axis) { return axis >= 0 ? Json(axis + 1) : Json(); }
+
+Json vec_json(const Vec3& v) { return Json::array({v[0], v[1], v[2]}); }
+
+// A standard error, null when there is none (negative).
+Json std_error_json(double se) { return se >= 0 ? Json(se) : Json(); }
+
+// A candidate's parameters by name (SI units), their standard errors and units.
+Json params_json(const CandidateResult& c) {
+  Json o = Json::object();
+  for (const auto& p : c.params) o[p.name] = p.value;
+  return o;
+}
+
+Json std_errors_json(const CandidateResult& c) {
+  Json o = Json::object();
+  for (const auto& p : c.params) o[p.name] = std_error_json(p.std_error);
+  return o;
+}
+
+Json units_json(const CandidateResult& c) {
+  Json o = Json::object();
+  for (const auto& p : c.params) o[p.name] = p.unit;
+  return o;
+}
+
+Json confounder_json(const Confounder& cf) {
+  return {{"with", cf.with},
+          {"effect", cf.effect.empty() ? Json() : Json(cf.effect)},
+          {"axis", axis_json(cf.axis)},
+          {"correlation", cf.correlation},
+          {"separate_by", cf.separate_by}};
+}
+
+Json candidate_json(const CandidateResult& c) {
+  Json with = Json::array();
+  for (const auto& cf : c.confounded) with.push_back(confounder_json(cf));
+  return {{"effect", c.effect},
+          {"axis", axis_json(c.axis)},
+          {"params", params_json(c)},
+          {"std_errors", std_errors_json(c)},
+          {"units", units_json(c)},
+          {"rms_after", c.rms_after},
+          {"explained", c.explained},
+          {"explained_beyond_base", c.explained_beyond_base},
+          {"significant", c.significant},
+          {"identifiable", c.identifiable},
+          {"f_stat", c.f_stat},
+          {"p_value", c.p_value},
+          {"p_adjusted", c.p_adjusted},
+          {"delta_bic", c.delta_bic},
+          {"n_params", c.n_params},
+          {"refits_base", c.refits_base},
+          {"note", c.note},
+          {"confounded_with", with}};
+}
+
+// An effect the verdict names, with its parameters and what else would fit.
+Json named_effect_json(const CandidateResult& c) {
+  const std::string implausible = detail::implausible(c);
+  return {{"effect", c.effect},
+          {"axis", axis_json(c.axis)},
+          {"params", params_json(c)},
+          {"std_errors", std_errors_json(c)},
+          {"implausible", implausible.empty() ? Json() : Json(implausible)},
+          {"alternatives", c.alternatives}};
+}
+
+Json structure_json(const std::vector<StructureFinding>& items) {
+  Json a = Json::array();
+  for (const auto& f : items)
+    a.push_back({{"kind", f.kind},
+                 {"axis", axis_json(f.axis)},
+                 {"coordinate", f.coordinate},
+                 {"location", f.location},
+                 {"size", f.size},
+                 {"z", f.z},
+                 {"text", f.text}});
+  return a;
+}
+
+// What is missing: an effect of the library, structure outside it, or nothing.
+Json verdict_json(const Diagnosis& D) {
+  Json v;
+  if (!D.outside_library.empty()) {
+    v = {{"missing", "outside_library"}, {"axis", axis_json(D.outside_library.front().axis)}};
+  } else if (D.verdict >= 0) {
+    const auto& c = D.candidates[static_cast<std::size_t>(D.verdict)];
+    v = {{"missing", c.effect}, {"axis", axis_json(c.axis)}};
+  } else {
+    v = {{"missing", nullptr}, {"axis", nullptr}};
+  }
+  v["ambiguous"] = D.ambiguous;
+  Json also = Json::array();
+  for (int j : D.also) {
+    const auto& c = D.candidates[static_cast<std::size_t>(j)];
+    also.push_back({{"effect", c.effect}, {"axis", axis_json(c.axis)}});
+  }
+  v["also"] = std::move(also);
+  // Every effect named, best first.
+  Json effects = Json::array();
+  for (int j : D.found()) effects.push_back(named_effect_json(D.candidates[static_cast<std::size_t>(j)]));
+  v["effects"] = std::move(effects);
+  // Structure no library effect describes that leads the verdict (missing = "outside_library").
+  v["outside_library"] = structure_json(D.outside_library);
+  v["text"] = D.verdict_text;
+  return v;
+}
+
+// Motion logs: how the acceleration was estimated and how force and motion were aligned.
+void add_motion_inputs(Json& o, const Diagnosis& D) {
+  const MotionProblem& P = D.motion;
+  const Alignment& a = D.alignment;
+  o["acceleration"] = {{"source", P.accel_source},
+                       {"filter_half_width_samples", P.half_width},
+                       {"force_noise", P.force_noise.maxCoeff()}};
+  o["alignment"] = {{"tau", a.tau},
+                    {"std_error", std_error_json(a.std_error)},
+                    {"periods", a.tau / a.period},
+                    {"period", a.period},
+                    {"model_tau", a.model_tau},
+                    {"missing_tau", a.missing()},
+                    {"convention", a.convention()}};
+}
+
+// Mean and RMS per bin, for each axis.
+Json bins_json(const std::array<ResidualSummary::Bins, 3>& bins) {
+  Json a = Json::array();
+  for (const auto& B : bins) a.push_back({{"centre", B.centre}, {"mean", B.mean}, {"rms", B.rms}});
+  return a;
+}
+
+}  // namespace
+
+std::string json_string(const std::string& s) { return Json(s).dump(-1, ' ', false, Json::error_handler_t::replace); }
+
+std::string json_num(double v) { return Json(v).dump(); }
+
+std::string summary_json(const ResidualSummary& s, const MotionProblem& P, const std::string& data_file,
+                         const std::string& model_file, int samples) {
+  Json o = {{"kind", "motion"}, {"data_file", data_file}, {"model_file", model_file},
+            {"samples", samples}, {"rows", 3 * P.rows()}, {"units", "N"}};
+  o["acceleration"] = {{"source", P.accel_source},
+                       {"filter_half_width_samples", P.half_width},
+                       {"force_noise", vec_json(P.force_noise)}};
+  o["rms"] = s.rms;
+  o["max"] = s.max;
+  o["axis_rms"] = vec_json(s.axis_rms);
+  o["axis_max"] = vec_json(s.axis_max);
+  o["rms_forward"] = vec_json(s.rms_forward);
+  o["rms_backward"] = vec_json(s.rms_backward);
+  o["mean_forward"] = vec_json(s.mean_forward);
+  o["mean_backward"] = vec_json(s.mean_backward);
+  o["along_position"] = bins_json(s.along_position);
+  o["over_time"] = bins_json(s.over_time);
+  return dumped(o);
+}
+
+std::string diagnosis_json(const Diagnosis& D) {
+  Json o = {{"kind", D.kind}, {"samples", D.samples}, {"rows", D.rows}, {"units", D.units},
+            {"data_file", D.data_file}, {"model_file", D.model_file}};
+  if (D.kind == "motion") add_motion_inputs(o, D);
+  o["baseline"] = {{"rms", D.baseline_rms}, {"max", D.baseline_max}, {"axis_rms", vec_json(D.baseline_axis_rms)}};
+  o["base_refit"] = {{"rms", D.base_refit_rms}};
+  o["noise_floor"] = D.noise_floor;
+  Json candidates = Json::array();
+  for (const auto& c : D.candidates) candidates.push_back(candidate_json(c));
+  o["candidates"] = std::move(candidates);
+  o["verdict"] = verdict_json(D);
+  o["structure"] = structure_json(D.structure);
+  o["notes"] = D.notes;
+  o["warnings"] = D.warnings;
+  return dumped(o);
+}
+
+std::string kinematic_summary_json(const KinematicProblem& P, const KinematicSummary& s, const std::string& model_file) {
+  Json o = {{"kind", P.kind}, {"data_file", P.data_file}, {"model_file", model_file},
+            {"samples", P.samples()}, {"rows", P.rows()}, {"units", "m"},
+            {"rms", s.rms}, {"max", s.max}, {"component_rms", vec_json(s.component_rms)}};
+  if (P.has_dir)
+    o["by_direction"] = {{"rms_forward", vec_json(s.rms_forward)}, {"rms_backward", vec_json(s.rms_backward)},
+                         {"mean_forward", vec_json(s.mean_forward)}, {"mean_backward", vec_json(s.mean_backward)}};
+  if (s.circle) {
+    const auto& c = *s.circle;
+    o["circle"] = {{"plane", cal::plane_name(c.spec.plane)}, {"radius", c.spec.radius},
+                   {"G", c.G_bidirectional}, {"G_ccw", c.ccw_metrics.G}, {"G_cw", c.cw_metrics.G},
+                   {"H", c.H}, {"F_max", c.F_max}, {"F_min", c.F_min}};
+  }
+  return dumped(o);
+}
+
+}  // namespace cpm::ident
