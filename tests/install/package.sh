@@ -19,6 +19,7 @@ set -euo pipefail
 SRC=$(cd "$1" && pwd) BUILD=$(cd "$2" && pwd) VERSION=$3 DEBVERSION=$4 LIBDIR=$5
 skip() { echo "SKIP: $*"; exit 77; }
 fail() { echo "FAIL: $*" >&2; exit 1; }
+. "$(dirname "$0")/default_model.sh"
 
 if [ -z "${CPMD_IN_NETNS:-}" ]; then
   [ "$(id -u)" -eq 0 ] || skip "needs root (dpkg -i and --purge on this system); runs as root in CI"
@@ -189,17 +190,7 @@ echo "$rms $ref" | awk '{ if ($1 < 0.75 * $2 * 1e6 || $1 > 1.25 * $2 * 1e6) exit
 
 step "cpm compare, diagnose, fit, calibrate from $T/work, no --model"
 M=/etc/cpmd/machine.yaml
-cpm compare --data circle.csv >compare.txt
-grep -qF "model $M on circle.csv" compare.txt || fail "compare did not use $M: $(head -n 3 compare.txt)"
-cpm diagnose --data circle.csv --json diagnose.json >diagnose.txt
-grep -qF "\"$M\"" diagnose.json || fail "diagnose did not use $M"
-cpm fit --data circle.csv --add force_gain:1 --out fitted.yaml --json fit.json >fit.txt
-grep -qF "\"model\": \"$M\"" fit.json || fail "fit did not use $M"
-cpm plan-poses --out poses.csv >/dev/null
-cpm simulate-measurement --poses poses.csv --out ballbar.csv >/dev/null
-cpm calibrate --data ballbar.csv --out calibrated.yaml --json calibrate.json >calibrate.txt
-grep -qF "$M" calibrated.yaml || fail "calibrate did not use $M (the new model's history names it)"
-echo "compare, diagnose, fit and calibrate used $M"
+check_default_model cpm circle.csv force_gain:1 "$M"
 
 step "stop cpmd"
 kill -TERM $pid

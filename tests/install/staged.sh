@@ -77,7 +77,7 @@ if [ -z "${CPMD_STAGED_PHASE:-}" ]; then
   fi
 
   # Phase 2 away from the tree: as root with the source tree hidden, else as is.
-  cp "$0" "$T/staged.sh"
+  cp "$0" "$(dirname "$0")/default_model.sh" "$T/"
   export CPMD_STAGED_PHASE=1 T R P
   if [ "$(id -u)" -eq 0 ] && unshare -m true 2>/dev/null; then
     echo "== phase 2 in a private mount namespace with $SRC hidden"
@@ -93,6 +93,7 @@ if [ -z "${CPMD_STAGED_PHASE:-}" ]; then
 fi
 
 # ---- phase 2: only $T exists for these programs ----
+. "$T/default_model.sh"
 mkdir -p "$T/work" "$T/home"
 cd "$T/work"
 export HOME=$T/home
@@ -109,17 +110,7 @@ M=$P/etc/cpmd/machine.yaml
 C=$P/bin/cpm
 echo "== cpm without --model, from $T/work"
 "$C" sim --trajectory paper-circle --log motion.csv --truth-effect coulomb_friction:1:2.0 >sim.txt
-"$C" compare --data motion.csv >compare.txt
-grep -qF "model $M on motion.csv" compare.txt || fail "compare did not use $M: $(head -n 3 compare.txt)"
-"$C" diagnose --data motion.csv --json diagnose.json >diagnose.txt
-grep -qF "\"$M\"" diagnose.json || fail "diagnose did not use $M"
-"$C" fit --data motion.csv --add coulomb_friction:1 --out fitted.yaml --json fit.json >fit.txt
-grep -qF "\"model\": \"$M\"" fit.json || fail "fit did not use $M"
-"$C" plan-poses --out poses.csv >/dev/null
-"$C" simulate-measurement --poses poses.csv --out ballbar.csv >/dev/null
-"$C" calibrate --data ballbar.csv --out calibrated.yaml --json calibrate.json >calibrate.txt
-grep -qF "$M" calibrated.yaml || fail "calibrate did not use $M (the new model's history names it)"
-echo "compare, diagnose, fit and calibrate used $M"
+check_default_model "$C" motion.csv coulomb_friction:1 "$M"
 
 # The example client, from the staged cpmd-dev, against a staged cpmd.
 echo "== example client: find_package(cpmd) in $R/usr"
