@@ -8,7 +8,7 @@
 #include <cstring>
 #include <random>
 
-#include "cpm/daemon/loop.hpp"
+#include "cpm/daemon/modes.hpp"
 
 namespace cpm::daemon {
 

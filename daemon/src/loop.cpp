@@ -15,38 +15,6 @@ namespace cpm::daemon {
 using cpm_msgs::ack_t;
 using cpm_msgs::state_t;
 
-const char* mode_name(Mode m) noexcept {
-  switch (m) {
-    case Mode::init: return "init";
-    case Mode::disabled: return "disabled";
-    case Mode::enabling: return "enabling";
-    case Mode::holding: return "holding";
-    case Mode::moving: return "moving";
-    case Mode::stopping: return "stopping";
-    case Mode::fault: return "fault";
-  }
-  return "?";
-}
-
-const char* fault_bit_name(std::uint32_t bit) noexcept {
-  switch (bit) {
-    case kFaultFollowingError: return "following_error";
-    case kFaultSoftLimit: return "soft_limit";
-    case kFaultOverspeed: return "overspeed";
-    case kFaultController: return "controller";
-    case kFaultEstimate: return "estimate";
-    case kFaultDrive: return "drive";
-    case kFaultBackendIo: return "backend_io";
-    case kFaultEstop: return "estop";
-    case kFaultOverrun: return "overrun";
-    case kFaultEnableTimeout: return "enable_timeout";
-    case kFaultLimitSwitch: return "limit_switch";
-    case kFaultSaturation: return "force_saturation";
-    case kFaultStreamUnderrun: return "stream_underrun";
-    default: return "unknown";
-  }
-}
-
 const ctl::Trajectory* Segment::get() const noexcept {
   if (auto* c = std::get_if<ctl::CircleTrajectory>(&traj)) return c;
   if (auto* p = std::get_if<ctl::PointToPoint>(&traj)) return p;

@@ -89,7 +89,7 @@ int run_kinematic(const io::DataSet& ds, const std::vector<ident::FitRequest>& r
 }
 
 int run(Args& a) {
-  const std::string model_path = a.option_or("model", "config/machine.yaml");
+  const std::string model_path = a.option_or("model", default_model_path());
   const auto data_path = a.option("data");
   const auto out_path = a.option("out");
   const auto holdout_path = a.option("holdout");

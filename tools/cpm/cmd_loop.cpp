@@ -15,7 +15,7 @@ namespace cpm::cli {
 namespace {
 
 int run(Args& a) {
-  const std::string model_path = a.option_or("model", "config/machine.yaml");
+  const std::string model_path = a.option_or("model", default_model_path());
   const auto data_path = a.option("data");
   const auto out_path = a.option("out");
   const auto json_path = a.option("json");

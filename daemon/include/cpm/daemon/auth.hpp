@@ -24,7 +24,7 @@
 #include <string_view>
 #include <vector>
 
-#include "cpm/kinematics/types.hpp"
+#include "cpm/kinematics/error.hpp"
 
 namespace cpm::daemon {
 

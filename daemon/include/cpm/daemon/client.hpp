@@ -17,7 +17,8 @@
 #include <cpm_msgs/trajectory_command_t.hpp>
 
 #include "cpm/daemon/auth.hpp"
-#include "cpm/daemon/config.hpp"
+#include "cpm/daemon/lcm_config.hpp"
+#include "cpm/daemon/modes.hpp"
 
 namespace lcm {
 class LCM;

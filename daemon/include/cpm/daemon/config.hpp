@@ -10,6 +10,7 @@
 #include <string>
 
 #include "cpm/control/controller.hpp"
+#include "cpm/daemon/lcm_config.hpp"
 #include "cpm/hal/digital_io.hpp"
 #include "cpm/hal/master.hpp"
 #include "cpm/sim/plant.hpp"
@@ -44,20 +45,6 @@ struct LimitsConfig {
 struct ControllerConfig {
   ctl::ControlLaw law = ctl::ControlLaw::computed_torque;
   ctl::Gains gains = ctl::table3_gains(ctl::ControlLaw::computed_torque);
-};
-
-struct LcmConfig {
-  std::string url = "udpm://239.255.76.67:7667?ttl=0";  // ttl=0: never leaves the host
-  std::string state_channel = "CPMD_STATE";
-  std::string stats_channel = "CPMD_STATS";
-  std::string trajectory_channel = "CPMD_TRAJ";
-  std::string control_channel = "CPMD_CONTROL";
-  std::string ack_channel = "CPMD_ACK";
-  std::string security_channel = "CPMD_SECURITY";  // security_t, 1 Hz
-  int state_decimation = 1;  // publish the state every N cycles
-  // A commander's session ends after this long without a command or ping
-  // from it (s); clients ping every 0.25 s while they hold one.
-  double session_timeout = 2.0;
 };
 
 // Who may command and what may be read for the network (docs/security.md).

@@ -40,36 +40,11 @@
 
 #include "cpm/daemon/backend.hpp"
 #include "cpm/daemon/config.hpp"
+#include "cpm/daemon/modes.hpp"
 #include "cpm/daemon/spsc.hpp"
 #include "cpm/daemon/stream_trajectory.hpp"
 
 namespace cpm::daemon {
-
-enum class Mode : std::uint8_t { init = 0, disabled, enabling, holding, moving, stopping, fault };
-const char* mode_name(Mode m) noexcept;
-
-// Latched fault bits (= state_t.FAULT_*).
-enum FaultBit : std::uint32_t {
-  kFaultFollowingError = 1,
-  kFaultSoftLimit = 2,
-  kFaultOverspeed = 4,
-  kFaultController = 8,
-  kFaultEstimate = 16,
-  kFaultDrive = 32,
-  kFaultBackendIo = 64,
-  kFaultEstop = 128,
-  kFaultOverrun = 256,
-  kFaultEnableTimeout = 512,
-  kFaultLimitSwitch = 1024,
-  // An actuator held at the force limit longer than limits.saturation_time.
-  kFaultSaturation = 2048,
-  // A setpoint stream ran dry while moving (its next chunk was late): the
-  // loop stops along the path at limits.stop_deceleration, then latches this.
-  kFaultStreamUnderrun = 4096,
-};
-// "following_error,estop" for a mask (static storage per bit; the joined text
-// is built in `buf`, not for the real-time path).
-const char* fault_bit_name(std::uint32_t bit) noexcept;
 
 // A queued trajectory segment: one of the trajectory kinds, by value.
 struct Segment {

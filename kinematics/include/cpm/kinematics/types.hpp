@@ -11,18 +11,12 @@
 #include <stdexcept>
 #include <string>
 
+#include "cpm/kinematics/error.hpp"
+
 namespace cpm {
 
 using Vec3 = Eigen::Vector3d;
 using Mat3 = Eigen::Matrix3d;
-
-// Error thrown by the non-real-time entry points (loading, validating,
-// preparing). The message says what is wrong and where. Real-time functions
-// never throw: they return a Status.
-class Error : public std::runtime_error {
- public:
-  using std::runtime_error::runtime_error;
-};
 
 // Why a real-time computation refused its input. Plain data, no allocation.
 enum class Fault : std::uint8_t {
