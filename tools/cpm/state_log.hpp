@@ -1,4 +1,4 @@
-// cpmd's state stream as a motion log (shared/spec/data-formats.md, kind =
+// cpmd's state stream as a motion log (docs/data-files.md, kind =
 // motion): what `cpm record` and `cpm lcm-log-to-csv` write, and what
 // `cpm compare`, `diagnose` and `fit` read directly from an lcm-logger file.
 // Not a subcommand itself.
@@ -51,7 +51,7 @@ struct StateLogRead {
 StateLogRead read_state_log(const std::string& path, const std::string& channel, bool strict);
 
 // What compare, diagnose and fit read: an lcm-logger file of cpmd's state
-// channel (strictly, as a motion log), or a CSV of data-formats.md.
+// channel (strictly, as a motion log), or a CSV of docs/data-files.md.
 io::DataSet read_measurements(const std::string& path, const std::string& channel = "CPMD_STATE");
 
 }  // namespace cpm::cli
