@@ -9,7 +9,7 @@
 #include "cpm/control/effects.hpp"
 #include "cpm/io/model_file.hpp"
 #include "cpm/kinematics/kinematic_effects.hpp"
-#include "cpm/version.hpp"
+#include "cpm/program_cli.hpp"
 
 namespace cpm::cli {
 
@@ -24,60 +24,7 @@ Command::Command(const char* name, const char* summary, Setup setup) {
 
 namespace {
 
-bool is_vector(const CLI::Option* o) { return o->get_expected_max() == CLI::detail::expected_max_vector_size; }
-bool takes_value(const CLI::Option* o) { return o->get_expected_max() != 0; }  // a flag expects none
-
-// CLI11's help with the defaults in the description ("[default 0.15]") rather
-// than glued to the value's name, and long descriptions wrapped under their
-// column (help2man keeps the indented lines with their option).
-class HelpFormatter : public CLI::Formatter {
- public:
-  HelpFormatter() { column_width(kColumn); }
-
-  std::string make_option_opts(const CLI::Option* o) const override {
-    std::string out;
-    if (!takes_value(o)) return out;
-    if (!o->get_type_name().empty()) out += " " + o->get_type_name();
-    if (is_vector(o)) out += " ...";
-    if (o->get_required()) out += " (required)";
-    return out;
-  }
-
-  std::string make_option_desc(const CLI::Option* o) const override {
-    std::string d = o->get_description();
-    const std::string def = o->get_default_str();
-    if (takes_value(o) && !o->get_required() && !def.empty() && def != "[]" && def != "{}")
-      d += " [default " + def + "]";
-    return d;
-  }
-
-  std::string make_option(const CLI::Option* o, bool is_positional) const override {
-    std::string left = "  " + make_option_name(o, is_positional) + (is_positional ? "" : make_option_opts(o));
-    std::istringstream words(make_option_desc(o));
-    std::string out, line, w;
-    const auto indent = static_cast<std::size_t>(kColumn);
-    if (left.size() >= indent) {
-      out = left + "\n";
-      left.clear();
-    }
-    line = left + std::string(indent - left.size(), ' ');
-    bool first = true;
-    while (words >> w) {
-      if (!first && line.size() + 1 + w.size() > kWidth) {
-        out += line + "\n";
-        line = std::string(indent, ' ');
-        first = true;
-      }
-      line += (first ? "" : " ") + w;
-      first = false;
-    }
-    return out + line + "\n";
-  }
-
- private:
-  static constexpr int kColumn = 30;
-  static constexpr std::size_t kWidth = 100;
-};
+using program::is_vector;
 
 std::string join(const std::vector<std::string>& v, const char* sep) {
   std::string out;
@@ -93,9 +40,7 @@ std::unique_ptr<CLI::App> make_app(std::map<std::string, Run>* runs) {
       "parallel manipulator, and commands a running cpmd over LCM. SI units on the command line and in files\n"
       "(m, s, N, rad); mm and µm on screen, labelled.",
       "cpm");
-  app->formatter(std::make_shared<HelpFormatter>());
-  app->set_version_flag("--version", std::string("cpm ") + kVersion, "print the version (cpm VERSION) and exit");
-  app->option_defaults()->always_capture_default();
+  program::setup(*app);
   app->require_subcommand(1);
   app->footer("'cpm COMMAND --help' (or man cpm-COMMAND) shows a command's options. Exit status: 0 done, 1 failed\n"
               "(a bad file, a refused command, a fault), 2 a bad command line.");
@@ -107,16 +52,7 @@ std::unique_ptr<CLI::App> make_app(std::map<std::string, Run>* runs) {
   return app;
 }
 
-const CLI::Validator& finite() {
-  static const CLI::Validator v(
-      [](std::string& s) -> std::string {
-        double x = 0;
-        if (!CLI::detail::lexical_cast(s, x) || !std::isfinite(x)) return "'" + s + "' is not a finite number";
-        return {};
-      },
-      "");
-  return v;
-}
+const CLI::Validator& finite() { return program::finite(); }
 
 std::vector<std::string> effect_names() {
   std::vector<std::string> out;
@@ -296,7 +232,7 @@ std::vector<std::string> complete(const CLI::App& app, const std::vector<std::st
     } else if (starts_with(w, "-") && w.size() > 1) {
       const auto eq = w.find('=');
       const CLI::Option* o = find_option(*sub, w.substr(0, eq));
-      if (o && takes_value(o) && eq == std::string::npos) pending = o;
+      if (o && program::takes_value(o) && eq == std::string::npos) pending = o;
     } else {
       ++positionals;
     }

@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "cli.hpp"
+#include "cpm/program_cli.hpp"
 
 int main(int argc, char** argv) {
   using namespace cpm::cli;
@@ -34,15 +35,8 @@ int main(int argc, char** argv) {
   }
   try {
     app->parse(argc, argv);
-  } catch (const CLI::CallForHelp& e) {
-    return app->exit(e);
-  } catch (const CLI::CallForAllHelp& e) {
-    return app->exit(e);
-  } catch (const CLI::CallForVersion& e) {
-    return app->exit(e);
   } catch (const CLI::ParseError& e) {
-    std::fprintf(stderr, "%s: %s\n'%s --help' shows the options.\n", who.c_str(), e.what(), who.c_str());
-    return 2;
+    return cpm::program::parse_exit(*app, e, who);
   } catch (const std::exception& e) {  // UsageError from an option's own check
     std::fprintf(stderr, "%s: %s\n'%s --help' shows the options.\n", who.c_str(), e.what(), who.c_str());
     return 2;
