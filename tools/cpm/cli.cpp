@@ -41,11 +41,12 @@ std::unique_ptr<CLI::App> make_app(std::map<std::string, Run>* runs) {
       "(m, s, N, rad); mm and µm on screen, labelled.",
       "cpm");
   program::setup(*app);
+  app->get_formatter()->label("SUBCOMMAND", "COMMAND");
   app->require_subcommand(1);
   app->footer("'cpm COMMAND --help' (or man cpm-COMMAND) shows a command's options. Exit status: 0 done, 1 failed\n"
               "(a bad file, a refused command, a fault), 2 a bad command line.");
   for (const auto& [name, entry] : registry()) {
-    CLI::App* sub = app->add_subcommand(name, entry.summary);
+    CLI::App* sub = app->add_subcommand(name, entry.summary)->group("Commands");
     Run r = entry.setup(*sub);
     if (runs) (*runs)[name] = std::move(r);
   }
@@ -153,7 +154,16 @@ std::string default_model_path() {
   return find_default_model(".", exe, "/etc/cpmd/machine.yaml");
 }
 
-std::string model_or_default(const std::optional<std::string>& model) { return model ? *model : default_model_path(); }
+std::string model_or_default(const std::optional<std::string>& model) {
+  if (model) return *model;
+  const std::string found = default_model_path();
+  std::error_code ec;
+  if (!std::filesystem::exists(found, ec))
+    throw Error(std::string("no --model given and no default model found: looked for config/machine.yaml in the "
+                            "current folder and in the build tree of this cpm, for etc/cpmd/machine.yaml beside "
+                            "its install prefix, and for /etc/cpmd/machine.yaml; give --model FILE"));
+  return found;
+}
 
 Vec3 parse_point(const std::string& what, const std::string& text, bool allow_non_finite) {
   Vec3 v;

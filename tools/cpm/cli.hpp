@@ -109,7 +109,8 @@ std::string default_model_path();
 // path and the system-wide file (for tests).
 std::string find_default_model(const std::filesystem::path& cwd, const std::filesystem::path& exe,
                                const std::filesystem::path& system_file);
-// The --model given, else default_model_path().
+// The --model given, else default_model_path(); an Error saying where it
+// looked when there is none.
 std::string model_or_default(const std::optional<std::string>& model);
 
 // A model file after a fit (cpm fit, cpm loop): the fitted parameters replace
