@@ -23,7 +23,7 @@ void apply_effect(ctl::MachineModel& m, const std::string& spec) {
   if (!axis_text.empty()) {
     if (axis_text != "1" && axis_text != "2" && axis_text != "3")
       throw UsageError("--truth-effect '" + spec + "': axis must be 1, 2, 3 or empty");
-    axis = std::stoi(axis_text) - 1;
+    axis = axis_text[0] - '1';
   }
   std::vector<double> values;
   std::istringstream is(spec.substr(c2 + 1));
