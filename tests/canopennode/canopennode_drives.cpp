@@ -160,11 +160,6 @@ void on_master_lost(Node& n) {
 
 int run(int argc, char** argv) {
   sim::DriveCommandLine d;
-  const std::string& interface = d.interface;
-  const std::string& model = d.model;
-  const std::string& control = d.control;
-  const double& rate = d.rate;
-  sim::VirtualMachineConfig& cfg = d.cfg;
   // Two RPDOs and two TPDOs, as many drives have: CiA 301 makes the others
   // optional, and the master must not depend on them (it did; docs/canopen-backend.md).
   int pdos = 2;
@@ -180,13 +175,12 @@ int run(int argc, char** argv) {
   } catch (const CLI::ParseError& e) {
     return program::parse_exit(app, e, "canopennode-drives");
   }
-  cfg.period = 1.0 / rate;
-  const ctl::MachineModel mm = model == "builtin:elkady" ? ctl::MachineModel::elkady() : io::load_model_file(model).model;
-  const ctl::Machine truth(mm);
+  const sim::VirtualMachineConfig cfg = d.config();
+  const ctl::Machine truth(d.true_machine());
   sim::SyncedPlant plant(truth, cfg);
 
-  const int ifindex = static_cast<int>(if_nametoindex(interface.c_str()));
-  if (ifindex == 0) throw Error("no CAN interface " + interface);
+  const int ifindex = static_cast<int>(if_nametoindex(d.interface.c_str()));
+  if (ifindex == 0) throw Error("no CAN interface " + d.interface);
   const int epfd = epoll_create1(EPOLL_CLOEXEC);
   std::array<Node, 3> nodes;
   for (std::size_t i = 0; i < 3; ++i) {
@@ -205,12 +199,12 @@ int run(int argc, char** argv) {
   }
 
   std::unique_ptr<sim::ControlSocket> control_socket;
-  if (!control.empty()) control_socket = std::make_unique<sim::ControlSocket>(control);
+  if (!d.control.empty()) control_socket = std::make_unique<sim::ControlSocket>(d.control);
   signal(SIGINT, on_signal);
   signal(SIGTERM, on_signal);
   signal(SIGPIPE, SIG_IGN);
   std::fprintf(stderr, "canopennode-drives: CANopenNode nodes %d %d %d on %s, %.0f Hz per SYNC, model %s\n", nodes[0].id,
-               nodes[1].id, nodes[2].id, interface.c_str(), rate, model.c_str());
+               nodes[1].id, nodes[2].id, d.interface.c_str(), d.rate, d.model.c_str());
 
   std::uint64_t syncs = 0;
   bool quit = false;

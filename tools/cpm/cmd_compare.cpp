@@ -5,7 +5,7 @@
 // G, H, F of ISO 230-4 when the ball-bar data are a circle about the pivot.
 #include <cstdio>
 
-#include "cli.hpp"
+#include "ident_common.hpp"
 #include "cpm/identification/align.hpp"
 #include "cpm/identification/kinematic.hpp"
 #include "cpm/identification/report.hpp"
@@ -17,18 +17,17 @@ namespace cpm::cli {
 namespace {
 
 struct Options {
-  std::optional<std::string> model, json, report;
-  std::string data;
-  double window_ms = ident::MotionOptions{}.half_window * 1e3;
+  MeasurementOptions in;
+  std::optional<std::string> json, report;
 };
 
 int run(const Options& o) {
-  const std::string model_path = model_or_default(o.model);
-  const std::string& data_path = o.data;
+  const std::string model_path = o.in.model_path();
+  const std::string& data_path = o.in.data;
   const auto& json_path = o.json;
   const auto& report_path = o.report;
   ident::MotionOptions mo;
-  mo.half_window = o.window_ms * 1e-3;
+  mo.half_window = o.in.half_window();
   const io::DataSet ds = read_measurements(data_path);
   const io::ModelFile mf = io::load_model_file(model_path);
   const std::string title = "cpm compare: " + model_path + " on " + data_path;
@@ -70,15 +69,9 @@ int run(const Options& o) {
 
 Run setup(CLI::App& app) {
   auto o = std::make_shared<Options>();
-  app.add_option("--data", o->data,
-                 "the measurements: a motion log, ball-bar or position data (data-files.md), or an lcm-logger file "
-                 "of cpmd's state")
-      ->type_name("FILE.csv")
-      ->required();
-  add_model_option(app, o->model, "the model to judge");
+  add_measurement_options(app, o->in, "the model to judge");
   app.add_option("--json", o->json, "write the residual summary as JSON (SI units)")->type_name("OUT.json");
   app.add_option("--report", o->report, "write an HTML report with the plots")->type_name("OUT.html");
-  add_number(app, "--window", o->window_ms, "MS", "half width of the motion logs' smoothing filter in ms");
   app.footer("Motion logs: force residual (N). Ball-bar and position data: length or position residual (m in the\n"
              "JSON, µm on screen); a ball-bar circle about the pivot gets G, H, F and its polar plot.");
   return [o] { return run(*o); };

@@ -2,7 +2,7 @@
 // on measurements (motion logs: the force residual; identification/).
 #include <cstdio>
 
-#include "cli.hpp"
+#include "ident_common.hpp"
 #include "cpm/identification/diagnose.hpp"
 #include "cpm/identification/kinematic.hpp"
 #include "cpm/identification/report.hpp"
@@ -14,20 +14,19 @@ namespace cpm::cli {
 namespace {
 
 struct Options {
-  std::optional<std::string> model, json, report;
-  std::string data;
+  MeasurementOptions in;
+  std::optional<std::string> json, report;
   ident::DiagnoseOptions diagnose;
-  double window_ms = ident::DiagnoseOptions{}.motion.half_window * 1e3;
   bool quiet = false;
 };
 
 int run(const Options& opt) {
-  const std::string model_path = model_or_default(opt.model);
-  const std::string& data_path = opt.data;
+  const std::string model_path = opt.in.model_path();
+  const std::string& data_path = opt.in.data;
   const auto& json_path = opt.json;
   const auto& report_path = opt.report;
   ident::DiagnoseOptions o = opt.diagnose;
-  o.motion.half_window = opt.window_ms * 1e-3;
+  o.motion.half_window = opt.in.half_window();
   const bool quiet = opt.quiet;
   if (!(o.alpha > 0.0 && o.alpha < 1.0)) throw UsageError("--alpha must be within (0, 1)");
   const io::DataSet ds = read_measurements(data_path);
@@ -54,12 +53,7 @@ int run(const Options& opt) {
 
 Run setup(CLI::App& app) {
   auto o = std::make_shared<Options>();
-  app.add_option("--data", o->data,
-                 "the measurements: a motion log, ball-bar or position data (data-files.md), or an lcm-logger file "
-                 "of cpmd's state")
-      ->type_name("FILE.csv")
-      ->required();
-  add_model_option(app, o->model, "the model to diagnose");
+  add_measurement_options(app, o->in, "the model to diagnose");
   app.add_option("--json", o->json, "write the diagnosis as JSON")->type_name("OUT.json");
   app.add_option("--report", o->report, "write an HTML report with the plots")->type_name("OUT.html");
   app.add_option("--effect", o->diagnose.effects, "judge only these effects (repeat the option; e.g. --effect backlash)")
@@ -68,7 +62,6 @@ Run setup(CLI::App& app) {
       ->allow_extra_args(false);
   add_number(app, "--alpha", o->diagnose.alpha, "P", "significance level of the F-test, within (0, 1)")
 ;
-  add_number(app, "--window", o->window_ms, "MS", "half width of the motion logs' smoothing filter in ms");
   app.add_flag("--quiet", o->quiet, "print nothing (the files only)");
   app.footer("Motion logs: the force residual, every dynamic effect of the library on every axis fitted with the\n"
              "base (A, B, C, E), scored (RMS after, share explained, F-test, BIC, confounding), ranked, a verdict,\n"

@@ -3,7 +3,7 @@
 #include <cstdio>
 #include <sstream>
 
-#include "cli.hpp"
+#include "ident_common.hpp"
 #include "cpm/identification/fit.hpp"
 #include "cpm/identification/kinematic.hpp"
 #include "cpm/identification/report.hpp"
@@ -99,21 +99,21 @@ int run_kinematic(const io::DataSet& ds, const std::vector<ident::FitRequest>& r
 }
 
 struct Options {
-  std::optional<std::string> model, holdout, json;
-  std::string data, out;
+  MeasurementOptions in;
+  std::optional<std::string> holdout, json;
+  std::string out;
   std::vector<std::string> adds;
-  double window_ms = ident::DiagnoseOptions{}.motion.half_window * 1e3;
 };
 
 int run(const Options& opt) {
-  const std::string model_path = model_or_default(opt.model);
-  const std::string& data_path = opt.data;
+  const std::string model_path = opt.in.model_path();
+  const std::string& data_path = opt.in.data;
   const std::string& out_path = opt.out;
   const auto& holdout_path = opt.holdout;
   const auto& json_path = opt.json;
   const std::vector<std::string>& adds = opt.adds;
   ident::DiagnoseOptions o;
-  o.motion.half_window = opt.window_ms * 1e-3;
+  o.motion.half_window = opt.in.half_window();
   std::vector<ident::FitRequest> req;
   for (const auto& s : adds) req.push_back(ident::parse_fit_request(s));
   const io::DataSet ds = read_measurements(data_path);
@@ -171,11 +171,7 @@ int run(const Options& opt) {
 
 Run setup(CLI::App& app) {
   auto o = std::make_shared<Options>();
-  app.add_option("--data", o->data,
-                 "the measurements: a motion log, ball-bar or position data (data-files.md), or an lcm-logger file "
-                 "of cpmd's state")
-      ->type_name("FILE.csv")
-      ->required();
+  add_measurement_options(app, o->in, "the model to extend");
   app.add_option("--add", o->adds,
                  "an effect to add and fit, with its axis when it acts on one (repeat the option; e.g. --add "
                  "coulomb_friction:2 --add payload_mass)")
@@ -183,14 +179,10 @@ Run setup(CLI::App& app) {
       ->check(effect_name())
       ->allow_extra_args(false)
       ->required();
-  app.add_option("--out", o->out, "the new model file (the input model is never overwritten)")
-      ->type_name("NEW_MODEL.yaml")
-      ->required();
-  add_model_option(app, o->model, "the model to extend");
+  add_new_model_option(app, o->out);
   app.add_option("--holdout", o->holdout, "measurements of the same kind to judge the fit on, unseen by it")
       ->type_name("FILE.csv");
   app.add_option("--json", o->json, "write the fit (parameters, RMS before and after) as JSON")->type_name("OUT.json");
-  add_number(app, "--window", o->window_ms, "MS", "half width of the motion logs' smoothing filter in ms");
   app.footer("Without --holdout the error on unseen data is a 2-fold cross-validation (motion: halves in time;\n"
              "ball-bar and position data: alternate samples). Kinematic effects (backlash:2, cyclic_error:1, ...)\n"
              "go into the kinematics and the planes are recalibrated with them.");

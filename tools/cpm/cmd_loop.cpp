@@ -5,7 +5,7 @@
 #include <cstdio>
 #include <sstream>
 
-#include "cli.hpp"
+#include "ident_common.hpp"
 #include "cpm/identification/loop.hpp"
 #include "cpm/io/data_files.hpp"
 #include "cpm/io/model_file.hpp"
@@ -15,21 +15,21 @@ namespace cpm::cli {
 namespace {
 
 struct Options {
-  std::optional<std::string> model, json, report;
-  std::string data, out;
+  MeasurementOptions in;
+  std::optional<std::string> json, report;
+  std::string out;
   int max_steps = 6;
-  double window_ms = ident::DiagnoseOptions{}.motion.half_window * 1e3;
 };
 
 int run(const Options& opt) {
-  const std::string model_path = model_or_default(opt.model);
-  const std::string& data_path = opt.data;
+  const std::string model_path = opt.in.model_path();
+  const std::string& data_path = opt.in.data;
   const std::string& out_path = opt.out;
   const auto& json_path = opt.json;
   const auto& report_path = opt.report;
   const int max_steps = opt.max_steps;
   ident::DiagnoseOptions o;
-  o.motion.half_window = opt.window_ms * 1e-3;
+  o.motion.half_window = opt.in.half_window();
   const io::DataSet ds = read_measurements(data_path);
   io::ModelFile mf = io::load_model_file(model_path);
   const ident::LoopResult R = ident::run_loop(ds, mf.model, o, max_steps);
@@ -53,21 +53,13 @@ int run(const Options& opt) {
 
 Run setup(CLI::App& app) {
   auto o = std::make_shared<Options>();
-  app.add_option("--data", o->data,
-                 "the measurements: a motion log, ball-bar or position data (data-files.md), or an lcm-logger file "
-                 "of cpmd's state")
-      ->type_name("FILE.csv")
-      ->required();
-  app.add_option("--out", o->out, "the new model file (the input model is never overwritten)")
-      ->type_name("NEW_MODEL.yaml")
-      ->required();
-  add_model_option(app, o->model, "the model to start from");
+  add_measurement_options(app, o->in, "the model to start from");
+  add_new_model_option(app, o->out);
   app.add_option("--report", o->report, "write the waterfall as an HTML page")->type_name("LOOP.html");
   app.add_option("--json", o->json, "write the waterfall as JSON")->type_name("LOOP.json");
   app.add_option("--max-steps", o->max_steps, "stop after N steps (1 .. 20)")
       ->type_name("N")
       ->check(CLI::Range(1, 20).description(""));
-  add_number(app, "--window", o->window_ms, "MS", "half width of the motion logs' smoothing filter in ms");
   app.footer("Each step adds the effect the diagnosis names first and refits every effect added so far together;\n"
              "it stops when nothing is missing, when something no library effect describes remains, or after N\n"
              "steps. The waterfall is the residual RMS of the model after each step beside the noise floor.");

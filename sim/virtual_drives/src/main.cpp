@@ -30,12 +30,7 @@ void on_signal(int) { g_stop = 1; }
 
 int run(int argc, char** argv) {
   sim::DriveCommandLine d;
-  const std::string& interface = d.interface;
-  const std::string& model = d.model;
-  const std::string& control = d.control;
-  const double& rate = d.rate;
-  sim::VirtualMachineConfig& cfg = d.cfg;
-  std::string ready_file, timing = sim::timing_name(cfg.timing);
+  std::string ready_file, timing = sim::timing_name(d.cfg.timing);
   bool use_stdin = false;
   std::vector<double> initial;
   std::vector<std::string> faults;
@@ -50,7 +45,7 @@ int run(int argc, char** argv) {
       ->expected(3)
       ->check(program::finite())
       ->default_str("0.600,0.425,0.300");
-  app.add_option("--substeps", cfg.plant.substeps, "RK4 steps of the plant per period")->type_name("N");
+  app.add_option("--substeps", d.cfg.plant.substeps, "RK4 steps of the plant per period")->type_name("N");
   app.add_option("--timing", timing,
                  "synchronous: a torque received before SYNC k acts from SYNC k, after the positions of SYNC k were "
                  "sampled (CiA 402 CST: one period of dead time); lockstep: it acts at once, as the in-process loop")
@@ -70,8 +65,8 @@ int run(int argc, char** argv) {
   } catch (const CLI::ParseError& e) {
     return program::parse_exit(app, e, "virtual-drives");
   }
-  if (initial.size() == 3) cfg.initial_position = Vec3(initial[0], initial[1], initial[2]);
-  cfg.timing = *sim::timing_from_name(timing);
+  if (initial.size() == 3) d.cfg.initial_position = Vec3(initial[0], initial[1], initial[2]);
+  d.cfg.timing = *sim::timing_from_name(timing);
   std::multimap<std::uint64_t, std::string> scheduled;
   for (const std::string& f : faults) {
     const auto colon = f.find(':');
@@ -80,17 +75,15 @@ int run(int argc, char** argv) {
       throw Error("--fault: expected SYNC:COMMAND, got '" + f + "'");
     scheduled.emplace(sync, f.substr(colon + 1));
   }
-  cfg.period = 1.0 / rate;
-
-  const ctl::MachineModel mm = model == "builtin:elkady" ? ctl::MachineModel::elkady() : io::load_model_file(model).model;
-  const ctl::Machine truth(mm);
-  hal::SocketCanBus bus(interface);
+  const sim::VirtualMachineConfig cfg = d.config();
+  const ctl::Machine truth(d.true_machine());
+  hal::SocketCanBus bus(d.interface);
   bus.set_filters({}, false);
   hal::SteadyClock clock;
   sim::VirtualMachine vm(bus, truth, cfg);
 
   std::unique_ptr<sim::ControlSocket> control_socket;
-  if (!control.empty()) control_socket = std::make_unique<sim::ControlSocket>(control);
+  if (!d.control.empty()) control_socket = std::make_unique<sim::ControlSocket>(d.control);
   if (use_stdin) fcntl(0, F_SETFL, fcntl(0, F_GETFL) | O_NONBLOCK);
   signal(SIGINT, on_signal);
   signal(SIGTERM, on_signal);
@@ -99,8 +92,8 @@ int run(int argc, char** argv) {
   vm.power_on(clock.now_ns());
   if (!ready_file.empty()) std::ofstream(ready_file) << getpid() << "\n";
   std::fprintf(stderr, "virtual-drives: nodes %d %d %d on %s, %.0f Hz per SYNC, %s timing, model %s\n",
-               cfg.axes[0].node_id, cfg.axes[1].node_id, cfg.axes[2].node_id, interface.c_str(), rate,
-               sim::timing_name(cfg.timing), model.c_str());
+               cfg.axes[0].node_id, cfg.axes[1].node_id, cfg.axes[2].node_id, d.interface.c_str(), d.rate,
+               sim::timing_name(cfg.timing), d.model.c_str());
 
   std::string stdin_buf;
   bool quit = false;

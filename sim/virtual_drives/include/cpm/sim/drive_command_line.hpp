@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "cpm/io/model_file.hpp"
 #include "cpm/program_cli.hpp"
 #include "cpm/sim/virtual_machine.hpp"
 
@@ -16,6 +17,17 @@ struct DriveCommandLine {
   std::string interface, model = "builtin:elkady", control;
   double rate = 1000;  // Hz
   VirtualMachineConfig cfg = VirtualMachineConfig::defaults();
+
+  // After the parse: the configuration with the period of the rate, and the
+  // true machine (the model file, or the nominal machine for builtin:elkady).
+  [[nodiscard]] VirtualMachineConfig config() const {
+    VirtualMachineConfig c = cfg;
+    c.period = 1.0 / rate;
+    return c;
+  }
+  [[nodiscard]] ctl::MachineModel true_machine() const {
+    return model == "builtin:elkady" ? ctl::MachineModel::elkady() : io::load_model_file(model).model;
+  }
 };
 
 inline void add_drive_options(CLI::App& app, DriveCommandLine& d) {
@@ -36,24 +48,19 @@ inline void add_drive_options(CLI::App& app, DriveCommandLine& d) {
       ->expected(3)
       ->check(CLI::Range(1, 127).description(""))
       ->default_str("1,2,3");
-  app.add_option_function<double>(
-         "--counts-per-m",
-         [&d](double v) {
-           for (auto& ax : d.cfg.axes) ax.scaling.counts_per_m = v;
-         },
-         "0x6064 position counts per metre (velocity in counts/s)")
-      ->type_name("N")
-      ->check(program::finite())
-      ->default_str(CLI::detail::to_string(d.cfg.axes[0].scaling.counts_per_m));
-  app.add_option_function<double>(
-         "--rated-force",
-         [&d](double v) {
-           for (auto& ax : d.cfg.axes) ax.scaling.rated_force_n = v;
-         },
-         "the force of 1000 per mille of 0x6071, in N")
-      ->type_name("N")
-      ->check(program::finite())
-      ->default_str(CLI::detail::to_string(d.cfg.axes[0].scaling.rated_force_n));
+  // A scaling of every axis's drive.
+  auto scaling = [&app, &d](const char* name, double hal::pdo::Scaling::*field, const char* help) {
+    app.add_option_function<double>(
+           name, [&d, field](double v) {
+             for (auto& ax : d.cfg.axes) ax.scaling.*field = v;
+           },
+           help)
+        ->type_name("N")
+        ->check(program::finite())
+        ->default_str(CLI::detail::to_string(d.cfg.axes[0].scaling.*field));
+  };
+  scaling("--counts-per-m", &hal::pdo::Scaling::counts_per_m, "0x6064 position counts per metre (velocity in counts/s)");
+  scaling("--rated-force", &hal::pdo::Scaling::rated_force_n, "the force of 1000 per mille of 0x6071, in N");
   app.add_option("--control", d.control,
                  "a UNIX stream socket for fault-injection commands (docs/canopen-backend.md)")
       ->type_name("PATH");
