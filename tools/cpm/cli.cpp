@@ -55,21 +55,33 @@ std::unique_ptr<CLI::App> make_app(std::map<std::string, Run>* runs) {
 
 const CLI::Validator& finite() { return program::finite(); }
 
-std::vector<std::string> effect_names() {
+namespace {
+
+std::vector<std::string> dynamic_effect_names() {
   std::vector<std::string> out;
   for (int t = 0; t < ctl::kDynamicEffectTypes; ++t) out.emplace_back(ctl::info(static_cast<ctl::DynamicEffectType>(t)).name);
+  return out;
+}
+
+std::vector<std::string> kinematic_effect_names() {
+  std::vector<std::string> out;
   for (int t = 0; t < kin::kKinematicEffectTypes; ++t)
     out.emplace_back(kin::info(static_cast<kin::KinematicEffectType>(t)).name);
   return out;
 }
 
+}  // namespace
+
+std::vector<std::string> effect_names() {
+  std::vector<std::string> out = dynamic_effect_names();
+  for (auto& n : kinematic_effect_names()) out.push_back(std::move(n));
+  return out;
+}
+
 std::string effect_list() {
-  std::vector<std::string> dyn, kinem;
-  for (int t = 0; t < ctl::kDynamicEffectTypes; ++t) dyn.emplace_back(ctl::info(static_cast<ctl::DynamicEffectType>(t)).name);
-  for (int t = 0; t < kin::kKinematicEffectTypes; ++t)
-    kinem.emplace_back(kin::info(static_cast<kin::KinematicEffectType>(t)).name);
-  return "dynamic (forces; seen in motion logs): " + join(dyn, ", ") +
-         "; kinematic (where the platform is; seen in ball-bar and position data): " + join(kinem, ", ");
+  return "dynamic (forces; seen in motion logs): " + join(dynamic_effect_names(), ", ") +
+         "; kinematic (where the platform is; seen in ball-bar and position data): " +
+         join(kinematic_effect_names(), ", ");
 }
 
 const CLI::Validator& effect_name() {
