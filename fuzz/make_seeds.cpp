@@ -19,6 +19,7 @@
 #include "cpm/hal/canopen.hpp"
 #include "cpm/hal/cia402.hpp"
 #include "cpm/hal/pdo.hpp"
+#include "cpm/program_cli.hpp"
 
 using Bytes = std::vector<std::uint8_t>;
 using cpm_msgs::control_command_t;
@@ -131,11 +132,14 @@ cpm::hal::CanFrame sdo_download_u32(std::uint16_t index, std::uint8_t sub, std::
 }  // namespace
 
 int main(int argc, char** argv) {
-  if (argc != 2) {
-    std::fprintf(stderr, "usage: fuzz_make_seeds CORPUS_ROOT\n");
-    return 2;
+  CLI::App app{"fuzz_make_seeds: the binary seeds of the fuzz targets' corpora", "fuzz_make_seeds"};
+  cpm::program::setup(app);
+  app.add_option("CORPUS_ROOT", root, "the corpora's folder (fuzz/corpus)")->type_name("DIR")->required();
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return cpm::program::parse_exit(app, e, "fuzz_make_seeds");
   }
-  root = argv[1];
 
   // ---- lcm_trajectory: one message each.
   write("lcm_trajectory", "move", encode(move(0.45, 0.40, 0.35)));
@@ -294,6 +298,6 @@ int main(int argc, char** argv) {
     Bytes t = {0x81, 0x01, 0, 0, 6, 0x37, 0x06, 0x10, 0x27, 0, 0, 0, 0, 20};  // TPDO1
     write("can_frames", "tpdo1", t);
   }
-  std::printf("seeds written under %s\n", argv[1]);
+  std::printf("seeds written under %s\n", root.c_str());
   return 0;
 }

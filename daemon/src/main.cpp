@@ -1,5 +1,5 @@
 // cpmd: the motion controller daemon. See docs/daemon.md and docs/security.md.
-//   cpmd --config FILE [--check] [--duration S] [--stats-json FILE] [--loop-cpu N] [--operators DIR]
+//   cpmd --config FILE [--check] [--duration S] [--stats-json FILE] [--loop-cpu N] [--operators DIR] [--version]
 #include <fcntl.h>
 #include <sched.h>
 #include <malloc.h>
@@ -23,22 +23,13 @@
 #include "cpm/daemon/server.hpp"
 #include "cpm/daemon/sim_backend.hpp"
 #include "cpm/daemon/stats_json.hpp"
+#include "cpm/program_cli.hpp"
 
 namespace {
 
 using namespace cpm;
 using namespace cpm::daemon;
 
-void usage() {
-  std::fprintf(stderr,
-               "usage: cpmd --config FILE [--check] [--duration S] [--stats-json FILE] [--loop-cpu N] [--operators DIR]\n"
-               "  --config FILE      the daemon's YAML configuration (config/sim.yaml)\n"
-               "  --check            validate the configuration and the model files, then exit\n"
-               "  --duration S       run S seconds, then shut down (latency runs)\n"
-               "  --stats-json FILE  at exit, write the loop statistics as JSON\n"
-               "  --loop-cpu N       pin the real-time loop to CPU N (-1: any), instead of loop.cpu\n"
-               "  --operators DIR    the operators' keys and roles (docs/security.md), instead of\n"
-               "                     security.operators_dir; re-read on SIGHUP and when it changes\n");
 }
 
 // Temporary file, fsync, rename: a crash leaves the old file or the new one
@@ -74,44 +65,62 @@ void keep_off_the_loops_cpu(int loop_cpu) {
     log::warning("cannot keep the other threads off CPU %d: %s", loop_cpu, std::strerror(errno));
 }
 
-// --loop-cpu: a CPU this machine has, or -1 (any); the loop.cpu key, for one run.
-int parse_cpu(const std::string& text) {
-  std::size_t used = 0;
-  long cpu = -2;
-  try {
-    cpu = std::stol(text, &used);
-  } catch (const std::exception&) {
-    used = 0;
-  }
-  const long cpus = ::sysconf(_SC_NPROCESSORS_CONF);
-  if (used != text.size() || used == 0 || cpu < -1 || (cpus > 0 && cpu >= cpus))
-    throw Error("--loop-cpu '" + text + "': want -1 (any CPU) or a CPU number from 0 to " +
-                std::to_string(cpus > 0 ? cpus - 1 : 1023));
-  return static_cast<int>(cpu);
-}
-
-int run(int argc, char** argv) {
+// The command line (CLI11): the exit status when cpmd is to stop at once
+// (--help, --version, a bad command line), else -1. The same text is the man
+// page cpmd(8) (help2man at build time, tools/man/).
+struct Options {
   std::string config_path, stats_path;
   double duration = -1;
   std::optional<int> loop_cpu;
   std::optional<std::string> operators_dir;
   bool check = false;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    auto value = [&]() -> std::string {
-      if (i + 1 >= argc) throw Error("option " + a + " needs a value");
-      return argv[++i];
-    };
-    if (a == "--config") config_path = value();
-    else if (a == "--stats-json") stats_path = value();
-    else if (a == "--duration") duration = std::stod(value());
-    else if (a == "--check") check = true;
-    else if (a == "--loop-cpu") loop_cpu = parse_cpu(value());
-    else if (a == "--operators") operators_dir = value();
-    else if (a == "--help" || a == "-h") { usage(); return 0; }
-    else { usage(); throw Error("unknown option '" + a + "'"); }
+};
+
+int parse(int argc, char** argv, Options& o) {
+  CLI::App app{"cpmd: the real-time motion controller daemon of a 3-PRRR Cartesian parallel manipulator. It runs\n"
+               "the control loop (a simulated plant or CiA 402 drives over CANopen), and takes trajectories and\n"
+               "commands from its operators over LCM (cpm is the client).",
+               "cpmd"};
+  program::setup(app);
+  app.add_option("--config", o.config_path, "the daemon's YAML configuration (cpmd.yaml(5); e.g. /etc/cpmd/cpmd.yaml)")
+      ->type_name("FILE")
+      ->required();
+  app.add_flag("--check,--check-config", o.check,
+               "validate the configuration and its model files, say how many operators may command, and exit");
+  app.add_option("--duration", o.duration, "run S seconds, then shut down (latency runs); < 0: until SIGTERM")
+      ->type_name("S")
+      ->check(program::finite());
+  app.add_option("--stats-json", o.stats_path,
+                 "at exit, write the loop statistics as JSON to FILE (times in ns, and the wake-up latency in 1 us "
+                 "bins as histogram_1us)")
+      ->type_name("FILE");
+  const long cpus = ::sysconf(_SC_NPROCESSORS_CONF);
+  app.add_option("--loop-cpu", o.loop_cpu, "pin the real-time loop to CPU N for this run, instead of loop.cpu (-1: any)")
+      ->type_name("N")
+      ->check(CLI::Range(-1L, cpus > 0 ? cpus - 1 : 1023L).description(""));
+  app.add_option("--operators", o.operators_dir,
+                 "the operators' keys and roles (docs/security.md), instead of security.operators_dir; re-read on "
+                 "SIGHUP and when it changes")
+      ->type_name("DIR");
+  app.footer("Signals: SIGTERM and SIGINT disable the drives and stop; SIGHUP re-reads the operators' keys.\n"
+             "Exit status: 0 stopped as asked, 1 an error (bad configuration, backend failure), 2 a bad command line.");
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return program::parse_exit(app, e, "cpmd");
   }
-  if (config_path.empty()) { usage(); return 2; }
+  return -1;
+}
+
+int run(int argc, char** argv) {
+  Options o;
+  if (const int rc = parse(argc, argv, o); rc >= 0) return rc;
+  const std::string& config_path = o.config_path;
+  const std::string& stats_path = o.stats_path;
+  const double duration = o.duration;
+  const std::optional<int>& loop_cpu = o.loop_cpu;
+  const std::optional<std::string>& operators_dir = o.operators_dir;
+  const bool check = o.check;
 
   const DaemonConfig cfg = [&] {
     DaemonConfig c = load_config(config_path);

@@ -32,6 +32,7 @@
 #include "cia402_state.hpp"
 #include "cpm/io/model_file.hpp"
 #include "cpm/sim/control_socket.hpp"
+#include "cpm/sim/drive_command_line.hpp"
 #include "cpm/sim/virtual_machine.hpp"
 #include "drive_od.hpp"
 
@@ -157,53 +158,29 @@ void on_master_lost(Node& n) {
                n.od->drive.x6007_abort_connection, canopennode::name(n.state));
 }
 
-std::vector<double> numbers(const std::string& s, std::size_t count, const std::string& opt) {
-  std::vector<double> v;
-  std::stringstream ss(s);
-  for (std::string t; std::getline(ss, t, ',');) v.push_back(std::stod(t));
-  if (v.size() != count) throw Error(opt + ": expected " + std::to_string(count) + " numbers, got '" + s + "'");
-  return v;
-}
-
 int run(int argc, char** argv) {
-  std::string interface, model = "builtin:elkady", control;
-  double rate = 1000;
+  sim::DriveCommandLine d;
   // Two RPDOs and two TPDOs, as many drives have: CiA 301 makes the others
   // optional, and the master must not depend on them (it did; docs/canopen-backend.md).
   int pdos = 2;
-  sim::VirtualMachineConfig cfg = sim::VirtualMachineConfig::defaults();
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    auto value = [&]() -> std::string {
-      if (i + 1 >= argc) throw Error("option " + a + " needs a value");
-      return argv[++i];
-    };
-    if (a == "--interface") interface = value();
-    else if (a == "--model") model = value();
-    else if (a == "--rate") rate = numbers(value(), 1, a)[0];
-    else if (a == "--control") control = value();
-    else if (a == "--pdos") pdos = static_cast<int>(numbers(value(), 1, a)[0]);
-    else if (a == "--nodes") {
-      const auto v = numbers(value(), 3, a);
-      for (std::size_t k = 0; k < 3; ++k) cfg.axes[k].node_id = static_cast<int>(v[k]);
-    } else if (a == "--counts-per-m") {
-      const double v = numbers(value(), 1, a)[0];
-      for (auto& ax : cfg.axes) ax.scaling.counts_per_m = v;
-    } else if (a == "--rated-force") {
-      const double v = numbers(value(), 1, a)[0];
-      for (auto& ax : cfg.axes) ax.scaling.rated_force_n = v;
-    } else {
-      throw Error("unknown option '" + a + "' (--interface --model --rate --nodes --counts-per-m --rated-force --control --pdos)");
-    }
+  CLI::App app{"canopennode-drives: three CiA 402 drive nodes on CANopenNode (CiA 301 by another project), around\n"
+               "the plant of virtual-drives: the SIL tests' independent peer.",
+               "canopennode-drives"};
+  program::setup(app);
+  sim::add_drive_options(app, d);
+  app.add_option("--pdos", pdos, "the RPDOs and the TPDOs each node has")->type_name("N")->check(CLI::Range(1, 4).description(""));
+  app.footer("Commands (--control): heartbeat AXIS off|on, emcy AXIS CODE [REG], status, quit.");
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return program::parse_exit(app, e, "canopennode-drives");
   }
-  if (interface.empty()) throw Error("--interface is required");
-  cfg.period = 1.0 / rate;
-  const ctl::MachineModel mm = model == "builtin:elkady" ? ctl::MachineModel::elkady() : io::load_model_file(model).model;
-  const ctl::Machine truth(mm);
+  const sim::VirtualMachineConfig cfg = d.config();
+  const ctl::Machine truth(d.true_machine());
   sim::SyncedPlant plant(truth, cfg);
 
-  const int ifindex = static_cast<int>(if_nametoindex(interface.c_str()));
-  if (ifindex == 0) throw Error("no CAN interface " + interface);
+  const int ifindex = static_cast<int>(if_nametoindex(d.interface.c_str()));
+  if (ifindex == 0) throw Error("no CAN interface " + d.interface);
   const int epfd = epoll_create1(EPOLL_CLOEXEC);
   std::array<Node, 3> nodes;
   for (std::size_t i = 0; i < 3; ++i) {
@@ -222,12 +199,12 @@ int run(int argc, char** argv) {
   }
 
   std::unique_ptr<sim::ControlSocket> control_socket;
-  if (!control.empty()) control_socket = std::make_unique<sim::ControlSocket>(control);
+  if (!d.control.empty()) control_socket = std::make_unique<sim::ControlSocket>(d.control);
   signal(SIGINT, on_signal);
   signal(SIGTERM, on_signal);
   signal(SIGPIPE, SIG_IGN);
   std::fprintf(stderr, "canopennode-drives: CANopenNode nodes %d %d %d on %s, %.0f Hz per SYNC, model %s\n", nodes[0].id,
-               nodes[1].id, nodes[2].id, interface.c_str(), rate, model.c_str());
+               nodes[1].id, nodes[2].id, d.interface.c_str(), d.rate, d.model.c_str());
 
   std::uint64_t syncs = 0;
   bool quit = false;

@@ -34,6 +34,7 @@
 
 #include "cpm/daemon/client.hpp"
 #include "cpm/daemon/loop.hpp"
+#include "cpm/program_cli.hpp"
 #include "cpm/sim/closed_loop.hpp"
 #include "sil/sil_check.hpp"
 #include "support/daemon_process.hpp"
@@ -220,17 +221,21 @@ int main(int argc, char** argv) {
 }
 
 int run(Sil& t, int argc, char** argv) {
-  // --drive-faults-only: the drives are another stack (tests/canopennode/);
-  // the e-stop and limit-switch cases, which do not involve them, ran with ours.
-  const bool drive_faults_only = argc == 6 && std::string(argv[5]) == "--drive-faults-only";
-  if (argc != 5 && !drive_faults_only) {
-    std::fprintf(stderr, "usage: sil_daemon CPMD DRIVES CONFIG MODEL [--drive-faults-only]\n");
-    return 2;
+  bool drive_faults_only = false;
+  CLI::App app{"test_sil_daemon: cpmd's CANopen backend against drives on vcan0 and a gpio-sim chip", "test_sil_daemon"};
+  cpm::program::setup(app);
+  app.add_option("CPMD", t.cpmd_exe, "the cpmd to test")->type_name("FILE")->required();
+  app.add_option("DRIVES", t.vd_exe, "virtual-drives or canopennode-drives")->type_name("FILE")->required();
+  app.add_option("CONFIG", t.config, "cpmd's configuration (config/sil.yaml)")->type_name("FILE")->required();
+  app.add_option("MODEL", t.model, "the true machine's model file")->type_name("FILE")->required();
+  // The drives are another stack (tests/canopennode/); the e-stop and
+  // limit-switch cases, which do not involve them, ran with ours.
+  app.add_flag("--drive-faults-only", drive_faults_only, "only the faults that involve the drives");
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return cpm::program::parse_exit(app, e, "test_sil_daemon");
   }
-  t.cpmd_exe = argv[1];
-  t.vd_exe = argv[2];
-  t.config = argv[3];
-  t.model = argv[4];
   t.dir = std::string(sil::env_or("TMPDIR", "/tmp")) + "/cpm-sil-daemon-" + std::to_string(getpid());
   mkdir(t.dir.c_str(), 0755);
   t.sock = t.dir + "/vd.sock";

@@ -3,7 +3,6 @@
 #pragma once
 
 #include <cmath>
-#include <cstdlib>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -19,9 +18,8 @@ inline std::vector<double> calib_numbers(const std::string& what, const std::str
   std::istringstream is(text);
   std::string part;
   while (std::getline(is, part, ',')) {
-    char* end = nullptr;
-    const double x = std::strtod(part.c_str(), &end);
-    if (part.empty() || *end != '\0' || !std::isfinite(x))
+    double x = 0;
+    if (!CLI::detail::lexical_cast(part, x) || !std::isfinite(x))
       throw UsageError(what + ": '" + text + "' is not a comma-separated list of finite numbers");
     v.push_back(x);
   }
@@ -32,6 +30,11 @@ inline Vec3 calib_point(const std::string& what, const std::string& text) {
   const auto v = calib_numbers(what, text);
   if (v.size() != 3) throw UsageError(what + ": expected three numbers x,y,z in metres, got '" + text + "'");
   return Vec3(v[0], v[1], v[2]);
+}
+
+// A point as the help shows a default: "0.430,0.430,0.400" (m).
+inline std::string point_text(const Vec3& v) {
+  return CLI::detail::to_string(v.x()) + "," + CLI::detail::to_string(v.y()) + "," + CLI::detail::to_string(v.z());
 }
 
 inline ctl::CirclePlane calib_plane(const std::string& text) {

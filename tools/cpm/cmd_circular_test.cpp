@@ -1,7 +1,6 @@
 // cpm circular-test: ISO 230-4 circular test of a simulated true machine
 // driven by a controller that believes another model.
 #include <cstdio>
-#include <fstream>
 #include <sstream>
 
 #include "calib_common.hpp"
@@ -22,25 +21,25 @@ std::string trace_csv(const cal::CircularTestResult& r) {
   return o.str();
 }
 
-int run(Args& a) {
-  const std::string truth_path = a.option_or("truth", default_model_path());
-  const std::string model_path = a.option_or("model", default_model_path());
-  cal::CircularTestSpec s;
-  if (auto v = a.option("centre")) s.centre = calib_point("--centre", *v);
-  s.radius = a.number("radius", s.radius);
-  s.plane = calib_plane(a.option_or("plane", "xy"));
-  s.feed = a.number("feed", s.feed);
-  s.overshoot_time = a.number("overshoot", s.overshoot_time);
-  s.closed_loop = !a.flag("kinematic");
-  const std::string law = a.option_or("controller", "computed_torque");
-  const auto l = ctl::law_from_name(law);
-  if (!l) throw UsageError("--controller must be pd, pd_gravity, pd_feedforward or computed_torque");
-  s.law = *l;
-  if (auto v = a.option("pivot")) s.pivot = calib_point("--pivot", *v);
-  const auto svg = a.option("svg");
-  const auto json = a.option("json");
-  const auto trace = a.option("trace");
-  a.finish();
+struct Options {
+  std::optional<std::string> truth, model, centre, pivot, svg, json, trace;
+  cal::CircularTestSpec spec;
+  std::string plane = "xy", controller = "computed_torque";
+  bool kinematic = false;
+};
+
+int run(const Options& o) {
+  const std::string truth_path = model_or_default(o.truth);
+  const std::string model_path = model_or_default(o.model);
+  cal::CircularTestSpec s = o.spec;
+  if (o.centre) s.centre = calib_point("--centre", *o.centre);
+  s.plane = calib_plane(o.plane);
+  s.closed_loop = !o.kinematic;
+  s.law = *ctl::law_from_name(o.controller);
+  if (o.pivot) s.pivot = calib_point("--pivot", *o.pivot);
+  const auto& svg = o.svg;
+  const auto& json = o.json;
+  const auto& trace = o.trace;
   const io::ModelFile truth = io::load_model_file(truth_path);
   const io::ModelFile model = io::load_model_file(model_path);
   const cal::CircularTestResult r = cal::run_circular_test(truth.model, model.model, s);
@@ -65,28 +64,47 @@ int run(Args& a) {
     io::write_file_atomically(*trace, trace_csv(r));
     std::printf("traces: %s\n", trace->c_str());
   }
-  if (json) {
-    std::ostringstream o;
-    o << "{\"G\": " << cal::json_num(r.G_bidirectional) << ", \"G_ccw\": " << cal::json_num(r.ccw_metrics.G)
-      << ", \"G_cw\": " << cal::json_num(r.cw_metrics.G) << ", \"H\": " << cal::json_num(r.H)
-      << ", \"F_max\": " << cal::json_num(r.F_max) << ", \"F_min\": " << cal::json_num(r.F_min)
-      << ", \"max_abs_error\": " << cal::json_num(r.max_abs_error)
-      << ", \"servo_rms\": " << cal::json_num(r.servo_rms) << ", \"radius\": " << cal::json_num(s.radius)
-      << ", \"feed\": " << cal::json_num(s.feed) << ", \"plane\": \"" << cal::plane_name(s.plane)
-      << "\", \"closed_loop\": " << (s.closed_loop ? "true" : "false") << ", \"pivot\": ["
-      << cal::json_num(r.pivot.x()) << ", " << cal::json_num(r.pivot.y()) << ", " << cal::json_num(r.pivot.z())
-      << "]}\n";
-    io::write_file_atomically(*json, o.str());
-  }
+  if (json)
+    write_json(*json, Json{{"G", r.G_bidirectional},
+                           {"G_ccw", r.ccw_metrics.G},
+                           {"G_cw", r.cw_metrics.G},
+                           {"H", r.H},
+                           {"F_max", r.F_max},
+                           {"F_min", r.F_min},
+                           {"max_abs_error", r.max_abs_error},
+                           {"servo_rms", r.servo_rms},
+                           {"radius", s.radius},
+                           {"feed", s.feed},
+                           {"plane", cal::plane_name(s.plane)},
+                           {"closed_loop", s.closed_loop},
+                           {"pivot", {r.pivot.x(), r.pivot.y(), r.pivot.z()}}});
   return 0;
 }
 
+Run setup(CLI::App& app) {
+  auto o = std::make_shared<Options>();
+  add_model_option(app, o->truth, "the true machine, simulated", "--truth");
+  add_model_option(app, o->model, "the model the controller believes");
+  app.add_option("--centre", o->centre, "commanded centre of the circle in m (e.g. 0.430,0.430,0.400)")
+      ->type_name("X,Y,Z")
+      ->default_str(point_text(o->spec.centre));
+  add_number(app, "--radius", o->spec.radius, "M", "circle radius in m, the bar length (e.g. 0.150)");
+  add_choice(app, "--plane", o->plane, {"xy", "yz", "zx"}, "the circle's plane");
+  add_number(app, "--feed", o->spec.feed, "M/S", "feed along the circle in m/s (0.020 = 1200 mm/min)");
+  add_number(app, "--overshoot", o->spec.overshoot_time, "S", "speed ramp at each end in s (the overshoot arcs)");
+  app.add_flag("--kinematic", o->kinematic, "kinematics only: no controller, no servo error");
+  add_choice(app, "--controller", o->controller, law_names(), "the control law (Table 3 gains)");
+  app.add_option("--pivot", o->pivot, "true position of the fixed ball in m, the truth's frame")
+      ->type_name("X,Y,Z")
+      ->default_str("the commanded centre");
+  app.add_option("--svg", o->svg, "write the polar plot to FILE.svg")->type_name("FILE.svg");
+  app.add_option("--trace", o->trace, "write the traces (angle in rad, deviation in m) to FILE.csv")->type_name("FILE.csv");
+  app.add_option("--json", o->json, "write G, H, F (m) as JSON to FILE")->type_name("FILE");
+  return [o] { return run(*o); };
+}
+
 const Command reg{"circular-test",
-                  "ISO 230-4 circular test (ball-bar) of a simulated machine: G, H, F and a polar plot", run,
-                  "[--truth TRUE.yaml] [--model MODEL.yaml] [--centre X,Y,Z] [--radius M] [--plane xy|yz|zx]\n"
-                  "       [--feed M/S] [--overshoot S] [--kinematic] [--controller LAW] [--pivot X,Y,Z]\n"
-                  "       [--svg FILE.svg] [--trace FILE.csv] [--json FILE]\n"
-                  "  Both model files default to config/machine.yaml; lengths in m, feed in m/s."};
+                  "ISO 230-4 circular test (ball-bar) of a simulated machine: G, H, F and a polar plot", setup};
 
 }  // namespace
 }  // namespace cpm::cli

@@ -53,52 +53,49 @@ state_t wait_segment(daemon::Client& c, std::int64_t id, double timeout_s, bool 
 
 namespace {
 
-std::string json_state(const state_t& s) {
-  auto arr = [](const double* v) {
-    std::string out("[");
-    for (int i = 0; i < 3; ++i) {
-      if (i) out.append(", ");
-      out.append(json_number(v[i]));
-    }
-    out.push_back(']');
-    return out;
-  };
-  std::ostringstream os;
-  os << "{\"mode\": \"" << daemon::mode_text(s.mode) << "\", \"t\": " << json_number(s.t) << ", \"cycle\": " << s.cycle
-     << ", \"position\": " << arr(s.position) << ", \"velocity\": " << arr(s.velocity)
-     << ", \"position_ref\": " << arr(s.position_ref) << ", \"position_error\": " << json_number(s.position_error_norm)
-     << ", \"d\": " << arr(s.d) << ", \"force\": " << arr(s.force) << ", \"faults\": [";
-  const std::string f = daemon::fault_text(s.faults);
-  std::istringstream is(f);
-  std::string part;
-  bool first = true;
-  while (std::getline(is, part, ',')) {
-    os << (first ? "" : ", ") << '"' << part << '"';
-    first = false;
-  }
-  std::string why(reinterpret_cast<const char*>(s.fault_text), strnlen(reinterpret_cast<const char*>(s.fault_text), sizeof s.fault_text));
-  for (char& ch : why)
-    if (ch == '"' || ch == '\\' || static_cast<unsigned char>(ch) < 0x20) ch = ' ';
-  os << "], \"fault_text\": \"" << why << "\"";
-  os << ", \"first_fault\": \"" << (s.first_fault ? daemon::fault_bit_name(static_cast<std::uint32_t>(s.first_fault)) : "")
-     << "\", \"controller\": \"" << ctl::law_name(static_cast<ctl::ControlLaw>(s.controller))
-     << "\", \"segment_id\": " << s.segment_id << ", \"queue_depth\": " << s.queue_depth
-     << ", \"last_segment\": {\"id\": " << s.last_segment_id << ", \"rmse\": " << json_number(s.last_segment_rmse)
-     << ", \"max\": " << json_number(s.last_segment_max) << "}, \"loop\": {\"cycles\": " << s.cycles
-     << ", \"overruns\": " << s.overruns << ", \"skipped\": " << s.skipped
-     << ", \"max_latency_ns\": " << s.max_latency_ns << ", \"max_cycle_ns\": " << s.max_cycle_ns << "}}";
-  return os.str();
+Json json_state(const state_t& s) {
+  auto arr = [](const double* v) { return Json::array({v[0], v[1], v[2]}); };
+  Json faults = Json::array();
+  std::istringstream is(daemon::fault_text(s.faults));
+  for (std::string part; std::getline(is, part, ',');) faults.push_back(part);
+  const auto* why = reinterpret_cast<const char*>(s.fault_text);
+  return {{"mode", daemon::mode_text(s.mode)},
+          {"t", s.t},
+          {"cycle", s.cycle},
+          {"position", arr(s.position)},
+          {"velocity", arr(s.velocity)},
+          {"position_ref", arr(s.position_ref)},
+          {"position_error", s.position_error_norm},
+          {"d", arr(s.d)},
+          {"force", arr(s.force)},
+          {"faults", faults},
+          {"fault_text", std::string(why, strnlen(why, sizeof s.fault_text))},
+          {"first_fault", s.first_fault ? daemon::fault_bit_name(static_cast<std::uint32_t>(s.first_fault)) : ""},
+          {"controller", ctl::law_name(static_cast<ctl::ControlLaw>(s.controller))},
+          {"segment_id", s.segment_id},
+          {"queue_depth", s.queue_depth},
+          {"last_segment", {{"id", s.last_segment_id}, {"rmse", s.last_segment_rmse}, {"max", s.last_segment_max}}},
+          {"loop",
+           {{"cycles", s.cycles},
+            {"overruns", s.overruns},
+            {"skipped", s.skipped},
+            {"max_latency_ns", s.max_latency_ns},
+            {"max_cycle_ns", s.max_cycle_ns}}}};
 }
 
-int status(Args& a) {
-  const bool json = a.flag("json");
-  auto l = lcm_options(a);
-  a.finish();
+struct StateOptions {
+  bool json = false;
+  Connection connection;
+};
+
+int status(const StateOptions& o) {
+  const bool json = o.json;
+  const auto l = lcm_options(o.connection);
   daemon::Client c(l);
   auto s = c.state(2.0);
   if (!s) throw Error("no state from cpmd within 2 s (is it running? LCM " + l.url + ", channel " + l.state_channel + ")");
   if (json) {
-    std::printf("%s\n", json_state(*s).c_str());
+    std::printf("%s\n", json_text(json_state(*s), -1).c_str());
     return 0;
   }
   std::printf("%s\n", state_line(*s).c_str());
@@ -117,11 +114,18 @@ int status(Args& a) {
   return 0;
 }
 
-int simple(Args& a, std::int8_t cmd, const char* what) {
-  const bool no_wait = a.flag("no-wait");
-  auto l = lcm_options(a);
-  auto key = cmd == control_command_t::CMD_STOP ? operator_key_if_usable(a) : operator_key(a);
-  a.finish();
+struct CommandOptions {
+  bool no_wait = false;
+  Connection connection;
+  Operator op;
+  std::string law, model;
+  std::optional<double> kp, kd;
+};
+
+int simple(const CommandOptions& o, std::int8_t cmd, const char* what) {
+  const bool no_wait = o.no_wait;
+  const auto l = lcm_options(o.connection);
+  auto key = cmd == control_command_t::CMD_STOP ? operator_key_if_usable(o.op) : operator_key(o.op);
   daemon::Client c(l, key);
   const auto ack = c.control(cmd);
   const int rc = report(what, ack);
@@ -139,15 +143,13 @@ int simple(Args& a, std::int8_t cmd, const char* what) {
   return rc;
 }
 
-int controller(Args& a) {
+int controller(const CommandOptions& o) {
   control_command_t cmd{};
   cmd.command = control_command_t::CMD_SELECT_CONTROLLER;
-  const double kp = a.number("kp", NAN), kd = a.number("kd", NAN);
-  auto l = lcm_options(a);
-  auto key = operator_key(a);
-  const auto pos = a.positionals();
-  const auto law = pos.empty() ? std::nullopt : ctl::law_from_name(pos[0]);
-  if (pos.size() != 1 || !law) throw UsageError("give one law: pd, pd_gravity, pd_feedforward or computed_torque");
+  const double kp = o.kp.value_or(NAN), kd = o.kd.value_or(NAN);
+  const auto l = lcm_options(o.connection);
+  auto key = operator_key(o.op);
+  const auto law = ctl::law_from_name(o.law);
   cmd.law = static_cast<std::int8_t>(*law);
   const auto g = ctl::table3_gains(*law);
   cmd.use_table3_gains = std::isnan(kp) && std::isnan(kd);
@@ -155,29 +157,23 @@ int controller(Args& a) {
     cmd.kp[i] = std::isnan(kp) ? g.kp[i] : kp;
     cmd.kd[i] = std::isnan(kd) ? g.kd[i] : kd;
   }
-  a.finish();
   daemon::Client c(l, key);
   return report("controller", c.control(cmd));
 }
 
-int load_model(Args& a) {
-  auto l = lcm_options(a);
-  auto key = operator_key(a);
-  const auto pos = a.positionals();
-  if (pos.size() != 1)
-    throw UsageError("give the model file's path in cpmd's model directory (security.model_dir), or builtin:elkady");
-  a.finish();
+int load_model(const CommandOptions& o) {
+  const auto l = lcm_options(o.connection);
+  auto key = operator_key(o.op);
   control_command_t cmd{};
   cmd.command = control_command_t::CMD_LOAD_MODEL;
-  cmd.model_path = pos[0];
+  cmd.model_path = o.model;
   daemon::Client c(l, key);
   return report("load-model", c.control(cmd, 10.0));
 }
 
-int stats(Args& a) {
-  const bool json = a.flag("json");
-  auto l = lcm_options(a);
-  a.finish();
+int stats(const StateOptions& o) {
+  const bool json = o.json;
+  const auto l = lcm_options(o.connection);
   daemon::Client c(l);
   auto s = c.stats(3.0);
   if (!s) throw Error("no statistics from cpmd within 3 s (channel " + l.stats_channel + ")");
@@ -194,14 +190,22 @@ int stats(Args& a) {
     return s->max_ns[k] * 1e-3;
   };
   if (json) {
-    std::printf("{\"rate_hz\": %g, \"cycles\": %lld, \"overruns\": %lld, \"skipped\": %lld, \"realtime\": %s, \"series\": {",
-                s->rate_hz, static_cast<long long>(s->cycles), static_cast<long long>(s->overruns),
-                static_cast<long long>(s->skipped), s->realtime ? "true" : "false");
+    // Microseconds, rounded as on screen: 1 ns for the mean and maximum, the
+    // histogram's 1 us bins for the percentiles.
+    auto us = [](double v, double per_us) { return std::round(v * per_us) / per_us; };
+    Json series = Json::object();
     for (int k = 0; k < daemon::kSeries; ++k)
-      std::printf("%s\"%s\": {\"mean_us\": %.3f, \"p99_us\": %.0f, \"p999_us\": %.0f, \"max_us\": %.3f}", k ? ", " : "",
-                  names[k], s->count[k] ? s->sum_ns[k] / s->count[k] * 1e-3 : 0.0, pct(k, 0.99), pct(k, 0.999),
-                  s->max_ns[k] * 1e-3);
-    std::printf("}}\n");
+      series[names[k]] = {{"mean_us", us(s->count[k] ? s->sum_ns[k] / s->count[k] * 1e-3 : 0.0, 1e3)},
+                          {"p99_us", us(pct(k, 0.99), 1.0)},
+                          {"p999_us", us(pct(k, 0.999), 1.0)},
+                          {"max_us", us(s->max_ns[k] * 1e-3, 1e3)}};
+    const Json j{{"rate_hz", s->rate_hz},
+                 {"cycles", s->cycles},
+                 {"overruns", s->overruns},
+                 {"skipped", s->skipped},
+                 {"realtime", static_cast<bool>(s->realtime)},
+                 {"series", series}};
+    std::printf("%s\n", json_text(j, -1).c_str());
     return 0;
   }
   std::printf("loop %.0f Hz, %s, memory %slocked: %lld cycles (%.1f s), %lld overruns, %lld slots skipped\n",
@@ -224,40 +228,76 @@ int stats(Args& a) {
   return 0;
 }
 
-int keygen(Args& a) {
-  const auto pos = a.positionals();
-  if (pos.size() != 1) throw UsageError("give the key file to create (e.g. ~/.config/cpm/operator.key)");
-  a.finish();
-  daemon::write_key_file(pos[0], daemon::generate_key());
+int keygen(const std::string& file) {
+  daemon::write_key_file(file, daemon::generate_key());
   std::printf("%s: a new operator key (32 random bytes, hex, mode 0600). cpmd needs the same key as\n"
               "operators.d/NAME.key (owned by cpmd's user, mode 0600) and NAME's role in operators.d/roles.yaml\n"
               "(docs/security.md).\n",
-              pos[0].c_str());
+              file.c_str());
   return 0;
 }
 
-const Command r1{"status", "print the state of a running cpmd (--json for machines)", status,
-                 "[--json] [--config DAEMON.yaml] [--url LCM_URL]"};
+Setup state_command(int (*run)(const StateOptions&), const char* json_help) {
+  return [run, json_help](CLI::App& app) -> Run {
+    auto o = std::make_shared<StateOptions>();
+    app.add_flag("--json", o->json, json_help);
+    add_connection(app, o->connection);
+    return [o, run] { return run(*o); };
+  };
+}
+
+// A command to cpmd; `wait`: --no-wait is offered.
+Setup control_command(std::int8_t cmd, const char* what, bool wait) {
+  return [cmd, what, wait](CLI::App& app) -> Run {
+    auto o = std::make_shared<CommandOptions>();
+    if (wait) app.add_flag("--no-wait", o->no_wait, "return once cpmd accepted, without waiting for the mode to settle");
+    add_connection(app, o->connection);
+    add_operator(app, o->op);
+    return [o, cmd, what] { return simple(*o, cmd, what); };
+  };
+}
+
+const Command r1{"status", "print the state of a running cpmd (--json for machines)",
+                 state_command(status, "one line of JSON (SI units: m, m/s, N, s) instead of text")};
 const Command r2{"enable", "enable the drives (disabled -> enabling -> holding)",
-                 [](Args& a) { return simple(a, control_command_t::CMD_ENABLE, "enable"); },
-                 "[--no-wait] [--config DAEMON.yaml] [--url LCM_URL] [--key FILE] [--operator NAME]"};
+                 control_command(control_command_t::CMD_ENABLE, "enable", true)};
 const Command r3{"disable", "disable the drives (a moving machine stops first)",
-                 [](Args& a) { return simple(a, control_command_t::CMD_DISABLE, "disable"); },
-                 "[--config DAEMON.yaml] [--url LCM_URL] [--key FILE] [--operator NAME]"};
-const Command r4{"stop", "stop the motion and clear the trajectory queue",
-                 [](Args& a) { return simple(a, control_command_t::CMD_STOP, "stop"); },
-                 "[--no-wait] [--config DAEMON.yaml] [--url LCM_URL] [--key FILE] [--operator NAME]"};
+                 control_command(control_command_t::CMD_DISABLE, "disable", false)};
+const Command r4{"stop", "stop the motion and clear the trajectory queue (any operator, or none)",
+                 control_command(control_command_t::CMD_STOP, "stop", true)};
 const Command r5{"reset", "reset a latched fault (the setpoint resyncs to the measured position)",
-                 [](Args& a) { return simple(a, control_command_t::CMD_RESET, "reset"); },
-                 "[--config DAEMON.yaml] [--url LCM_URL] [--key FILE] [--operator NAME]"};
-const Command r6{"controller", "select the control law and gains of a running cpmd", controller,
-                 "pd|pd_gravity|pd_feedforward|computed_torque [--kp K] [--kd K] [--config DAEMON.yaml] [--url LCM_URL] [--key FILE] [--operator NAME]"};
-const Command r7{"load-model", "load a model file into a running cpmd (when disabled)", load_model,
-                 "MODEL.yaml [--config DAEMON.yaml] [--url LCM_URL] [--key FILE] [--operator NAME]"};
-const Command r9{"keygen", "make a new operator key file (32 random bytes, hex, mode 0600; never overwrites)", keygen,
-                 "FILE"};
-const Command r8{"stats", "print cpmd's loop timing: wake-up latency and per-phase times", stats,
-                 "[--json] [--config DAEMON.yaml] [--url LCM_URL]"};
+                 control_command(control_command_t::CMD_RESET, "reset", false)};
+const Command r6{"controller", "select the control law and gains of a running cpmd", [](CLI::App& app) -> Run {
+                   auto o = std::make_shared<CommandOptions>();
+                   add_choice(app, "LAW", o->law, law_names(), "the control law")->required();
+                   add_number(app, "--kp", o->kp, "K", "proportional gain on every axis: N/m for the PD laws, 1/s^2 for computed_torque")
+                       ->default_str("Table 3's gain of the law");
+                   add_number(app, "--kd", o->kd, "K", "derivative gain on every axis: N s/m for the PD laws, 1/s for computed_torque")
+                       ->default_str("Table 3's gain of the law");
+                   add_connection(app, o->connection);
+                   add_operator(app, o->op);
+                   return [o] { return controller(*o); };
+                 }};
+const Command r7{"load-model", "load a model file into a running cpmd (when disabled)", [](CLI::App& app) -> Run {
+                   auto o = std::make_shared<CommandOptions>();
+                   app.add_option("MODEL", o->model,
+                                  "the model file's path in cpmd's model directory (security.model_dir), or builtin:elkady")
+                       ->type_name("MODEL.yaml")
+                       ->required();
+                   add_connection(app, o->connection);
+                   add_operator(app, o->op);
+                   return [o] { return load_model(*o); };
+                 }};
+const Command r9{"keygen", "make a new operator key file (32 random bytes, hex, mode 0600; never overwrites)",
+                 [](CLI::App& app) -> Run {
+                   auto file = std::make_shared<std::string>();
+                   app.add_option("FILE", *file, "the key file to create (e.g. ~/.config/cpm/operator.key)")
+                       ->type_name("FILE")
+                       ->required();
+                   return [file] { return keygen(*file); };
+                 }};
+const Command r8{"stats", "print cpmd's loop timing: wake-up latency and per-phase times",
+                 state_command(stats, "one line of JSON (times in µs) instead of the table")};
 
 }  // namespace
 }  // namespace cpm::cli::client

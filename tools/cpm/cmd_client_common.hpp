@@ -13,28 +13,46 @@
 namespace cpm::cli::client {
 
 // --config FILE (the daemon's config: its lcm section) and/or --url URL.
-inline daemon::LcmConfig lcm_options(Args& a) {
+struct Connection {
+  std::optional<std::string> config, url;
+};
+inline void add_connection(CLI::App& app, Connection& c) {
+  app.add_option("--config", c.config, "the daemon's configuration: its lcm section says where cpmd listens")
+      ->type_name("DAEMON.yaml");
+  app.add_option("--url", c.url, "the LCM URL, instead of the config's")
+      ->type_name("LCM_URL")
+      ->default_str(daemon::LcmConfig{}.url);
+}
+inline daemon::LcmConfig lcm_options(const Connection& c) {
   daemon::LcmConfig l;
-  if (auto c = a.option("config")) l = daemon::load_config(*c).lcm;
-  if (auto u = a.option("url")) l.url = *u;
+  if (c.config) l = daemon::load_config(*c.config).lcm;
+  if (c.url) l.url = *c.url;
   return l;
 }
-inline const char* kConnUsage = "[--config DAEMON.yaml] [--url LCM_URL]";
 
 // The operator's key (docs/security.md): --key FILE, else $CPM_KEY_FILE, else
 // ~/.config/cpm/operator.key; the name --operator NAME, else $CPM_OPERATOR,
 // else the key file's name, else the login name. None found: nullopt (the
 // client then refuses every command but stop).
-inline std::optional<daemon::Credentials> operator_key(Args& a) {
-  const auto key = a.option("key");
-  const auto name = a.option("operator");
-  return daemon::find_credentials(key, name);
+struct Operator {
+  std::optional<std::string> key, name;
+};
+inline void add_operator(CLI::App& app, Operator& o) {
+  app.add_option("--key", o.key, "the operator's key file (docs/security.md)")
+      ->type_name("FILE")
+      ->default_str("$CPM_KEY_FILE, else ~/.config/cpm/operator.key");
+  app.add_option("--operator", o.name, "the operator's name, as cpmd knows it")
+      ->type_name("NAME")
+      ->default_str("$CPM_OPERATOR, else the key file's name, else the login name");
+}
+inline std::optional<daemon::Credentials> operator_key(const Operator& o) {
+  return daemon::find_credentials(o.key, o.name);
 }
 // For `stop`, which must work whatever state the key is in: a key that
 // cannot be read is said and left out (cpmd takes an unsigned stop).
-inline std::optional<daemon::Credentials> operator_key_if_usable(Args& a) {
+inline std::optional<daemon::Credentials> operator_key_if_usable(const Operator& o) {
   try {
-    return operator_key(a);
+    return operator_key(o);
   } catch (const Error& e) {
     std::fprintf(stderr, "cpm: warning: %s; stopping without a key\n", e.what());
     return std::nullopt;

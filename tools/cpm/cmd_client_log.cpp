@@ -22,10 +22,16 @@ using cpm_msgs::state_t;
 std::atomic<bool> g_interrupted{false};
 void on_sigint(int) { g_interrupted.store(true); }
 
-int watch(Args& a) {
-  const double duration = a.number("duration", -1);
-  auto l = lcm_options(a);
-  a.finish();
+struct Options {
+  double duration = -1;
+  bool until_idle = false;
+  Connection connection;
+  std::string out, channel = "CPMD_STATE", log;
+};
+
+int watch(const Options& o) {
+  const double duration = o.duration;
+  const auto l = lcm_options(o.connection);
   daemon::Client c(l);
   signal(SIGINT, on_sigint);
   const auto start = std::chrono::steady_clock::now();
@@ -54,13 +60,11 @@ int watch(Args& a) {
   return 0;
 }
 
-int record(Args& a) {
-  const auto out = a.option("out");
-  if (!out) throw UsageError("--out FILE.csv is required");
-  const double duration = a.number("duration", -1);
-  const bool until_idle = a.flag("until-idle");
-  auto l = lcm_options(a);
-  a.finish();
+int record(const Options& o) {
+  const std::string& out = o.out;
+  const double duration = o.duration;
+  const bool until_idle = o.until_idle;
+  const auto l = lcm_options(o.connection);
   if (duration < 0 && !until_idle) throw UsageError("give --duration S or --until-idle");
   daemon::Client c(l);
   StateToMotion rows;
@@ -92,40 +96,52 @@ int record(Args& a) {
   std::snprintf(note, sizeof note, "cpm record from %s: %zu states of %ld cycles run (%lld slots skipped by late cycles)",
                 l.state_channel.c_str(), rows.rows() + static_cast<std::size_t>(rows.inactive()), expected,
                 static_cast<long long>(skipped));
-  const io::MotionData m = rows.finish(*out, note);
-  io::write_motion(*out, m);
+  const io::MotionData m = rows.finish(out, note);
+  io::write_motion(out, m);
   std::printf("record: %zu rows over %.3f s to %s (%ld cycles run, %ld missing; %lld slots skipped by late cycles; "
               "%ld states with the drives off left out)\n",
-              m.t.size(), m.t.back() - m.t.front(), out->c_str(), expected,
+              m.t.size(), m.t.back() - m.t.front(), out.c_str(), expected,
               expected - static_cast<long>(rows.rows()) - rows.inactive(), static_cast<long long>(skipped), rows.inactive());
   return 0;
 }
 
-int log_to_csv(Args& a) {
-  const auto out = a.option("out");
-  if (!out) throw UsageError("--out FILE.csv is required");
-  const std::string channel = a.option_or("channel", "CPMD_STATE");
-  const auto pos = a.positionals();
-  if (pos.size() != 1) throw UsageError("give the lcm-logger file");
-  a.finish();
-  const StateLogRead r = read_state_log(pos[0], channel, false);
+int log_to_csv(const Options& o) {
+  const std::string& out = o.out;
+  const std::string& channel = o.channel;
+  const StateLogRead r = read_state_log(o.log, channel, false);
   io::MotionData m = r.data;
-  m.info.path = *out;
-  m.info.metadata["source"] = "cpm lcm-log-to-csv from " + pos[0] + ", channel " + channel;
-  io::write_motion(*out, m);
-  std::printf("lcm-log-to-csv: %zu rows to %s", m.t.size(), out->c_str());
+  m.info.path = out;
+  m.info.metadata["source"] = "cpm lcm-log-to-csv from " + o.log + ", channel " + channel;
+  io::write_motion(out, m);
+  std::printf("lcm-log-to-csv: %zu rows to %s", m.t.size(), out.c_str());
   if (r.undecodable) std::printf(" (%ld undecodable or non-finite events skipped)", r.undecodable);
   if (r.inactive) std::printf(" (%ld states with the drives off left out)", r.inactive);
   std::printf("\n");
   return 0;
 }
 
-const Command r1{"watch", "live text view of a running cpmd's state, with trajectory progress", watch,
-                 "[--duration S] [--config DAEMON.yaml] [--url LCM_URL]"};
-const Command r2{"record", "record cpmd's state to a motion CSV (docs/data-formats.md, kind = motion)", record,
-                 "--out FILE.csv (--duration S | --until-idle) [--config DAEMON.yaml] [--url LCM_URL]"};
-const Command r3{"lcm-log-to-csv", "convert an lcm-logger file of cpmd's state channel to a motion CSV", log_to_csv,
-                 "LOGFILE --out FILE.csv [--channel CPMD_STATE]"};
+const Command r1{"watch", "live text view of a running cpmd's state, with trajectory progress", [](CLI::App& app) -> Run {
+                   auto o = std::make_shared<Options>();
+                   add_number(app, "--duration", o->duration, "S", "stop after S seconds; < 0: until Ctrl-C");
+                   add_connection(app, o->connection);
+                   return [o] { return watch(*o); };
+                 }};
+const Command r2{"record", "record cpmd's state to a motion CSV (data-formats.md, kind = motion)", [](CLI::App& app) -> Run {
+                   auto o = std::make_shared<Options>();
+                   app.add_option("--out", o->out, "the motion log to write")->type_name("FILE.csv")->required();
+                   add_number(app, "--duration", o->duration, "S", "record S seconds (or give --until-idle)");
+                   app.add_flag("--until-idle", o->until_idle, "record until the machine has moved and stopped");
+                   add_connection(app, o->connection);
+                   return [o] { return record(*o); };
+                 }};
+const Command r3{"lcm-log-to-csv", "convert an lcm-logger file of cpmd's state channel to a motion CSV",
+                 [](CLI::App& app) -> Run {
+                   auto o = std::make_shared<Options>();
+                   app.add_option("LOGFILE", o->log, "the lcm-logger file")->type_name("LOGFILE")->required();
+                   app.add_option("--out", o->out, "the motion log to write")->type_name("FILE.csv")->required();
+                   app.add_option("--channel", o->channel, "the channel of cpmd's state")->type_name("CHANNEL");
+                   return [o] { return log_to_csv(*o); };
+                 }};
 
 }  // namespace
 }  // namespace cpm::cli::client

@@ -32,17 +32,23 @@ trajectory_command_t move_cmd(const Vec3& to, double v, double a, double j) {
   return m;
 }
 
-int move(Args& a) {
-  const double v = a.number("vmax", 0.1), acc = a.number("amax", 1.0), j = a.number("jmax", 50.0);
-  const bool no_wait = a.flag("no-wait");
-  auto l = lcm_options(a);
-  auto key = operator_key(a);
-  const auto pos = a.positionals();  // after the options: they consume their values
-  if (pos.size() != 1) throw UsageError("give the target X,Y,Z (m)");
-  const Vec3 to = parse_point("target", pos[0]);
-  a.finish();
+struct Options {
+  bool no_wait = false, paper = false, cw = false, no_approach = false;
+  Connection connection;
+  Operator op;
+  std::string target, file, plane = "xy";
+  double vmax = 0.1, amax = 1.0, jmax = 50.0, approach_vmax = 0.1;
+  std::optional<std::string> centre;
+  std::optional<double> radius, speed, time, ramp, start_angle;
+};
+
+int move(const Options& o) {
+  const auto l = lcm_options(o.connection);
+  auto key = operator_key(o.op);
+  const Vec3 to = parse_point("target", o.target);
+  const bool no_wait = o.no_wait;
   daemon::Client c(l, key);
-  const auto ack = c.trajectory(move_cmd(to, v, acc, j));
+  const auto ack = c.trajectory(move_cmd(to, o.vmax, o.amax, o.jmax));
   if (report("move", ack) != 0) return 1;
   if (no_wait) return 0;
   const state_t s = wait_segment(c, ack.id, 600.0, true);
@@ -50,27 +56,24 @@ int move(Args& a) {
   return s.last_segment_id == ack.id ? 0 : 1;
 }
 
-int circle(Args& a) {
-  const bool paper = a.flag("paper");
+int circle(const Options& o) {
+  const bool paper = o.paper;
   trajectory_command_t m{};
   m.kind = trajectory_command_t::KIND_CIRCLE;
   ctl::CircleSpec spec;  // Elkady's circle by default
-  if (!paper) spec.ramp_time = a.number("ramp", 0.5);
-  if (auto cen = a.option("centre")) spec.centre = parse_point("--centre", *cen);
-  spec.radius = a.number("radius", spec.radius);
-  spec.angular_speed = a.number("speed", spec.angular_speed);
-  if (a.flag("cw")) spec.angular_speed = -std::abs(spec.angular_speed);
-  spec.cruise_time = a.number("time", spec.cruise_time);
-  spec.start_angle = a.number("start-angle", spec.start_angle);
-  const std::string plane = a.option_or("plane", "xy");
-  const int pl = plane == "xy" ? 0 : plane == "yz" ? 1 : plane == "zx" ? 2 : -1;
-  if (pl < 0) throw UsageError("--plane must be xy, yz or zx");
-  const bool approach = !a.flag("no-approach");
-  const double vapp = a.number("approach-vmax", 0.1);
-  const bool no_wait = a.flag("no-wait");
-  auto l = lcm_options(a);
-  auto key = operator_key(a);
-  a.finish();
+  if (!paper) spec.ramp_time = o.ramp.value_or(0.5);
+  if (o.centre) spec.centre = parse_point("--centre", *o.centre);
+  spec.radius = o.radius.value_or(spec.radius);
+  spec.angular_speed = o.speed.value_or(spec.angular_speed);
+  if (o.cw) spec.angular_speed = -std::abs(spec.angular_speed);
+  spec.cruise_time = o.time.value_or(spec.cruise_time);
+  spec.start_angle = o.start_angle.value_or(spec.start_angle);
+  const int pl = o.plane == "xy" ? 0 : o.plane == "yz" ? 1 : 2;
+  const bool approach = !o.no_approach;
+  const double vapp = o.approach_vmax;
+  const bool no_wait = o.no_wait;
+  const auto l = lcm_options(o.connection);
+  auto key = operator_key(o.op);
   for (int i = 0; i < 3; ++i) m.centre[i] = spec.centre[i];
   m.radius = spec.radius;
   m.plane = static_cast<std::int8_t>(pl);
@@ -107,15 +110,13 @@ int circle(Args& a) {
 }
 
 // CSV with columns t,x,y,z and optionally vx,vy,vz (SI).
-int stream(Args& a) {
-  const bool no_wait = a.flag("no-wait");
-  auto l = lcm_options(a);
-  auto key = operator_key(a);
-  const auto pos = a.positionals();
-  if (pos.size() != 1) throw UsageError("give a CSV file with columns t,x,y,z[,vx,vy,vz] (s, m, m/s)");
-  a.finish();
-  std::ifstream f(pos[0]);
-  if (!f) throw Error(pos[0] + ": cannot read");
+int stream(const Options& o) {
+  const bool no_wait = o.no_wait;
+  const auto l = lcm_options(o.connection);
+  auto key = operator_key(o.op);
+  const std::string& path = o.file;
+  std::ifstream f(path);
+  if (!f) throw Error(path + ": cannot read");
   std::string line;
   std::vector<std::string> cols;
   std::vector<std::array<double, 7>> rows;
@@ -139,14 +140,14 @@ int stream(Args& a) {
           char* end = nullptr;
           r[k] = std::strtod(cells[j].c_str(), &end);
           if (*end != '\0' || !std::isfinite(r[k]))
-            throw Error(pos[0] + ":" + std::to_string(lineno) + ": column " + names[k] + ": not a finite number");
+            throw Error(path + ":" + std::to_string(lineno) + ": column " + names[k] + ": not a finite number");
         }
     rows.push_back(r);
   }
   for (const char* need : {"t", "x", "y", "z"})
     if (std::find(cols.begin(), cols.end(), need) == cols.end())
-      throw Error(pos[0] + ": missing column '" + need + "'");
-  if (rows.size() < 2) throw Error(pos[0] + ": needs at least two setpoints");
+      throw Error(path + ": missing column '" + need + "'");
+  if (rows.size() < 2) throw Error(path + ": needs at least two setpoints");
   const std::size_t n = rows.size();
   // Velocities: given, or central differences (rest at both ends).
   for (std::size_t i = 0; i < n; ++i)
@@ -191,16 +192,58 @@ int stream(Args& a) {
   return r.last_segment_id == last_id ? 0 : 1;
 }
 
-const Command r1{"move", "move a running cpmd's platform to X,Y,Z (jerk-limited straight line)", move,
-                 "X,Y,Z [--vmax M/S] [--amax M/S2] [--jmax M/S3] [--no-wait] [--config DAEMON.yaml] [--url LCM_URL]\n"
-                 "       [--key FILE] [--operator NAME]"};
-const Command r2{"circle", "run a circle on a running cpmd (--paper: Elkady's test) and print the tracking error", circle,
-                 "[--paper] [--centre X,Y,Z] [--radius M] [--speed RAD/S] [--cw] [--time S] [--ramp S]\n"
-                 "       [--plane xy|yz|zx] [--start-angle RAD] [--no-approach] [--approach-vmax M/S] [--no-wait]\n"
-                 "       [--config DAEMON.yaml] [--url LCM_URL] [--key FILE] [--operator NAME]"};
-const Command r3{"stream", "stream timed setpoints from a CSV (t,x,y,z[,vx,vy,vz]) to a running cpmd", stream,
-                 "FILE.csv [--no-wait] [--config DAEMON.yaml] [--url LCM_URL]\n"
-                 "       [--key FILE] [--operator NAME]"};
+// --no-wait, where cpmd is, and who commands it: every motion command has them.
+void add_common(CLI::App& app, Options& o) {
+  app.add_flag("--no-wait", o.no_wait, "return once cpmd accepted, without waiting for the motion to end");
+  add_connection(app, o.connection);
+  add_operator(app, o.op);
+}
+
+const Command r1{"move", "move a running cpmd's platform to X,Y,Z (jerk-limited straight line)", [](CLI::App& app) -> Run {
+                   auto o = std::make_shared<Options>();
+                   app.add_option("TARGET", o->target, "where to in m (e.g. 0.45,0.40,0.35)")->type_name("X,Y,Z")->required();
+                   add_number(app, "--vmax", o->vmax, "M/S", "velocity limit in m/s");
+                   add_number(app, "--amax", o->amax, "M/S2", "acceleration limit in m/s^2");
+                   add_number(app, "--jmax", o->jmax, "M/S3", "jerk limit in m/s^3");
+                   add_common(app, *o);
+                   return [o] { return move(*o); };
+                 }};
+const Command r2{"circle", "run a circle on a running cpmd (--paper: Elkady's test) and print the tracking error",
+                 [](CLI::App& app) -> Run {
+                   auto o = std::make_shared<Options>();
+                   const ctl::CircleSpec c;
+                   auto* paper = app.add_flag("--paper", o->paper, "Elkady's circle: full speed from the start, no ramp");
+                   app.add_option("--centre", o->centre, "circle centre in m")
+                       ->type_name("X,Y,Z")
+                       ->default_str("0.425,0.425,0.300");
+                   add_number(app, "--radius", o->radius, "M", "circle radius in m (e.g. 0.150)")
+                       ->default_str(CLI::detail::to_string(c.radius));
+                   add_number(app, "--speed", o->speed, "RAD/S", "angular speed in rad/s, > 0 counter-clockwise")
+                       ->default_str(CLI::detail::to_string(c.angular_speed));
+                   app.add_flag("--cw", o->cw, "run clockwise");
+                   add_number(app, "--time", o->time, "S", "time at full speed in s")
+                       ->default_str(CLI::detail::to_string(c.cruise_time));
+                   add_number(app, "--ramp", o->ramp, "S", "time to reach and leave full speed in s")
+                       ->default_str("0.5")
+                       ->excludes(paper);
+                   add_choice(app, "--plane", o->plane, {"xy", "yz", "zx"}, "the circle's plane");
+                   add_number(app, "--start-angle", o->start_angle, "RAD", "start angle in rad from the plane's first axis")
+                       ->default_str("0");
+                   app.add_flag("--no-approach", o->no_approach, "do not move to the circle's start first");
+                   add_number(app, "--approach-vmax", o->approach_vmax, "M/S", "velocity of the approach move in m/s");
+                   add_common(app, *o);
+                   return [o] { return circle(*o); };
+                 }};
+const Command r3{"stream", "stream timed setpoints from a CSV (t,x,y,z[,vx,vy,vz]) to a running cpmd", [](CLI::App& app) -> Run {
+                   auto o = std::make_shared<Options>();
+                   app.add_option("FILE", o->file,
+                                  "CSV with columns t,x,y,z and optionally vx,vy,vz (s, m, m/s); velocities missing "
+                                  "are central differences")
+                       ->type_name("FILE.csv")
+                       ->required();
+                   add_common(app, *o);
+                   return [o] { return stream(*o); };
+                 }};
 
 }  // namespace
 }  // namespace cpm::cli::client

@@ -2,7 +2,7 @@
 // on measurements (motion logs: the force residual; identification/).
 #include <cstdio>
 
-#include "cli.hpp"
+#include "ident_common.hpp"
 #include "cpm/identification/diagnose.hpp"
 #include "cpm/identification/kinematic.hpp"
 #include "cpm/identification/report.hpp"
@@ -13,20 +13,23 @@
 namespace cpm::cli {
 namespace {
 
-int run(Args& a) {
-  const std::string model_path = a.option_or("model", default_model_path());
-  const auto data_path = a.option("data");
-  const auto json_path = a.option("json");
-  const auto report_path = a.option("report");
-  ident::DiagnoseOptions o;
-  o.effects = a.options("effect");
-  o.alpha = a.number("alpha", o.alpha);
-  o.motion.half_window = a.number("window", o.motion.half_window * 1e3) * 1e-3;
-  const bool quiet = a.flag("quiet");
-  a.finish();
-  if (!data_path) throw UsageError("--data FILE is required");
+struct Options {
+  MeasurementOptions in;
+  std::optional<std::string> json, report;
+  ident::DiagnoseOptions diagnose;
+  bool quiet = false;
+};
+
+int run(const Options& opt) {
+  const std::string model_path = opt.in.model_path();
+  const std::string& data_path = opt.in.data;
+  const auto& json_path = opt.json;
+  const auto& report_path = opt.report;
+  ident::DiagnoseOptions o = opt.diagnose;
+  o.motion.half_window = opt.in.half_window();
+  const bool quiet = opt.quiet;
   if (!(o.alpha > 0.0 && o.alpha < 1.0)) throw UsageError("--alpha must be within (0, 1)");
-  const io::DataSet ds = read_measurements(*data_path);
+  const io::DataSet ds = read_measurements(data_path);
   const io::ModelFile mf = io::load_model_file(model_path);
   ident::Diagnosis D;
   if (!std::holds_alternative<io::MotionData>(ds)) {
@@ -48,15 +51,26 @@ int run(Args& a) {
   return 0;
 }
 
-const Command reg{
-    "diagnose", "name the effect missing from a model, judged on measurements", run,
-    "--data FILE.csv [--model MODEL.yaml] [--json OUT.json] [--report OUT.html]\n"
-    "       [--effect NAME]... (only these effects) [--alpha 0.01] [--window MS (filter half width, 12)] [--quiet]\n"
-    "  Motion logs: the force residual, every dynamic effect of docs/effects.md on every axis fitted with the\n"
-    "  base (A, B, C, E), scored (RMS after, share explained, F-test, BIC, confounding), ranked, a verdict,\n"
-    "  and the structure no effect explains. Ball-bar and position data: the same with every kinematic\n"
-    "  effect, fitted jointly with calibration's base (beta', dq[, dl]; the 12 plane parameters).\n"
-    "  Default model: config/machine.yaml."};
+Run setup(CLI::App& app) {
+  auto o = std::make_shared<Options>();
+  add_measurement_options(app, o->in, "the model to diagnose");
+  app.add_option("--json", o->json, "write the diagnosis as JSON")->type_name("OUT.json");
+  app.add_option("--report", o->report, "write an HTML report with the plots")->type_name("OUT.html");
+  app.add_option("--effect", o->diagnose.effects, "judge only these effects (repeat the option; e.g. --effect backlash)")
+      ->type_name("EFFECT")
+      ->check(effect_name())
+      ->allow_extra_args(false);
+  add_number(app, "--alpha", o->diagnose.alpha, "P", "significance level of the F-test, within (0, 1)")
+;
+  app.add_flag("--quiet", o->quiet, "print nothing (the files only)");
+  app.footer("Motion logs: the force residual, every dynamic effect of the library on every axis fitted with the\n"
+             "base (A, B, C, E), scored (RMS after, share explained, F-test, BIC, confounding), ranked, a verdict,\n"
+             "and the structure no effect explains. Ball-bar and position data: the same with every kinematic\n"
+             "effect, fitted jointly with calibration's base (beta', dq[, dl]; the 12 plane parameters).");
+  return [o] { return run(*o); };
+}
+
+const Command reg{"diagnose", "name the effect missing from a model, judged on measurements", setup};
 
 }  // namespace
 }  // namespace cpm::cli

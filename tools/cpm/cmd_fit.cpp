@@ -3,7 +3,7 @@
 #include <cstdio>
 #include <sstream>
 
-#include "cli.hpp"
+#include "ident_common.hpp"
 #include "cpm/identification/fit.hpp"
 #include "cpm/identification/kinematic.hpp"
 #include "cpm/identification/report.hpp"
@@ -13,6 +13,38 @@
 
 namespace cpm::cli {
 namespace {
+
+// The fitted effects as the JSON has them: axis 1..3 (null for machine-wide
+// ones), parameters and standard errors by name (null: unknown).
+template <class Effects>
+Json effects_json(const Effects& effects) {
+  Json out = Json::array();
+  for (const auto& c : effects) {
+    Json params = Json::object(), errors = Json::object();
+    for (const auto& p : c.params) {
+      params[p.name] = p.value;
+      errors[p.name] = p.std_error >= 0 ? Json(p.std_error) : Json(nullptr);
+    }
+    out.push_back({{"effect", c.effect},
+                   {"axis", c.axis >= 0 ? Json(c.axis + 1) : Json(nullptr)},
+                   {"params", params},
+                   {"std_errors", errors}});
+  }
+  return out;
+}
+
+// The error on unseen data (held-out file, cross-validation) and the effects.
+template <class Result>
+void add_unseen_and_effects(Json& js, const Result& R, const std::optional<std::string>& holdout_path) {
+  if (R.holdout)
+    js["holdout"] = {{"file", *holdout_path},
+                     {"before", {{"rms", R.holdout->before}}},
+                     {"after", {{"rms", R.holdout->after}}}};
+  if (R.cross_validation)
+    js["cross_validation"] = {{"before", {{"rms", R.cross_validation->before}}},
+                              {"after", {{"rms", R.cross_validation->after}}}};
+  js["effects"] = effects_json(R.effects);
+}
 
 // Ball-bar and position data: the effects go into the kinematics, the planes
 // are recalibrated with them; errors in m (µm on screen).
@@ -57,57 +89,38 @@ int run_kinematic(const io::DataSet& ds, const std::vector<ident::FitRequest>& r
   for (const auto& n : R.notes) std::printf("note: %s\n", n.c_str());
   std::printf("new model: %s\n", out_path.c_str());
   if (json_path) {
-    using ident::json_num;
-    std::ostringstream js;
-    js << "{\"model\": " << ident::json_string(model_path) << ", \"out\": " << ident::json_string(out_path)
-       << ", \"data\": " << ident::json_string(data_path) << ", \"units\": \"m\",\n \"before\": {\"rms\": "
-       << json_num(R.on_fit.before) << "}, \"base_only\": {\"rms\": " << json_num(R.base_only)
-       << "}, \"after\": {\"rms\": " << json_num(R.on_fit.after) << "},\n";
-    if (R.holdout)
-      js << " \"holdout\": {\"file\": " << ident::json_string(*holdout_path) << ", \"before\": {\"rms\": "
-         << json_num(R.holdout->before) << "}, \"after\": {\"rms\": " << json_num(R.holdout->after) << "}},\n";
-    if (R.cross_validation)
-      js << " \"cross_validation\": {\"before\": {\"rms\": " << json_num(R.cross_validation->before)
-         << "}, \"after\": {\"rms\": " << json_num(R.cross_validation->after) << "}},\n";
-    js << " \"effects\": [";
-    for (std::size_t k = 0; k < R.effects.size(); ++k) {
-      const auto& c = R.effects[k];
-      js << (k ? ", " : "") << "{\"effect\": " << ident::json_string(c.effect) << ", \"axis\": " << c.axis + 1
-         << ", \"params\": {";
-      for (std::size_t j = 0; j < c.params.size(); ++j)
-        js << (j ? ", " : "") << ident::json_string(c.params[j].name) << ": " << json_num(c.params[j].value);
-      js << "}, \"std_errors\": {";
-      for (std::size_t j = 0; j < c.params.size(); ++j)
-        js << (j ? ", " : "") << ident::json_string(c.params[j].name) << ": "
-           << (c.params[j].std_error >= 0 ? json_num(c.params[j].std_error) : "null");
-      js << "}}";
-    }
-    js << "]}\n";
-    io::write_file_atomically(*json_path, js.str());
+    Json js{{"model", model_path}, {"out", out_path}, {"data", data_path}, {"units", "m"},
+            {"before", {{"rms", R.on_fit.before}}}, {"base_only", {{"rms", R.base_only}}},
+            {"after", {{"rms", R.on_fit.after}}}};
+    add_unseen_and_effects(js, R, holdout_path);
+    write_json(*json_path, js);
   }
   return 0;
 }
 
-int run(Args& a) {
-  const std::string model_path = a.option_or("model", default_model_path());
-  const auto data_path = a.option("data");
-  const auto out_path = a.option("out");
-  const auto holdout_path = a.option("holdout");
-  const auto json_path = a.option("json");
-  const std::vector<std::string> adds = a.options("add");
+struct Options {
+  MeasurementOptions in;
+  std::optional<std::string> holdout, json;
+  std::string out;
+  std::vector<std::string> adds;
+};
+
+int run(const Options& opt) {
+  const std::string model_path = opt.in.model_path();
+  const std::string& data_path = opt.in.data;
+  const std::string& out_path = opt.out;
+  const auto& holdout_path = opt.holdout;
+  const auto& json_path = opt.json;
+  const std::vector<std::string>& adds = opt.adds;
   ident::DiagnoseOptions o;
-  o.motion.half_window = a.number("window", o.motion.half_window * 1e3) * 1e-3;
-  a.finish();
-  if (!data_path) throw UsageError("--data FILE is required");
-  if (!out_path) throw UsageError("--out NEW_MODEL.yaml is required (the input model is never overwritten)");
-  if (adds.empty()) throw UsageError("--add EFFECT[:AXIS] is required (e.g. --add coulomb_friction:2)");
+  o.motion.half_window = opt.in.half_window();
   std::vector<ident::FitRequest> req;
   for (const auto& s : adds) req.push_back(ident::parse_fit_request(s));
-  const io::DataSet ds = read_measurements(*data_path);
+  const io::DataSet ds = read_measurements(data_path);
   if (!std::holds_alternative<io::MotionData>(ds)) {
     const std::string kind = io::kind_name(io::kind_of(ds));
     for (const auto& r : req) ident::check_effect_for_kind(r.effect, kind);
-    return run_kinematic(ds, req, adds, model_path, *data_path, *out_path, holdout_path, json_path);
+    return run_kinematic(ds, req, adds, model_path, data_path, out_path, holdout_path, json_path);
   }
   const io::MotionData& data = std::get<io::MotionData>(ds);
   io::ModelFile mf = io::load_model_file(model_path);
@@ -120,8 +133,8 @@ int run(Args& a) {
   note << "added";
   for (const auto& s : adds) note << " " << s;
   note << "; force residual RMS " << R.on_fit.before << " -> " << R.on_fit.after << " N";
-  record_fit(mf, R.fitted, "cpm fit", *data_path, note.str());
-  io::save_model_file(*out_path, mf, model_path);
+  record_fit(mf, R.fitted, "cpm fit", data_path, note.str());
+  io::save_model_file(out_path, mf, model_path);
 
   for (const auto& c : R.effects) {
     std::printf("%s:", c.label().c_str());
@@ -145,45 +158,39 @@ int run(Args& a) {
     std::printf("2-fold cross-validation (fit on one half in time, measure on the other): %.4g N before, %.4g N after\n",
                 R.cross_validation->before, R.cross_validation->after);
   for (const auto& n : R.notes) std::printf("note: %s\n", n.c_str());
-  std::printf("new model: %s\n", out_path->c_str());
+  std::printf("new model: %s\n", out_path.c_str());
   if (json_path) {
-    std::ostringstream js;
-    using ident::json_num;
-    js << "{\"model\": " << ident::json_string(model_path) << ", \"out\": " << ident::json_string(*out_path)
-       << ", \"data\": " << ident::json_string(*data_path) << ",\n \"before\": {\"rms\": " << json_num(R.on_fit.before)
-       << "}, \"after\": {\"rms\": " << json_num(R.on_fit.after) << "},\n";
-    if (R.holdout)
-      js << " \"holdout\": {\"file\": " << ident::json_string(*holdout_path) << ", \"before\": {\"rms\": "
-         << json_num(R.holdout->before) << "}, \"after\": {\"rms\": " << json_num(R.holdout->after) << "}},\n";
-    if (R.cross_validation)
-      js << " \"cross_validation\": {\"before\": {\"rms\": " << json_num(R.cross_validation->before)
-         << "}, \"after\": {\"rms\": " << json_num(R.cross_validation->after) << "}},\n";
-    js << " \"effects\": [";
-    for (std::size_t k = 0; k < R.effects.size(); ++k) {
-      const auto& c = R.effects[k];
-      js << (k ? ", " : "") << "{\"effect\": " << ident::json_string(c.effect) << ", \"axis\": "
-         << (c.axis >= 0 ? std::to_string(c.axis + 1) : "null") << ", \"params\": {";
-      for (std::size_t j = 0; j < c.params.size(); ++j)
-        js << (j ? ", " : "") << ident::json_string(c.params[j].name) << ": " << json_num(c.params[j].value);
-      js << "}, \"std_errors\": {";
-      for (std::size_t j = 0; j < c.params.size(); ++j)
-        js << (j ? ", " : "") << ident::json_string(c.params[j].name) << ": "
-           << (c.params[j].std_error >= 0 ? json_num(c.params[j].std_error) : "null");
-      js << "}}";
-    }
-    js << "], \"base_refitted\": " << (R.base_refitted ? "true" : "false") << "}\n";
-    io::write_file_atomically(*json_path, js.str());
+    Json js{{"model", model_path}, {"out", out_path}, {"data", data_path},
+            {"before", {{"rms", R.on_fit.before}}}, {"after", {{"rms", R.on_fit.after}}}};
+    add_unseen_and_effects(js, R, holdout_path);
+    js["base_refitted"] = R.base_refitted;
+    write_json(*json_path, js);
   }
   return 0;
 }
 
-const Command reg{
-    "fit", "add effects to a model, refit, write a new model file, show the error before and after", run,
-    "--data FILE.csv --add EFFECT[:AXIS]... --out NEW_MODEL.yaml [--model MODEL.yaml]\n"
-    "       [--holdout FILE.csv] [--json OUT.json] [--window MS]\n"
-    "  Without --holdout the error on unseen data is a 2-fold cross-validation (motion: halves in time;\n"
-    "  ball-bar and position data: alternate samples). Kinematic effects (backlash:2, cyclic_error:1, ...)\n"
-    "  go into the kinematics and the planes are recalibrated with them."};
+Run setup(CLI::App& app) {
+  auto o = std::make_shared<Options>();
+  add_measurement_options(app, o->in, "the model to extend");
+  app.add_option("--add", o->adds,
+                 "an effect to add and fit, with its axis when it acts on one (repeat the option; e.g. --add "
+                 "coulomb_friction:2 --add payload_mass)")
+      ->type_name("EFFECT[:AXIS]")
+      ->check(effect_name())
+      ->allow_extra_args(false)
+      ->required();
+  add_new_model_option(app, o->out);
+  app.add_option("--holdout", o->holdout, "measurements of the same kind to judge the fit on, unseen by it")
+      ->type_name("FILE.csv");
+  app.add_option("--json", o->json, "write the fit (parameters, RMS before and after) as JSON")->type_name("OUT.json");
+  app.footer("Without --holdout the error on unseen data is a 2-fold cross-validation (motion: halves in time;\n"
+             "ball-bar and position data: alternate samples). Kinematic effects (backlash:2, cyclic_error:1, ...)\n"
+             "go into the kinematics and the planes are recalibrated with them.");
+  return [o] { return run(*o); };
+}
+
+const Command reg{"fit", "add effects to a model, refit, write a new model file, show the error before and after",
+                  setup};
 
 }  // namespace
 }  // namespace cpm::cli

@@ -10,21 +10,24 @@
 namespace cpm::cli {
 namespace {
 
-int run(Args& a) {
-  cal::KimOptions o;
-  o.seed = static_cast<std::uint64_t>(a.integer("seed", 1));
-  o.noise = a.number("noise", o.noise);
-  o.circle.feed = a.number("feed", o.circle.feed);
-  o.circle.closed_loop = !a.flag("kinematic");
-  if (auto v = a.option("centre")) o.circle.centre = calib_point("--centre", *v);
-  o.circle.radius = a.number("radius", o.circle.radius);
-  const auto svg_before = a.option("svg-before");
-  const auto svg_after = a.option("svg-after");
-  const auto json = a.option("json");
-  const auto data = a.option("data");
-  const auto truth_out = a.option("truth-out");
-  const auto model_out = a.option("model-out");
-  a.finish();
+struct Options {
+  cal::KimOptions kim;
+  long seed = 1;
+  bool kinematic = false;
+  std::optional<std::string> centre, svg_before, svg_after, json, data, truth_out, model_out;
+};
+
+int run(const Options& opt) {
+  cal::KimOptions o = opt.kim;
+  o.seed = static_cast<std::uint64_t>(opt.seed);
+  o.circle.closed_loop = !opt.kinematic;
+  if (opt.centre) o.circle.centre = calib_point("--centre", *opt.centre);
+  const auto& svg_before = opt.svg_before;
+  const auto& svg_after = opt.svg_after;
+  const auto& json = opt.json;
+  const auto& data = opt.data;
+  const auto& truth_out = opt.truth_out;
+  const auto& model_out = opt.model_out;
   const cal::KimReproduction k = cal::reproduce_kim(o);
   std::fputs(k.report().c_str(), stdout);
   if (svg_before)
@@ -38,7 +41,7 @@ int run(Args& a) {
     io::Provenance p;
     p.tool = "cpm kim-experiment";
     p.date = io::utc_now_iso8601();
-    p.note = "true machine carrying Kim's fitted errors (docs/model.md); the fixed ball is 1.030 mm above its declared pivot";
+    p.note = "true machine carrying Kim's fitted errors (docs/calibration.md); the fixed ball is 1.030 mm above its declared pivot";
     t.history.push_back(p);
     io::save_model_file(*truth_out, t);
   }
@@ -56,12 +59,29 @@ int run(Args& a) {
   return k.all_within_3sigma ? 0 : 1;
 }
 
+Run setup(CLI::App& app) {
+  auto o = std::make_shared<Options>();
+  app.add_option("--seed", o->seed, "seed of the simulated bar's noise")->type_name("N");
+  add_number(app, "--noise", o->kim.noise, "M", "half-width of the bar's uniform length error in m (QC10: 0.5e-6)");
+  add_number(app, "--feed", o->kim.circle.feed, "M/S", "feed of the circular tests in m/s");
+  app.add_flag("--kinematic", o->kinematic, "circular tests on the kinematics only (no servo error)");
+  app.add_option("--centre", o->centre, "centre of the circular tests in m")
+      ->type_name("X,Y,Z")
+      ->default_str(point_text(o->kim.circle.centre));
+  add_number(app, "--radius", o->kim.circle.radius, "M", "radius of the circular tests in m");
+  app.add_option("--svg-before", o->svg_before, "polar plot before calibration")->type_name("FILE.svg");
+  app.add_option("--svg-after", o->svg_after, "polar plot after calibration")->type_name("FILE.svg");
+  app.add_option("--data", o->data, "write the simulated ball-bar data (data-formats.md)")->type_name("FILE.csv");
+  app.add_option("--truth-out", o->truth_out, "write the true machine (Kim's errors) as a model file")
+      ->type_name("FILE.yaml");
+  app.add_option("--model-out", o->model_out, "write the calibrated model")->type_name("FILE.yaml");
+  app.add_option("--json", o->json, "write the fit and the checks as JSON to FILE")->type_name("FILE");
+  app.footer("Exit status 1 when some fitted parameter is outside its 3-sigma interval.");
+  return [o] { return run(*o); };
+}
+
 const Command reg{"kim-experiment",
-                  "Kim's ball-bar experiment in simulation: fit, 3-sigma check, circular test before/after", run,
-                  "[--seed N] [--noise M] [--feed M/S] [--kinematic] [--centre X,Y,Z] [--radius M]\n"
-                  "       [--svg-before FILE.svg] [--svg-after FILE.svg] [--data FILE.csv] [--truth-out FILE.yaml]\n"
-                  "       [--model-out FILE.yaml] [--json FILE]\n"
-                  "  Exit status 1 when some fitted parameter is outside its 3-sigma interval."};
+                  "Kim's ball-bar experiment in simulation: fit, 3-sigma check, circular test before/after", setup};
 
 }  // namespace
 }  // namespace cpm::cli

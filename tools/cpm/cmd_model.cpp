@@ -107,25 +107,25 @@ void show(const io::ModelFile& mf) {
   }
 }
 
-int run(Args& args) {
-  const bool force = args.flag("force");
-  const auto pos = args.positionals();
-  args.finish();
-  if (pos.size() != 2) throw UsageError("expected an action (check, show or init) and a FILE");
-  const std::string& action = pos[0];
-  const std::string& file = pos[1];
+struct Options {
+  std::string action, file;
+  bool force = false;
+};
+
+int run(const Options& o) {
+  const bool force = o.force;
+  const std::string& action = o.action;
+  const std::string& file = o.file;
   if (action == "init") {
     if (std::filesystem::exists(file) && !force)
       throw UsageError(file + " exists; give --force to replace it");
     io::ModelFile mf;
     mf.history.push_back({"cpm model init", "", "", io::utc_now_iso8601(),
-                          "the nominal machine of docs/model.md"});
+                          "the nominal machine (docs/model.md)"});
     io::save_model_file(file, mf);
     std::printf("%s: wrote the nominal machine model\n", file.c_str());
     return 0;
   }
-  if (action != "check" && action != "show")
-    throw UsageError("unknown action '" + action + "' (check, show or init)");
   io::ModelFile mf;
   try {
     mf = io::load_model_file(file);
@@ -151,11 +151,20 @@ int run(Args& args) {
   return 0;
 }
 
-const Command reg{"model", "check or show a model file, or write the nominal one", run,
-                  "check FILE | show FILE | init FILE [--force]\n"
-                  "  check: validate FILE (exit 1 with the error on a bad file)\n"
-                  "  show:  validate and print it (mm, µm, degrees, ppm)\n"
-                  "  init:  write the nominal machine of docs/model.md to FILE"};
+Run setup(CLI::App& app) {
+  auto o = std::make_shared<Options>();
+  app.add_option("ACTION", o->action,
+                 "check: validate FILE (exit 1 with the error on a bad file); show: validate and print it (mm, µm, "
+                 "degrees, ppm); init: write the nominal machine to FILE")
+      ->check(CLI::IsMember({"check", "show", "init"}).description(""))
+      ->type_name("check|show|init")
+      ->required();
+  app.add_option("FILE", o->file, "the model file (model-file.md)")->type_name("FILE.yaml")->required();
+  app.add_flag("--force", o->force, "init: replace FILE when it exists");
+  return [o] { return run(*o); };
+}
+
+const Command reg{"model", "check or show a model file, or write the nominal one", setup};
 
 }  // namespace
 }  // namespace cpm::cli

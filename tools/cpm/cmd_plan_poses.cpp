@@ -15,22 +15,25 @@ std::string vec_text(const Vec3& v) {
   return buf;
 }
 
-int run(Args& a) {
-  const std::string model_path = a.option_or("model", default_model_path());
-  const std::string kind = a.option_or("kind", "ballbar");
-  const std::string layout = a.option_or("layout", kind == "ballbar" ? "kim" : "optimal");
+struct Options {
+  std::optional<std::string> model, layout, pivot, radii, out;
+  std::string kind = "ballbar";
+  long count = 32;
+  bool dl_unknown = false;
+};
+
+int run(const Options& o) {
+  const std::string model_path = model_or_default(o.model);
+  const std::string& kind = o.kind;
+  const std::string layout = o.layout.value_or(kind == "ballbar" ? "kim" : "optimal");
   Vec3 pivot(0.430, 0.430, 0.530);
-  if (auto v = a.option("pivot")) pivot = calib_point("--pivot", *v);
+  if (o.pivot) pivot = calib_point("--pivot", *o.pivot);
   std::vector<double> radii{0.100, 0.150};
-  if (auto v = a.option("radii")) radii = calib_numbers("--radii", *v);
-  const long count = a.integer("count", 32);
-  const bool dl_unknown = a.flag("length-offset-unknown");
-  const auto out = a.option("out");
-  a.finish();
-  if (kind != "ballbar" && kind != "position") throw UsageError("--kind must be ballbar or position");
-  if (layout != "kim" && layout != "optimal") throw UsageError("--layout must be kim or optimal");
+  if (o.radii) radii = calib_numbers("--radii", *o.radii);
+  const long count = o.count;
+  const bool dl_unknown = o.dl_unknown;
+  const auto& out = o.out;
   if (kind == "position" && layout == "kim") throw UsageError("Kim's layout is for a ball-bar; use --layout optimal");
-  if (count < 1 || count > 10000) throw UsageError("--count must be within 1 .. 10000");
   const io::ModelFile mf = io::load_model_file(model_path);
   std::vector<cal::PlannedPose> poses;
   double o1 = 0.0, o1_kim = 0.0;
@@ -75,10 +78,26 @@ int run(Args& a) {
   return 0;
 }
 
-const Command reg{"plan-poses", "measurement poses for a calibration (Kim's layout or D-optimal), as CSV", run,
-                  "[--model MODEL.yaml] [--kind ballbar|position] [--layout kim|optimal]\n"
-                  "       [--pivot X,Y,Z] [--radii R1,R2,...] [--count N] [--length-offset-unknown] [--out FILE.csv]\n"
-                  "  Lengths in m. Kim's layout: 32 points on hemispheres of 100 and 150 mm above the pivot."};
+Run setup(CLI::App& app) {
+  auto o = std::make_shared<Options>();
+  add_model_option(app, o->model, "the model whose workspace the poses must lie in");
+  add_choice(app, "--kind", o->kind, {"ballbar", "position"}, "what will be measured: bar lengths or positions");
+  app.add_option("--layout", o->layout,
+                 "Kim's 32 points on hemispheres of 100 and 150 mm above the pivot, or a D-optimal set")
+      ->check(CLI::IsMember({"kim", "optimal"}).description(""))
+      ->type_name("kim|optimal")
+      ->default_str("kim for ballbar, optimal for position");
+  app.add_option("--pivot", o->pivot, "the ball-bar's fixed ball in m")->type_name("X,Y,Z")->default_str("0.430,0.430,0.530");
+  app.add_option("--radii", o->radii, "bar lengths in m (e.g. 0.100,0.150)")
+      ->type_name("R1,R2,...")
+      ->default_str("0.100,0.150");
+  app.add_option("--count", o->count, "number of poses of the optimal layout (1 .. 10000)")->type_name("N")->check(CLI::Range(1L, 10000L).description(""));
+  app.add_flag("--length-offset-unknown", o->dl_unknown, "the bar's length offset is fitted too (no setting master)");
+  app.add_option("--out", o->out, "write the poses to FILE.csv instead of the standard output")->type_name("FILE.csv");
+  return [o] { return run(*o); };
+}
+
+const Command reg{"plan-poses", "measurement poses for a calibration (Kim's layout or D-optimal), as CSV", setup};
 
 }  // namespace
 }  // namespace cpm::cli

@@ -14,35 +14,38 @@
 namespace cpm::cli {
 namespace {
 
-int run(Args& a) {
-  const std::string truth_path = a.option_or("truth", default_model_path());
-  const std::string model_path = a.option_or("model", default_model_path());
-  const auto poses_path = a.option("poses");
-  const std::string kind = a.option_or("kind", "ballbar");
+struct Options {
+  std::optional<std::string> truth, model, pivot, pivot_error, noise_shape;
+  std::string poses, out, kind = "ballbar", order = "file";
+  double length_offset = 0.0, dwell = 0.0;
+  bool length_offset_unknown = false;
+  std::optional<double> noise;
+  long seed = 1;
+};
+
+int run(const Options& o) {
+  const std::string truth_path = model_or_default(o.truth);
+  const std::string model_path = model_or_default(o.model);
+  const std::string& poses_path = o.poses;
+  const std::string& kind = o.kind;
   cal::BallbarSimulation bs;
-  if (auto v = a.option("pivot")) bs.pivot_nominal = calib_point("--pivot", *v);
+  if (o.pivot) bs.pivot_nominal = calib_point("--pivot", *o.pivot);
   Vec3 pivot_error = Vec3::Zero();
-  if (auto v = a.option("pivot-error")) pivot_error = calib_point("--pivot-error", *v);
-  bs.length_offset = a.number("length-offset", 0.0);
-  bs.length_offset_known = !a.flag("length-offset-unknown");
+  if (o.pivot_error) pivot_error = calib_point("--pivot-error", *o.pivot_error);
+  bs.length_offset = o.length_offset;
+  bs.length_offset_known = !o.length_offset_unknown;
   cal::Noise noise;
-  noise.size = a.number("noise", kind == "ballbar" ? 0.5e-6 : 5e-6);
-  const std::string shape = a.option_or("noise-shape", kind == "ballbar" ? "uniform" : "gaussian");
-  if (shape == "uniform") noise.shape = cal::NoiseShape::uniform;
-  else if (shape == "gaussian") noise.shape = cal::NoiseShape::gaussian;
-  else throw UsageError("--noise-shape must be uniform or gaussian");
-  noise.seed = static_cast<std::uint64_t>(a.integer("seed", 1));
-  const double dwell = a.number("dwell", 0.0);
-  const std::string order = a.option_or("order", "file");
-  const auto out = a.option("out");
-  a.finish();
-  if (!(dwell >= 0.0) || !std::isfinite(dwell)) throw UsageError("--dwell must be a number of seconds >= 0");
-  if (order != "file" && order != "shuffled") throw UsageError("--order must be file or shuffled");
-  if (!poses_path) throw UsageError("--poses FILE.csv is required (cpm plan-poses writes one)");
-  if (!out) throw UsageError("--out FILE.csv is required");
+  noise.size = o.noise.value_or(kind == "ballbar" ? 0.5e-6 : 5e-6);
+  const std::string shape = o.noise_shape.value_or(kind == "ballbar" ? "uniform" : "gaussian");
+  noise.shape = shape == "uniform" ? cal::NoiseShape::uniform : cal::NoiseShape::gaussian;
+  noise.seed = static_cast<std::uint64_t>(o.seed);
+  const double dwell = o.dwell;
+  const std::string& order = o.order;
+  const std::string& out = o.out;
+  if (!(dwell >= 0.0)) throw UsageError("--dwell must be a number of seconds >= 0");
   const io::ModelFile truth = io::load_model_file(truth_path);
   const io::ModelFile model = io::load_model_file(model_path);
-  std::vector<Vec3> cmd = cal::read_poses_csv(*poses_path);
+  std::vector<Vec3> cmd = cal::read_poses_csv(poses_path);
   // Visiting in a shuffled order brings every axis into the poses from both
   // directions (backlash needs that); a dwell gives each pose its time and
   // approach direction (the t and dir columns: thermal drift, backlash).
@@ -57,29 +60,50 @@ int run(Args& a) {
     bs.noise = noise;
     bs.inputs = inputs;
     io::BallbarData d = cal::simulate_ballbar(truth.model, model.model, cmd, bs);
-    io::write_ballbar(*out, d);
-  } else if (kind == "position") {
-    io::PositionData d = cal::simulate_positions(truth.model, model.model, cmd, noise, inputs);
-    io::write_position(*out, d);
+    io::write_ballbar(out, d);
   } else {
-    throw UsageError("--kind must be ballbar or position");
+    io::PositionData d = cal::simulate_positions(truth.model, model.model, cmd, noise, inputs);
+    io::write_position(out, d);
   }
   std::printf("wrote %s: %zu %s rows, true machine %s, commanded through %s, noise %s %.3g µm%s\n",
-              out->c_str(), cmd.size(), kind.c_str(), truth_path.c_str(), model_path.c_str(),
+              out.c_str(), cmd.size(), kind.c_str(), truth_path.c_str(), model_path.c_str(),
               shape.c_str(), noise.size * 1e6,
               dwell > 0.0 ? ", with t and dir1..dir3 (poses visited in order, one per dwell)" : "");
   return 0;
 }
 
+Run setup(CLI::App& app) {
+  auto o = std::make_shared<Options>();
+  app.add_option("--poses", o->poses, "the commanded poses (cpm plan-poses writes them)")->type_name("POSES.csv")->required();
+  app.add_option("--out", o->out, "the measurement file to write (data-formats.md)")->type_name("FILE.csv")->required();
+  add_choice(app, "--kind", o->kind, {"ballbar", "position"}, "a ball-bar (lengths) or a laser tracker (positions)");
+  add_model_option(app, o->truth, "the true machine, simulated", "--truth");
+  add_model_option(app, o->model, "the model the poses are commanded through");
+  app.add_option("--pivot", o->pivot, "the fixed ball as declared in the file, in m")
+      ->type_name("X,Y,Z")
+      ->default_str(point_text(cal::BallbarSimulation{}.pivot_nominal));
+  app.add_option("--pivot-error", o->pivot_error, "where the ball really is minus where it is declared, in m")
+      ->type_name("DX,DY,DZ")
+      ->default_str("0,0,0");
+  add_number(app, "--length-offset", o->length_offset, "M", "the bar's length offset in m (reading = distance - offset)");
+  app.add_flag("--length-offset-unknown", o->length_offset_unknown, "mark the length offset unknown in the file (fitted)");
+  add_number(app, "--noise", o->noise, "M", "measurement noise in m: half-width (uniform) or standard deviation (gaussian)")
+      ->default_str("0.5e-6 for ballbar (QC10), 5e-6 for position");
+  app.add_option("--noise-shape", o->noise_shape, "the noise's distribution")
+      ->check(CLI::IsMember({"uniform", "gaussian"}).description(""))
+      ->type_name("uniform|gaussian")
+      ->default_str("uniform for ballbar, gaussian for position");
+  app.add_option("--seed", o->seed, "seed of the noise (and of the shuffled order)")->type_name("N");
+  add_number(app, "--dwell", o->dwell, "S",
+             "visit the poses S seconds apart and write t and dir1..dir3 (what backlash and thermal drift need); "
+             "0: no time columns");
+  add_choice(app, "--order", o->order, {"file", "shuffled"},
+             "visit the poses in the file's order or in a random one (every axis from both directions)");
+  return [o] { return run(*o); };
+}
+
 const Command reg{"simulate-measurement",
-                  "simulated ball-bar or position measurements of a true machine (a data file)", run,
-                  "--poses POSES.csv --out FILE.csv [--kind ballbar|position] [--truth TRUE.yaml]\n"
-                  "       [--model MODEL.yaml] [--pivot X,Y,Z] [--pivot-error DX,DY,DZ] [--length-offset M]\n"
-                  "       [--length-offset-unknown] [--noise M] [--noise-shape uniform|gaussian] [--seed N]\n"
-                  "       [--dwell S] [--order file|shuffled]\n"
-                  "  Ball-bar noise is +-0.5 µm uniform by default (QC10), positions 5 µm gaussian.\n"
-                  "  --dwell S visits the poses S seconds apart and writes t and dir1..dir3 (what backlash and\n"
-                  "  thermal drift need); --order shuffled visits them in a random order (both directions)."};
+                  "simulated ball-bar or position measurements of a true machine (a data file)", setup};
 
 }  // namespace
 }  // namespace cpm::cli

@@ -1,6 +1,5 @@
-// cpm table3: Elkady's Table 3 under docs/model.md's reference conditions.
+// cpm table3: Elkady's Table 3 under the reference conditions of docs/model.md.
 #include <cstdio>
-#include <sstream>
 
 #include "cli.hpp"
 #include "cpm/sim/table3.hpp"
@@ -8,9 +7,7 @@
 namespace cpm::cli {
 namespace {
 
-int run(Args& args) {
-  const auto json_path = args.option("json");
-  args.finish();
+int run(const std::optional<std::string>& json_path) {
   const auto rows = sim::reproduce_table3();
   std::printf("Elkady Table 3, paper's circle, 1 kHz ZOH, RK4 x10, RMSE over 4000 samples\n\n");
   std::printf("%-16s %9s %6s | %-28s | %-20s | %s\n", "controller", "Kp", "Kd",
@@ -33,31 +30,37 @@ int run(Args& args) {
                 100.0 * (r.metrics.position_rmse / r.independent_position_rmse - 1.0));
   std::printf("\n");
   if (json_path) {
-    std::ostringstream js;
-    js << "{\n  \"conditions\": {\"rate_hz\": 1000, \"rk4_substeps\": 10, \"samples\": 4000,"
-       << " \"trajectory\": \"elkady_circle\", \"force_limit\": 120},\n  \"controllers\": [\n";
-    for (std::size_t i = 0; i < rows.size(); ++i) {
-      const auto& r = rows[i];
-      js << "    {\"name\": \"" << ctl::law_name(r.law) << "\", \"kp\": " << json_number(r.gains.kp.x())
-         << ", \"kd\": " << json_number(r.gains.kd.x())
-         << ", \"position_rmse\": " << json_number(r.metrics.position_rmse)
-         << ", \"velocity_rmse\": " << json_number(r.metrics.velocity_rmse)
-         << ", \"position_max\": " << json_number(r.metrics.position_max)
-         << ", \"saturated_samples\": " << r.metrics.saturated_samples
-         << ", \"paper_position_rmse\": " << json_number(r.paper_position_rmse)
-         << ", \"paper_velocity_rmse\": " << json_number(r.paper_velocity_rmse)
-         << ", \"independent_position_rmse\": " << json_number(r.independent_position_rmse)
-         << ", \"ok\": " << (r.fault ? "true" : "false") << "}" << (i + 1 < rows.size() ? "," : "")
-         << "\n";
-    }
-    js << "  ]\n}\n";
-    write_file_atomically(*json_path, js.str());
+    Json controllers = Json::array();
+    for (const auto& r : rows)
+      controllers.push_back({{"name", ctl::law_name(r.law)},
+                             {"kp", r.gains.kp.x()},
+                             {"kd", r.gains.kd.x()},
+                             {"position_rmse", r.metrics.position_rmse},
+                             {"velocity_rmse", r.metrics.velocity_rmse},
+                             {"position_max", r.metrics.position_max},
+                             {"saturated_samples", r.metrics.saturated_samples},
+                             {"paper_position_rmse", r.paper_position_rmse},
+                             {"paper_velocity_rmse", r.paper_velocity_rmse},
+                             {"independent_position_rmse", r.independent_position_rmse},
+                             {"ok", static_cast<bool>(r.fault)}});
+    write_json(*json_path, Json{{"conditions",
+                                 {{"rate_hz", 1000},
+                                  {"rk4_substeps", 10},
+                                  {"samples", 4000},
+                                  {"trajectory", "elkady_circle"},
+                                  {"force_limit", 120}}},
+                                {"controllers", controllers}});
   }
   return all_ok ? 0 : 1;
 }
 
-const Command reg{"table3", "reproduce Elkady's Table 3 (four controllers on the paper's circle)",
-                  run, "[--json FILE]"};
+const Command reg{"table3", "reproduce Elkady's Table 3 (four controllers on the paper's circle)", [](CLI::App& app) {
+                    auto json = std::make_shared<std::optional<std::string>>();
+                    app.add_option("--json", *json, "also write the table as JSON to FILE (SI units: m, m/s)")
+                        ->type_name("FILE");
+                    app.footer("Exit status 1 when a controller stops on a fault before the end of the circle.");
+                    return [json] { return run(*json); };
+                  }};
 
 }  // namespace
 }  // namespace cpm::cli

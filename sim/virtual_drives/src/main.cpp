@@ -18,6 +18,7 @@
 #include "cpm/hal/socketcan.hpp"
 #include "cpm/io/model_file.hpp"
 #include "cpm/sim/control_socket.hpp"
+#include "cpm/sim/drive_command_line.hpp"
 #include "cpm/sim/virtual_drives_control.hpp"
 
 namespace {
@@ -27,113 +28,62 @@ using namespace cpm;
 volatile sig_atomic_t g_stop = 0;
 void on_signal(int) { g_stop = 1; }
 
-void usage() {
-  std::fprintf(stderr,
-               "usage: virtual-drives --interface IF [options]\n"
-               "  --interface IF       SocketCAN interface (vcan0)\n"
-               "  --model FILE         the true machine (model file; builtin:elkady = docs/model.md) [builtin:elkady]\n"
-               "  --rate HZ            control rate: the plant advances 1/HZ s per SYNC [1000]\n"
-               "  --initial X,Y,Z      platform centre at power-on (m) [0.600,0.425,0.300]\n"
-               "  --nodes A,B,C        node ids of the drives of actuators 1, 2, 3 [1,2,3]\n"
-               "  --counts-per-m N     0x6064 counts per metre (velocity in counts/s) [1e7]\n"
-               "  --rated-force N      force of 1000 per mille of 0x6071 (N) [40]\n"
-               "  --substeps N         RK4 steps per period [10]\n"
-               "  --timing T           synchronous: a torque received before SYNC k acts from SYNC k, after\n"
-               "                       the positions of SYNC k were sampled (CiA 402 CST: one period of dead\n"
-               "                       time); lockstep: it acts at once, as the in-process loop [synchronous]\n"
-               "  --control PATH       UNIX stream socket for fault-injection commands\n"
-               "  --stdin              read fault-injection commands from stdin too\n"
-               "  --fault SYNC:CMD     run CMD when the SYNC counter reaches SYNC (repeatable)\n"
-               "  --ready-file PATH    written once the drives have powered on\n"
-               "Commands: heartbeat AXIS off|on, emcy AXIS CODE [REG], fault AXIS CODE [persistent],\n"
-               "clear AXIS, refuse AXIS CMD on|off, late AXIS MS, silent AXIS on|off, disappear,\n"
-               "reappear, status, quit (docs/canopen-backend.md).\n");
-}
-
-std::vector<double> numbers(const std::string& s, std::size_t n, const std::string& opt) {
-  std::vector<double> v;
-  std::stringstream ss(s);
-  for (std::string t; std::getline(ss, t, ',');) {
-    std::size_t used = 0;
-    double x = 0;
-    try {
-      x = std::stod(t, &used);
-    } catch (const std::exception&) {
-      used = 0;
-    }
-    if (used != t.size() || t.empty()) throw Error(opt + ": '" + t + "' is not a number");
-    v.push_back(x);
-  }
-  if (v.size() != n) throw Error(opt + ": expected " + std::to_string(n) + " comma-separated numbers, got '" + s + "'");
-  return v;
-}
-
 int run(int argc, char** argv) {
-  std::string interface, model = "builtin:elkady", control, ready_file;
+  sim::DriveCommandLine d;
+  std::string ready_file, timing = sim::timing_name(d.cfg.timing);
   bool use_stdin = false;
-  double rate = 1000;
-  sim::VirtualMachineConfig cfg = sim::VirtualMachineConfig::defaults();
+  std::vector<double> initial;
+  std::vector<std::string> faults;
+  CLI::App app{"virtual-drives: three CiA 402 drives on a SocketCAN interface, stepping the true machine's plant by\n"
+               "one control period per SYNC (docs/canopen-backend.md).",
+               "virtual-drives"};
+  program::setup(app);
+  sim::add_drive_options(app, d);
+  app.add_option("--initial", initial, "platform centre at power-on in m")
+      ->type_name("X,Y,Z")
+      ->delimiter(',')
+      ->expected(3)
+      ->check(program::finite())
+      ->default_str("0.600,0.425,0.300");
+  app.add_option("--substeps", d.cfg.plant.substeps, "RK4 steps of the plant per period")->type_name("N");
+  app.add_option("--timing", timing,
+                 "synchronous: a torque received before SYNC k acts from SYNC k, after the positions of SYNC k were "
+                 "sampled (CiA 402 CST: one period of dead time); lockstep: it acts at once, as the in-process loop")
+      ->check(CLI::IsMember({"synchronous", "lockstep"}).description(""))
+      ->type_name("synchronous|lockstep");
+  app.add_flag("--stdin", use_stdin, "read fault-injection commands from the standard input too");
+  app.add_option("--fault", faults, "run the command CMD when the SYNC counter reaches SYNC (repeatable)")
+      ->type_name("SYNC:CMD")
+      ->allow_extra_args(false);
+  app.add_option("--ready-file", ready_file, "written (with the process id) once the drives have powered on")
+      ->type_name("PATH");
+  app.footer("Commands: heartbeat AXIS off|on, emcy AXIS CODE [REG], fault AXIS CODE [persistent], clear AXIS,\n"
+             "refuse AXIS CMD on|off, late AXIS MS, silent AXIS on|off, disappear, reappear, status, quit\n"
+             "(docs/canopen-backend.md).");
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return program::parse_exit(app, e, "virtual-drives");
+  }
+  if (initial.size() == 3) d.cfg.initial_position = Vec3(initial[0], initial[1], initial[2]);
+  d.cfg.timing = *sim::timing_from_name(timing);
   std::multimap<std::uint64_t, std::string> scheduled;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    auto value = [&]() -> std::string {
-      if (i + 1 >= argc) throw Error("option " + a + " needs a value");
-      return argv[++i];
-    };
-    if (a == "--interface") interface = value();
-    else if (a == "--model") model = value();
-    else if (a == "--rate") rate = numbers(value(), 1, a)[0];
-    else if (a == "--initial") {
-      const auto v = numbers(value(), 3, a);
-      cfg.initial_position = Vec3(v[0], v[1], v[2]);
-    } else if (a == "--nodes") {
-      const auto v = numbers(value(), 3, a);
-      for (int k = 0; k < 3; ++k) cfg.axes[static_cast<std::size_t>(k)].node_id = static_cast<int>(v[static_cast<std::size_t>(k)]);
-    } else if (a == "--counts-per-m") {
-      const double v = numbers(value(), 1, a)[0];
-      for (auto& ax : cfg.axes) ax.scaling.counts_per_m = v;
-    } else if (a == "--rated-force") {
-      const double v = numbers(value(), 1, a)[0];
-      for (auto& ax : cfg.axes) ax.scaling.rated_force_n = v;
-    } else if (a == "--substeps") cfg.plant.substeps = static_cast<int>(numbers(value(), 1, a)[0]);
-    else if (a == "--timing") {
-      const std::string t = value();
-      const auto timing = sim::timing_from_name(t);
-      if (!timing) throw Error("--timing: expected synchronous or lockstep, got '" + t + "'");
-      cfg.timing = *timing;
-    }
-    else if (a == "--control") control = value();
-    else if (a == "--stdin") use_stdin = true;
-    else if (a == "--ready-file") ready_file = value();
-    else if (a == "--fault") {
-      const std::string f = value();
-      const auto colon = f.find(':');
-      if (colon == std::string::npos) throw Error("--fault: expected SYNC:COMMAND, got '" + f + "'");
-      scheduled.emplace(static_cast<std::uint64_t>(numbers(f.substr(0, colon), 1, a)[0]), f.substr(colon + 1));
-    } else if (a == "--help" || a == "-h") {
-      usage();
-      return 0;
-    } else {
-      usage();
-      throw Error("unknown option '" + a + "'");
-    }
+  for (const std::string& f : faults) {
+    const auto colon = f.find(':');
+    std::uint64_t sync = 0;
+    if (colon == std::string::npos || !CLI::detail::lexical_cast(f.substr(0, colon), sync))
+      throw Error("--fault: expected SYNC:COMMAND, got '" + f + "'");
+    scheduled.emplace(sync, f.substr(colon + 1));
   }
-  if (interface.empty()) {
-    usage();
-    return 2;
-  }
-  if (!(rate > 0 && rate <= 10000)) throw Error("--rate must be in (0, 10000] Hz");
-  cfg.period = 1.0 / rate;
-
-  const ctl::MachineModel mm = model == "builtin:elkady" ? ctl::MachineModel::elkady() : io::load_model_file(model).model;
-  const ctl::Machine truth(mm);
-  hal::SocketCanBus bus(interface);
+  const sim::VirtualMachineConfig cfg = d.config();
+  const ctl::Machine truth(d.true_machine());
+  hal::SocketCanBus bus(d.interface);
   bus.set_filters({}, false);
   hal::SteadyClock clock;
   sim::VirtualMachine vm(bus, truth, cfg);
 
   std::unique_ptr<sim::ControlSocket> control_socket;
-  if (!control.empty()) control_socket = std::make_unique<sim::ControlSocket>(control);
+  if (!d.control.empty()) control_socket = std::make_unique<sim::ControlSocket>(d.control);
   if (use_stdin) fcntl(0, F_SETFL, fcntl(0, F_GETFL) | O_NONBLOCK);
   signal(SIGINT, on_signal);
   signal(SIGTERM, on_signal);
@@ -142,8 +92,8 @@ int run(int argc, char** argv) {
   vm.power_on(clock.now_ns());
   if (!ready_file.empty()) std::ofstream(ready_file) << getpid() << "\n";
   std::fprintf(stderr, "virtual-drives: nodes %d %d %d on %s, %.0f Hz per SYNC, %s timing, model %s\n",
-               cfg.axes[0].node_id, cfg.axes[1].node_id, cfg.axes[2].node_id, interface.c_str(), rate,
-               sim::timing_name(cfg.timing), model.c_str());
+               cfg.axes[0].node_id, cfg.axes[1].node_id, cfg.axes[2].node_id, d.interface.c_str(), d.rate,
+               sim::timing_name(cfg.timing), d.model.c_str());
 
   std::string stdin_buf;
   bool quit = false;

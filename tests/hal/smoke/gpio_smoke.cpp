@@ -6,11 +6,10 @@
 // output in its safe state (0) on exit. Exits 77 (skipped) where there is
 // no GPIO chip, 0 on success, 1 on failure.
 #include <cstdio>
-#include <cstdlib>
-#include <cstring>
 #include <string>
 
 #include "cpm/hal/gpiod_io.hpp"
+#include "cpm/program_cli.hpp"
 
 using namespace cpm::hal;
 
@@ -18,24 +17,19 @@ int main(int argc, char** argv) {
   std::string chip = "gpiochip0";
   int in = 0, out = 1, expect = -1;
   bool active_low = false;
-  for (int i = 1; i < argc; ++i) {
-    const std::string a = argv[i];
-    auto next = [&]() -> const char* {
-      if (i + 1 >= argc) {
-        std::fprintf(stderr, "hal_gpio_smoke: %s needs a value\n", a.c_str());
-        std::exit(2);
-      }
-      return argv[++i];
-    };
-    if (a == "--chip") chip = next();
-    else if (a == "--in") in = std::atoi(next());
-    else if (a == "--out") out = std::atoi(next());
-    else if (a == "--expect-in") expect = std::atoi(next());
-    else if (a == "--active-low") active_low = true;
-    else {
-      std::fprintf(stderr, "hal_gpio_smoke: unknown option %s\n", a.c_str());
-      return 2;
-    }
+  CLI::App app{"hal_gpio_smoke: the e-stop input and the drive-enable output through libgpiod on a real kernel",
+               "hal_gpio_smoke"};
+  cpm::program::setup(app);
+  app.add_option("--chip", chip, "the GPIO chip")->type_name("CHIP");
+  app.add_option("--in", in, "line offset of the e-stop input")->type_name("OFFSET");
+  app.add_option("--out", out, "line offset of the drive-enable output")->type_name("OFFSET");
+  app.add_option("--expect-in", expect, "the value the input must read (-1: any)")->type_name("0|1");
+  app.add_flag("--active-low", active_low, "the input is active low");
+  app.footer("Exit status: 0 passed, 1 failed, 2 a bad command line, 77 skipped (no GPIO chip).");
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return cpm::program::parse_exit(app, e, "hal_gpio_smoke");
   }
   std::string why;
   if (!GpiodIo::available(&why)) {

@@ -11,6 +11,7 @@
 #include <string>
 
 #include "cpm/hal/socketcan.hpp"
+#include "cpm/program_cli.hpp"
 
 using namespace cpm::hal;
 
@@ -30,7 +31,17 @@ bool receive(SocketCanBus& bus, CanFrame& f) {
 }  // namespace
 
 int main(int argc, char** argv) {
-  const std::string ifname = argc > 1 ? argv[1] : "vcan0";
+  std::string ifname = "vcan0";
+  CLI::App app{"hal_socketcan_smoke: two SocketCAN sockets on one interface exchange a frame and an error frame",
+               "hal_socketcan_smoke"};
+  cpm::program::setup(app);
+  app.add_option("INTERFACE", ifname, "the CAN interface")->type_name("IF");
+  app.footer("Exit status: 0 passed, 1 failed, 2 a bad command line, 77 skipped (no CAN, no such interface).");
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return cpm::program::parse_exit(app, e, "hal_socketcan_smoke");
+  }
   std::string why;
   if (!SocketCanBus::available(&why)) {
     std::printf("SKIP: %s\n", why.c_str());
