@@ -30,8 +30,6 @@ namespace {
 using namespace cpm;
 using namespace cpm::daemon;
 
-}
-
 // Temporary file, fsync, rename: a crash leaves the old file or the new one
 // (cpmd does not link cpm_io's write_file_atomically).
 void write_atomically(const std::string& path, const std::string& text) {
