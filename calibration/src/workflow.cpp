@@ -458,10 +458,6 @@ Json parameters_json(const CalibrationResult& r) {
 
 }  // namespace
 
-std::string json_string(const std::string& s) { return Json(s).dump(-1, ' ', false, Json::error_handler_t::replace); }
-
-std::string json_num(double v) { return Json(v).dump(); }
-
 std::string CalibrationResult::json() const {
   const Identifiability& id = identifiability();
   const Json o = {{"kind", kind},

@@ -151,10 +151,6 @@ Json bins_json(const std::array<ResidualSummary::Bins, 3>& bins) {
 
 }  // namespace
 
-std::string json_string(const std::string& s) { return Json(s).dump(-1, ' ', false, Json::error_handler_t::replace); }
-
-std::string json_num(double v) { return Json(v).dump(); }
-
 std::string summary_json(const ResidualSummary& s, const MotionProblem& P, const std::string& data_file,
                          const std::string& model_file, int samples) {
   Json o = {{"kind", "motion"}, {"data_file", data_file}, {"model_file", model_file},

@@ -58,10 +58,4 @@ CalibrationResult calibrate_files(const std::string& model_path, const std::stri
                                   const std::optional<std::string>& json_path,
                                   const std::string& tool, const CalibrationOptions& options = {});
 
-// One JSON value as text, through nlohmann-json: a string quoted and escaped,
-// a number shortest-exact (null when not finite). For tools/cpm's commands
-// that still assemble their JSON as text; new code builds nlohmann values.
-std::string json_string(const std::string& s);
-std::string json_num(double v);
-
 }  // namespace cpm::cal

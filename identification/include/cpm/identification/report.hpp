@@ -37,10 +37,4 @@ std::string diagnosis_json(const Diagnosis& D);
 std::string compare_html(const MotionProblem& P, const ResidualSummary& s, const std::string& title);
 std::string diagnosis_html(const Diagnosis& D);
 
-// One JSON value as text, through nlohmann-json: a string quoted and escaped,
-// a number shortest-exact (null when not finite). For tools/cpm's commands
-// that still assemble their JSON as text; new code builds nlohmann values.
-std::string json_string(const std::string& s);
-std::string json_num(double v);
-
 }  // namespace cpm::ident
