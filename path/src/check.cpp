@@ -9,7 +9,7 @@
 namespace cpm::path::detail {
 namespace {
 
-constexpr double kSlack = 0.01;  // the grid bounds the limits between its points only to about this
+constexpr double kSlack = 0.005;  // the grid bounds the limits between its points only to about this
 constexpr std::size_t kKeep = 4096;  // violations kept (all are counted in the figures)
 
 struct Checker {
@@ -74,7 +74,10 @@ std::vector<Violation> check(const Geometry& g, const std::vector<Knot>& knots, 
   const double dt = o.knot_period;
   std::size_t last = 0;
   for (std::size_t k = 0; k < knots.size(); ++k) {
-    if (k == 0 || k + 1 == knots.size() || k - last >= 4 || knots[k].s - knots[last].s >= 0.5 * o.grid_step) {
+    // Every knot while the acceleration changes, else every half grid step
+    // of path or every eighth knot (cruise, where only the pose changes).
+    const bool changing = std::abs(knots[k].a - knots[last].a) > 0.05 || std::abs(knots[k].v - knots[last].v) > 1e-3;
+    if (k == 0 || k + 1 == knots.size() || changing || k - last >= 8 || knots[k].s - knots[last].s >= 0.5 * o.grid_step) {
       c.at(g, knots, static_cast<double>(k) * dt);
       last = k;
     }

@@ -12,7 +12,7 @@ namespace {
 constexpr double kSlope = 1e-5;  // m: step of the finite difference of J^-1 along s
 
 int intervals_of(const Piece& pc, double step) {
-  int n = std::max(1, static_cast<int>(std::ceil(pc.length / step)));
+  int n = std::max(1, static_cast<int>(std::ceil(pc.length / step - 1e-9)));
   if (pc.kind == PieceKind::arc)  // at least every 5 degrees: the Jacobian and M turn with the arc
     n = std::max(n, static_cast<int>(std::ceil(std::abs(pc.angle1 - pc.angle0) / (std::numbers::pi / 36))));
   if (pc.kind == PieceKind::blend) n = std::max(n, 6);  // its curvature rises and falls within it
@@ -27,12 +27,14 @@ int intervals_of(const Piece& pc, double step) {
 }
 
 // Bound on |effects(d, d_dot)| per actuator for speeds up to v_max along
-// the path: friction grows with speed, cogging does not depend on it.
+// the path: friction grows with speed (viscous) or peaks just above rest
+// (Coulomb, Stribeck); cogging and springs do not depend on it.
 Vec3 effects_bound(const ctl::Machine& m, const Vec3& d, const Vec3& d1, double v_max) {
   if (!m.has_additive_effects()) return Vec3::Zero();
-  const Vec3 e0 = m.effect_forces(d, Vec3::Zero());
-  const Vec3 ep = m.effect_forces(d, d1 * v_max), en = m.effect_forces(d, -d1 * v_max);
-  return e0.cwiseAbs().cwiseMax(ep.cwiseAbs()).cwiseMax(en.cwiseAbs());
+  Vec3 e = m.effect_forces(d, Vec3::Zero()).cwiseAbs();
+  for (double v : {1e-4, 1e-2 * v_max, 0.1 * v_max, v_max})
+    for (double sign : {-1.0, 1.0}) e = e.cwiseMax(m.effect_forces(d, sign * v * d1).cwiseAbs());
+  return e;
 }
 
 // d and J^-1 at p (throws outside the strokes; the limbs' reach and

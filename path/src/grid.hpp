@@ -91,8 +91,8 @@ struct Violation {
   double value = 0.0, limit = 0.0;
 };
 // Check the plan (its geometry and knots) with the machine's inverse
-// kinematics and dynamics, at every knot where the path has moved half a
-// grid step since the last checked one, and at least every fourth: the
+// kinematics and dynamics, at every knot while the acceleration along the
+// path changes and else every half grid step of path or eighth knot: the
 // violations of its mode's limits, and the figures in `sum`.
 std::vector<Violation> check(const Geometry& g, const std::vector<Knot>& knots, const ctl::Machine& m,
                              const PlannerOptions& o, PlanSummary& sum);

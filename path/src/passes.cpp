@@ -33,6 +33,23 @@ void binding(const Point& p, double x, Limit& by, int& axis) {
   axis = low ? w.lo_axis : w.hi_axis;
 }
 
+// The largest u in [lo, u] that the interval's end also allows at the
+// speed it reaches, x + 2 ds u: accelerating into a tighter bound (a curve
+// taken faster) must not end the interval beyond it.
+double held_at_end(const Point& end, double x, double ds, double lo, double u) {
+  const auto ok = [&](double v) {
+    double l, h;
+    return interval(end, x + 2.0 * ds * v, l, h) && v >= l - 1e-12 && v <= h + 1e-12;
+  };
+  if (ok(u) || !ok(lo)) return u;
+  double a = lo, b = u;
+  for (int it = 0; it < 30; ++it) {
+    const double mid = 0.5 * (a + b);
+    (ok(mid) ? a : b) = mid;
+  }
+  return a;
+}
+
 }  // namespace
 
 double set_tangential_cap(Grid& grid, const PlannerOptions& o) {
@@ -99,7 +116,8 @@ Profile passes(const Grid& grid, const std::vector<double>& caps) {
     }
     double lo = 0.0, hi = 0.0;
     if (!interval(grid.pts[i], pr.x[i], lo, hi)) lo = hi = 0.0;
-    const double u = std::max(std::min(hi, (k[i + 1] - pr.x[i]) / (2.0 * ds)), lo);
+    double u = std::max(std::min(hi, (k[i + 1] - pr.x[i]) / (2.0 * ds)), lo);
+    u = held_at_end(grid.pts[i + 1], pr.x[i], ds, lo, u);
     pr.x[i + 1] = std::max(0.0, std::min(pr.x[i] + 2.0 * ds * u, k[i + 1]));
     pr.u[i] = (pr.x[i + 1] - pr.x[i]) / (2.0 * ds);
   }

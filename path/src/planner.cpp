@@ -127,7 +127,8 @@ Plan plan_path(const PathQueue& q, const ctl::Machine& m, const PlannerOptions& 
     knots = detail::filtered_knots(tp, T, o.knot_period, g);
     sum = PlanSummary{};
     sum.mode = o.mode;
-    sum.duration = tp.t.back() + T;
+    // To the knot after the filtered end: from there every knot is at rest.
+    sum.duration = static_cast<double>(knots.size() - 1) * o.knot_period;
     sum.repairs = round;
     bad = detail::check(g, knots, m, o, sum);
     if (bad.empty() || round >= o.max_repairs) break;

@@ -58,7 +58,7 @@ struct LimitedStretch {
 // the planner bounded them).
 struct PlanSummary {
   PlanMode mode = PlanMode::actuator_aware;
-  double duration = 0.0;            // s
+  double duration = 0.0;            // s, to the first knot at rest at the end
   double length = 0.0;              // m of path
   double peak_speed = 0.0;          // |v| (m/s)
   double peak_acceleration = 0.0;   // |a| (m/s^2)
