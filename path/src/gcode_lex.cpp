@@ -45,9 +45,6 @@ bool comment(std::string_view text, std::size_t& i) {
 bool lex(std::string_view text, int line, Block& out, std::vector<Diagnostic>& errors) {
   out.line = line;
   out.words.clear();
-  const std::size_t first = text.find_first_not_of(" \t\r");
-  if (first != std::string_view::npos && text[first] == '%' && text.find_first_not_of(" \t\r", first + 1) == std::string_view::npos)
-    return true;  // a program's % delimiter
   for (std::size_t i = 0; i < text.size();) {
     const char c = text[i];
     if (blank(c)) {
@@ -59,6 +56,11 @@ bool lex(std::string_view text, int line, Block& out, std::vector<Diagnostic>& e
     } else if (std::isalpha(static_cast<unsigned char>(c))) {
       Word w{static_cast<char>(std::toupper(static_cast<unsigned char>(c))), 0.0, static_cast<int>(i) + 1};
       ++i;
+      const std::size_t next = text.find_first_not_of(" \t\r", i);
+      if (next != std::string_view::npos && (text[next] == '#' || text[next] == '['))
+        return fail(errors, line, next, text[next] == '#' ? "parameters (#) are not supported"
+                                                          : "expressions ([ ]) are not supported"),
+               false;
       if (!number(text, i, w.value))
         return fail(errors, line, static_cast<std::size_t>(w.column - 1), std::string("word ") + w.letter + " has no number"),
                false;
@@ -67,6 +69,7 @@ bool lex(std::string_view text, int line, Block& out, std::vector<Diagnostic>& e
       const std::string what = c == '#' ? "parameters (#) are not supported"
                                : c == '[' ? "expressions ([ ]) are not supported"
                                : c == '/' ? "block delete (/) is not supported"
+                               : c == '%' ? "'%' stands alone on a program's first line and on the line that ends it"
                                           : std::string("unexpected character '") + c + "'";
       return fail(errors, line, i, what), false;
     }

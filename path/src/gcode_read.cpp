@@ -141,6 +141,8 @@ bool Reader::g_codes(const Words& w, std::optional<int>& motion, bool& dwell) {
 
 // Feed, plane, units, path control and distance modes, in the RS274NGC order.
 void Reader::modes(const Words& w) {
+  for (const Word* g : w.g)
+    if (std::lround(g->value * 10.0) == 940) st_.feed = 0.0, st_.feed_set = true;  // G94 clears the feed, as LinuxCNC does
   if (const Word* f = w.get('F')) {
     if (f->value < 0.0) fail(f->column, "a feed must not be negative");
     st_.feed = f->value * st_.scale() / 60.0;  // units/min in the units before this block's G20/G21
@@ -311,20 +313,37 @@ ProgramError::ProgramError(const std::string& name, std::vector<Diagnostic> diag
       }()),
       diagnostics_(std::move(diagnostics)) {}
 
+// A line holding only '%': a program may open with one, and then ends at the next.
+bool percent_line(std::string_view line) {
+  const std::size_t a = line.find_first_not_of(" \t\r");
+  return a != std::string_view::npos && line[a] == '%' && line.find_first_not_of(" \t\r", a + 1) == std::string_view::npos;
+}
+
 Program read_program(std::string_view text, const ReaderOptions& options) {
   Program prog;
   prog.start = options.start;
   Reader r(options, prog);
   int line = 0;
+  bool any = false, percent = false;
+  int opened = 0;
   for (std::size_t at = 0; !r.ended && static_cast<int>(r.errors.size()) < options.max_errors;) {
     const std::size_t nl = text.find('\n', at);
-    detail::Block b;
-    if (detail::lex(text.substr(at, nl == std::string_view::npos ? std::string_view::npos : nl - at), ++line, b,
-                    r.errors))
-      r.block(b);
+    const std::string_view ln = text.substr(at, nl == std::string_view::npos ? std::string_view::npos : nl - at);
+    ++line;
+    if (percent_line(ln) && (!any || percent)) {
+      r.ended = percent;  // the closing '%' ends the program
+      if (!percent) opened = line;
+      percent = any = true;
+    } else {
+      any = any || ln.find_first_not_of(" \t\r") != std::string_view::npos;
+      detail::Block b;
+      if (detail::lex(ln, line, b, r.errors)) r.block(b);
+    }
     if (nl == std::string_view::npos) break;
     at = nl + 1;
   }
+  if (percent && !r.ended)
+    r.errors.push_back(Diagnostic{opened, 1, "the program opens with '%' but neither M2, M30 nor '%' ends it"});
   prog.ended = r.ended;
   if (!r.errors.empty()) throw ProgramError(options.name, std::move(r.errors));
   return prog;

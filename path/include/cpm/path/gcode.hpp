@@ -7,9 +7,10 @@
 // G91.1, G61 (exact path) and G64 [P tolerance] (blending), F (units per
 // minute), N, M2 and M30 (program end; nothing after is read). G40, G49,
 // G54, G80 and G94, which only restate what is in force here, are
-// accepted. Comments in ( ) and after ;. A '%' line is skipped. Anything
-// else is refused: no parameters, expressions, subroutines, spindle or
-// tools.
+// accepted (G94 clears the feed, as in LinuxCNC). Comments in ( ) and
+// after ;. A program may open with a line holding only '%', and then ends
+// at the next such line. Anything else is refused: no parameters,
+// expressions, subroutines, spindle or tools.
 //
 // Units and frames: numbers are read in the program's units (G21 mm,
 // G20 inch) and converted at once to SI (m, m/s, s); the canonical moves
