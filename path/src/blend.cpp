@@ -60,6 +60,8 @@ Piece blend_piece(const Segment& A, double LA, const Segment& B, double trim) {
   pc.P[4] = pc.P[5] - h * t5;
   pc.P[3] = pc.P[5] - 2.0 * h * t5 + 1.25 * h * h * k5;
   pc.length = detail::bezier_length(pc.P);
+  pc.rate0 = 1.0 / (5.0 * h);  // |dB/du| = 5 h at both ends
+  pc.rate1 = pc.rate0;
   pc.feed = (A.feed > 0.0 && B.feed > 0.0) ? std::min(A.feed, B.feed) : std::max(A.feed, B.feed);
   return pc;
 }

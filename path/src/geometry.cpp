@@ -58,6 +58,14 @@ void bezier_at(const std::array<Vec3, 6>& P, double u, Vec3& p, Vec3& d1, Vec3& 
   for (int i = 0; i < 4; ++i) d2 += (20.0 * b3[i]) * (P[i + 2] - 2.0 * P[i + 1] + P[i]);
 }
 
+// The blend's parameter u in [0, 1] at s, and du/ds, d2u/ds2: a quintic in
+// s whose rate at each end makes |dp/ds| = 1 there (P[0..5] alone give
+// |dB/du| / length, not 1, and the speed would step at the blend's ends).
+void blend_parameter(const Piece& b, double s, double& u, double& du, double& ddu) noexcept {
+  const double L = b.length;
+  detail::quintic_hermite({0.0, b.rate0, 0.0, 1.0, b.rate1, 0.0}, L, s / L, u, du, ddu);
+}
+
 double arc_speed(const Piece& a, double th) {
   const double r = a.radius + a.radius_rate * th;
   return std::sqrt(r * r + a.radius_rate * a.radius_rate + a.rise_rate * a.rise_rate);
@@ -106,10 +114,12 @@ PathPoint Piece::at(double s) const noexcept {
       break;
     }
     case PieceKind::blend: {
-      const double inv = 1.0 / length;
-      bezier_at(P, s * inv, out.p, out.d1, out.d2);
-      out.d1 *= inv;
-      out.d2 *= inv * inv;
+      double u, du, ddu;
+      blend_parameter(*this, s, u, du, ddu);
+      Vec3 b1, b2;
+      bezier_at(P, u, out.p, b1, b2);
+      out.d1 = b1 * du;
+      out.d2 = b2 * (du * du) + b1 * ddu;
       break;
     }
   }
@@ -161,25 +171,53 @@ double distance_to_piece(const Piece& piece, const Vec3& q, double* s_out) noexc
     if (s_out) *s_out = u * L;
     return (piece.P[0] + u * d - q).norm();
   }
+  // Coarse samples, then Newton on (p(s) - q) . p'(s) = 0 from the two
+  // nearest (a full circle's ends are one point: one of them may be stuck
+  // at its end of the range).
   constexpr int kCoarse = 24;
+  double second_s = 0.0, second = 1e300;
   for (int k = 1; k <= kCoarse; ++k) {
     const double s = L * k / kCoarse;
     const double e = (piece.at(s).p - q).squaredNorm();
+    if (e < best) second = best, second_s = best_s, best = e, best_s = s;
+    else if (e < second) second = e, second_s = s;
+  }
+  for (double s : {best_s, second_s}) {
+    for (int it = 0; it < 8; ++it) {
+      const PathPoint pp = piece.at(s);
+      const Vec3 r = pp.p - q;
+      const double f = r.dot(pp.d1), df = pp.d1.squaredNorm() + r.dot(pp.d2);
+      if (df <= 0.0) break;
+      s = std::clamp(s - f / df, 0.0, L);
+    }
+    const double e = (piece.at(s).p - q).squaredNorm();
     if (e < best) best = e, best_s = s;
   }
-  // Newton on (p(s) - q) . p'(s) = 0 from the nearest coarse point.
-  double s = best_s;
-  for (int it = 0; it < 8; ++it) {
-    const PathPoint pp = piece.at(s);
-    const Vec3 r = pp.p - q;
-    const double f = r.dot(pp.d1), df = pp.d1.squaredNorm() + r.dot(pp.d2);
-    if (df <= 0.0) break;
-    s = std::clamp(s - f / df, 0.0, L);
-  }
-  const double e = (piece.at(s).p - q).squaredNorm();
-  if (e < best) best = e, best_s = s;
   if (s_out) *s_out = best_s;
   return std::sqrt(best);
+}
+
+void detail::quintic_hermite(const std::array<double, 6>& y, double h, double tau, double& v, double& d1,
+                             double& d2) noexcept {
+  const double t2 = tau * tau, t3 = t2 * tau, t4 = t3 * tau, t5 = t4 * tau;
+  const double w[6] = {y[0], h * y[1], h * h * y[2], h * h * y[5], h * y[4], y[3]};
+  const double H[6] = {1 - 10 * t3 + 15 * t4 - 6 * t5, tau - 6 * t3 + 8 * t4 - 3 * t5,
+                       0.5 * (t2 - 3 * t3 + 3 * t4 - t5), 0.5 * (t3 - 2 * t4 + t5),
+                       -4 * t3 + 7 * t4 - 3 * t5, 10 * t3 - 15 * t4 + 6 * t5};
+  const double D[6] = {-30 * t2 + 60 * t3 - 30 * t4, 1 - 18 * t2 + 32 * t3 - 15 * t4,
+                       0.5 * (2 * tau - 9 * t2 + 12 * t3 - 5 * t4), 0.5 * (3 * t2 - 8 * t3 + 5 * t4),
+                       -12 * t2 + 28 * t3 - 15 * t4, 30 * t2 - 60 * t3 + 30 * t4};
+  const double DD[6] = {-60 * tau + 180 * t2 - 120 * t3, -36 * tau + 96 * t2 - 60 * t3,
+                        0.5 * (2 - 18 * tau + 36 * t2 - 20 * t3), 0.5 * (6 * tau - 24 * t2 + 20 * t3),
+                        -24 * tau + 84 * t2 - 60 * t3, 60 * tau - 180 * t2 + 120 * t3};
+  v = d1 = d2 = 0.0;
+  for (int i = 0; i < 6; ++i) {
+    v += H[i] * w[i];
+    d1 += D[i] * w[i];
+    d2 += DD[i] * w[i];
+  }
+  d1 /= h;
+  d2 /= h * h;
 }
 
 double detail::bezier_length(const std::array<Vec3, 6>& P) {

@@ -92,6 +92,7 @@ Point make_point(const Geometry& g, int piece, double sl, const ctl::Machine& m,
   const bool fed = pc.feed > 0.0 && pc.feed < V;
   pt.speed = std::sqrt(n1);
   pt.feed = fed ? pc.feed : V;
+  pt.rapid = pc.feed <= 0.0;
   pt.cap = pt.feed * pt.feed / n1;
   pt.cap_by = fed ? Limit::feed : Limit::velocity;
   if (o.mode == PlanMode::cartesian_only) {

@@ -33,6 +33,7 @@ struct Point {
   double scale = 1.0;  // factor on the rows' bounds, lowered by repairs
   double speed = 1.0;  // |p'|: platform speed per unit s_dot
   double feed = 0.0;   // programmed speed here (m/s): the feed, or the velocity ceiling for rapids
+  bool rapid = false;
   bool stop = false;
 };
 

@@ -7,6 +7,11 @@
 
 namespace cpm::path::detail {
 
+// The quintic Hermite interpolant over [0, h] of y0, y0', y0'' at 0 and
+// y1, y1', y1'' at h (y = {y0, y0', y0'', y1, y1', y1''}), at tau * h
+// (tau in [0, 1]): its value and first two derivatives. noexcept.
+void quintic_hermite(const std::array<double, 6>& y, double h, double tau, double& v, double& d1, double& d2) noexcept;
+
 // Arc length of a quintic Bezier curve (m).
 double bezier_length(const std::array<Vec3, 6>& P);
 

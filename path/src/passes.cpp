@@ -53,18 +53,21 @@ double held_at_end(const Point& end, double x, double ds, double lo, double u) {
 }  // namespace
 
 double set_tangential_cap(Grid& grid, const PlannerOptions& o) {
-  double available = 0.0, v_max = 0.0;
+  double available = 0.0, v_feed = 0.0, v_any = 0.0;
   for (Point& p : grid.pts) {
     p.u_cap = std::numeric_limits<double>::infinity();
     double lo = 0.0, hi = 0.0;
     if (o.mode == PlanMode::cartesian_only) available = o.cartesian.acceleration;
     else if (interval(p, 0.0, lo, hi)) available = std::max(available, std::max(hi, -lo));
-    v_max = std::max(v_max, std::sqrt(p.cap * p.q11 > 0.0 ? p.cap * p.q11 : p.cap));
+    v_any = std::max(v_any, p.feed);
+    if (!p.rapid) v_feed = std::max(v_feed, p.feed);
   }
   // Slowing for a corner from v and back costs about 2 v / a_t of braking
   // and accelerating plus 3 T = 6 a_t / j of filter (the window, and the
-  // cap spread over T on either side): least at a_t = sqrt(v j / 3).
-  const double a_t = std::min(available, std::sqrt(o.cartesian.jerk * v_max / 3.0));
+  // cap spread over T on either side): least at a_t = sqrt(v j / 3), v the
+  // fastest programmed feed (rapids only when there is nothing else).
+  const double v = v_feed > 0.0 ? v_feed : v_any;
+  const double a_t = std::min(available, std::sqrt(o.cartesian.jerk * v / 3.0));
   for (Point& p : grid.pts) p.u_cap = a_t;
   return a_t;
 }

@@ -13,9 +13,11 @@
 // between segments too short to trim, the platform stops at the corner.
 //
 // Frame and units: machine frame (m, z down). The parameter s is arc length
-// on lines and constant-radius arcs, and proportional to it elsewhere
-// (spirals, helices, blends), so a piece's first derivative dp/ds has unit
-// length or nearly; every user takes the derivatives as they are.
+// on lines, arcs and helices; on spirals it is proportional to the angle
+// and on blends a quintic of the Bezier parameter with |dp/ds| = 1 at both
+// ends, so dp/ds has unit length or nearly (within 0.1 % on a spiral the
+// reader accepts, a few % inside a blend); every user takes the
+// derivatives as they are.
 #pragma once
 
 #include <array>
@@ -46,6 +48,9 @@ struct Piece {
   // arc: radius at angle 0 (m), its rate (m/rad), the rise along the normal
   // (m/rad), and the angles (rad) at the piece's start and end.
   double radius = 0.0, radius_rate = 0.0, rise_rate = 0.0, angle0 = 0.0, angle1 = 0.0;
+  // blend: du/ds (1/m) of the Bezier parameter u at its start and end, so
+  // that |dp/ds| = 1 there and the speed joins the neighbours' without a step.
+  double rate0 = 0.0, rate1 = 0.0;
   double feed = 0.0;   // programmed speed (m/s); 0: rapid
   int segment = -1;    // index of its programmed segment (blends: the segment before the corner)
 
