@@ -37,6 +37,7 @@ ContourFigures contour(const PathQueue& queue, const Plan& plan, const std::vect
     c.error = nearest(g, r.p, ref.segment, piece, c.s);
     c.tracking = (r.p - ref.ref.p).norm();
     const Piece& pc = g.pieces[static_cast<std::size_t>(piece)];
+    c.nearest = pc.at(c.s - pc.s0).p;
     c.segment = pc.segment;
     c.rapid = pc.feed <= 0.0;
     c.feed = r.p_dot.norm();

@@ -183,6 +183,23 @@ TEST(Planner, CartesianPlanMayOverloadTheDrivesTheActuatorPlanDoesNot) {
   EXPECT_LT(a.duration(), slow.duration());
 }
 
+TEST(Planner, ReferenceIsSmoothAcrossPiecesAndKnots) {
+  // v = dp/dt and a = dv/dt everywhere, also where a blend meets a line or
+  // an arc and between knots: no step in the speed a controller would chase.
+  PathQueue q(kCentre + Vec3(-0.1, -0.05, 0), 5e-5);
+  q.line(kCentre + Vec3(0.05, -0.05, 0), 0.2);
+  q.arc(kCentre + Vec3(0.05, 0.05, 0), kCentre + Vec3(0.05, 0, 0), Vec3::UnitZ(), 1, 0.2);  // a tangent half circle
+  q.line(kCentre + Vec3(-0.1, 0.05, 0.02), 0.2);
+  q.line(kCentre + Vec3(-0.1, -0.05, 0), 0.2);  // corners: blends
+  const Plan p = plan_path(q, elkady(), PlannerOptions{});
+  const double h = 1e-6;
+  for (double t = 2e-3; t < p.duration() - 2e-3; t += 1.3e-4) {
+    const ctl::TrajectorySample s = p.sample(t), a = p.sample(t + h), b = p.sample(t - h);
+    EXPECT_LT((s.v - (a.p - b.p) / (2 * h)).norm(), 1e-6) << "t = " << t;
+    EXPECT_LT((s.a - (a.v - b.v) / (2 * h)).norm(), 2e-2) << "t = " << t;
+  }
+}
+
 TEST(Planner, DwellsAndStopsHoldThePlatformAtRest) {
   PathQueue q(kCentre, 0.0);
   q.line(kCentre + Vec3(0.05, 0, 0), 0.1);

@@ -28,6 +28,7 @@ struct ContourPoint {
   double t = 0.0;
   Vec3 p = Vec3::Zero();
   double error = 0.0;       // m to the programmed path
+  Vec3 nearest = Vec3::Zero();  // the nearest point of the programmed path (m)
   double tracking = 0.0;    // m to the plan's reference at t
   double s = 0.0;           // m along the programmed path, of the nearest point
   double feed = 0.0;        // m/s achieved, |p_dot|
