@@ -4,9 +4,11 @@
 // the computed-torque controller on the model file), and the contouring
 // figures of each: contour error along the path, feed achieved against
 // programmed, peak actuator forces, cycle time. Writes report.md,
-// report.html (with the plots) and contour.svg into --out.
+// report.html (with the plots), and the plots as contour.svg, error.svg,
+// feed.svg and forces.svg into --out.
 #include <CLI/CLI.hpp>
 
+#include <array>
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
@@ -116,15 +118,24 @@ std::string limited_table(const Plan& p, const PathQueue& q) {
 
 namespace {
 
-// At most about n points of a run's series.
+// About n points of a run's series on feed moves: of every bucket of
+// samples its lowest and its highest, so that no dip at a corner is lost.
 template <class F>
-report::Line series(const ContourFigures& f, F y, const std::string& colour, const std::string& label, std::size_t n = 1500) {
+report::Line series(const ContourFigures& f, F y, const std::string& colour, const std::string& label, std::size_t n = 800) {
   report::Line l{{}, {}, colour, label};
-  const std::size_t step = std::max<std::size_t>(1, f.points.size() / n);
-  for (std::size_t k = 0; k < f.points.size(); k += step) {
-    if (f.points[k].rapid) continue;
-    l.x.push_back(f.points[k].s * 1e3);
-    l.y.push_back(y(f.points[k]));
+  const std::size_t bucket = std::max<std::size_t>(1, 2 * f.points.size() / n);
+  for (std::size_t a = 0; a < f.points.size(); a += bucket) {
+    std::size_t lo = f.points.size(), hi = lo;
+    for (std::size_t k = a; k < std::min(a + bucket, f.points.size()); ++k) {
+      if (f.points[k].rapid) continue;
+      if (lo == f.points.size() || y(f.points[k]) < y(f.points[lo])) lo = k;
+      if (hi == f.points.size() || y(f.points[k]) > y(f.points[hi])) hi = k;
+    }
+    if (lo == f.points.size()) continue;
+    for (std::size_t k : {std::min(lo, hi), std::max(lo, hi)}) {
+      l.x.push_back(f.points[k].along * 1e3);
+      l.y.push_back(y(f.points[k]));
+    }
   }
   return l;
 }
@@ -167,7 +178,8 @@ std::string coloured(const Run& r, const PathQueue& q, const ProgramFrame& frame
   return report::coloured_path(c);
 }
 
-std::string plots(const std::vector<Run>& rs) {
+// The charts: contour error and feed along the path, forces in time.
+std::array<std::string, 3> plots(const std::vector<Run>& rs) {
   const std::array<const char*, 3> colours{"#1f5fbf", "#c2410c", "#6b21a8"};
   std::vector<report::Line> err, feed;
   for (std::size_t k = 0; k < rs.size(); ++k) {
@@ -182,9 +194,9 @@ std::string plots(const std::vector<Run>& rs) {
     for (report::Line* l : {&fx, &fy, &fz}) l->x.push_back(row.t);
     fx.y.push_back(row.force.x()), fy.y.push_back(row.force.y()), fz.y.push_back(row.force.z());
   }
-  return report::chart("contour error along the path", "path (mm)", "error (µm)", err) +
-         report::chart("feed achieved against programmed", "path (mm)", "feed (mm/min)", feed) +
-         report::chart("actuator commands, " + rs[0].name, "t (s)", "force (N)", {fx, fy, fz});
+  return {report::chart("contour error along the path", "path (mm)", "error (µm)", err),
+          report::chart("feed achieved against programmed", "path (mm)", "feed (mm/min)", feed),
+          report::chart("actuator commands, " + rs[0].name, "t (s)", "force (N)", {fx, fy, fz})};
 }
 
 std::string header(const Options& o, const std::string& name) {
@@ -206,12 +218,16 @@ void write(const Options& o, const std::string& name, const std::vector<Run>& rs
   std::ofstream(o.out + "/report.md") << "# Path report\n\n" << head << runs_md << "\n## Where the actuator-aware plan "
                                       << "runs below the programmed feed, and why\n\n" << lim;
   const std::string path_svg = coloured(rs[0], q, frame);
+  const std::array<std::string, 3> charts = plots(rs);
   std::ofstream(o.out + "/contour.svg") << path_svg;
+  std::ofstream(o.out + "/error.svg") << charts[0];
+  std::ofstream(o.out + "/feed.svg") << charts[1];
+  std::ofstream(o.out + "/forces.svg") << charts[2];
   std::ofstream html(o.out + "/report.html");
   html << "<!doctype html><meta charset='utf-8'><title>Path report</title><style>body{font-family:sans-serif;"
           "max-width:1200px;margin:16px}pre{white-space:pre-wrap}</style><h1>Path report</h1><pre>"
-       << head << runs_md << "</pre>" << path_svg << plots(rs) << "<h2>Where the actuator-aware plan runs below the "
-       << "programmed feed</h2><pre>" << lim << "</pre>";
+       << head << runs_md << "</pre>" << path_svg << charts[0] << charts[1] << charts[2]
+       << "<h2>Where the actuator-aware plan runs below the programmed feed</h2><pre>" << lim << "</pre>";
 }
 
 }  // namespace
@@ -244,7 +260,7 @@ int main(int argc, char** argv) {
     for (Run& r : rs) run(r, q, model, truth);
     write(o, name, rs, q);
     std::printf("%s", table(rs).c_str());
-    std::printf("wrote %s/report.md, report.html, contour.svg\n", o.out.c_str());
+    std::printf("wrote %s/report.md, report.html, contour.svg, error.svg, feed.svg, forces.svg\n", o.out.c_str());
   } catch (const std::exception& e) {
     std::fprintf(stderr, "cpm-path-report: %s\n", e.what());
     return 1;

@@ -7,15 +7,21 @@ namespace cpm::path {
 namespace {
 
 // The programmed piece nearest to q among the segments within 3 of `hint`
-// (the reference's), and the distance.
+// (the reference's), and the distance. Where the path passes twice (a side
+// traced again), the segment nearer the hint wins a tie within 1 um.
 double nearest(const Geometry& g, const Vec3& q, int hint, int& piece, double& s) {
   const auto first = std::lower_bound(g.pieces.begin(), g.pieces.end(), hint - 3,
                                       [](const Piece& pc, int seg) { return pc.segment < seg; });
   double best = 1e300;
+  int best_gap = 0;
   for (auto it = first; it != g.pieces.end() && it->segment <= hint + 3; ++it) {
     double at = 0.0;
     const double d = distance_to_piece(*it, q, &at);
-    if (d < best) best = d, piece = static_cast<int>(it - g.pieces.begin()), s = it->s0 + at;
+    const int gap = std::abs(it->segment - hint);
+    if (d < best - 1e-6 || (d < best + 1e-6 && gap < best_gap)) {
+      best = std::min(best, d), best_gap = gap;
+      piece = static_cast<int>(it - g.pieces.begin()), s = it->s0 + at;
+    }
   }
   return best;
 }
@@ -36,6 +42,7 @@ ContourFigures contour(const PathQueue& queue, const Plan& plan, const std::vect
     int piece = 0;
     c.error = nearest(g, r.p, ref.segment, piece, c.s);
     c.tracking = (r.p - ref.ref.p).norm();
+    c.along = ref.s;
     const Piece& pc = g.pieces[static_cast<std::size_t>(piece)];
     c.nearest = pc.at(c.s - pc.s0).p;
     c.segment = pc.segment;

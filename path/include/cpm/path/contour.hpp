@@ -31,6 +31,7 @@ struct ContourPoint {
   Vec3 nearest = Vec3::Zero();  // the nearest point of the programmed path (m)
   double tracking = 0.0;    // m to the plan's reference at t
   double s = 0.0;           // m along the programmed path, of the nearest point
+  double along = 0.0;       // m along the plan's path of its reference at t (rises with t)
   double feed = 0.0;        // m/s achieved, |p_dot|
   double programmed = 0.0;  // m/s programmed there (rapids: the velocity ceiling)
   int segment = -1;         // programmed segment nearest
