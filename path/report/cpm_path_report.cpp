@@ -87,15 +87,17 @@ std::string vec(const Vec3& v, int digits = 1) {
 std::string table(const std::vector<Run>& rs) {
   std::ostringstream o;
   o << "| plan | cycle time (s) | planned peak force x/y/z (N) | within the drives' limits | run peak force x/y/z (N) "
-       "| saturated periods | contour error max / rms (µm) | tracking max (µm) | feed held (% of distance) | planning (ms) |\n"
-       "|---|---|---|---|---|---|---|---|---|---|\n";
+       "| saturated periods | contour error max / rms (µm) | of it the plan's rounding (µm) | tracking max (µm) "
+       "| feed held (% of distance) | planning (ms), repairs |\n"
+       "|---|---|---|---|---|---|---|---|---|---|---|\n";
   char b[512];
   for (const Run& r : rs) {
     const PlanSummary& s = r.plan->summary();
-    std::snprintf(b, sizeof b, "| %s | %.3f | %s | %s | %s | %ld | %.1f / %.2f | %.1f | %.1f | %.1f |\n", r.name.c_str(),
-                  s.duration, vec(s.peak_actuator_force).c_str(), s.actuators_within_limits ? "yes" : "**no**",
-                  vec(r.fig.peak_force).c_str(), r.result.metrics.saturated_samples, r.fig.max_error * 1e6,
-                  r.fig.rms_error * 1e6, r.fig.max_tracking * 1e6, r.fig.feed_held * 100, r.plan_ms);
+    std::snprintf(b, sizeof b, "| %s | %.3f | %s | %s | %s | %ld | %.1f / %.2f | %.1f | %.1f | %.1f | %.1f, %d |\n",
+                  r.name.c_str(), s.duration, vec(s.peak_actuator_force).c_str(),
+                  s.actuators_within_limits ? "yes" : "**no**", vec(r.fig.peak_force).c_str(),
+                  r.result.metrics.saturated_samples, r.fig.max_error * 1e6, r.fig.rms_error * 1e6,
+                  r.fig.max_rounding * 1e6, r.fig.max_tracking * 1e6, r.fig.feed_held * 100, r.plan_ms, s.repairs);
     o << b;
   }
   return o.str();

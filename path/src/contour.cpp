@@ -51,6 +51,9 @@ ContourFigures contour(const PathQueue& queue, const Plan& plan, const std::vect
     c.programmed = c.rapid ? velocity : std::min(pc.feed, velocity);
     f.peak_force = f.peak_force.cwiseMax(r.force.cwiseAbs());
     if (!c.rapid) {
+      int ref_piece = 0;
+      double ref_s = 0.0;
+      f.max_rounding = std::max(f.max_rounding, nearest(g, ref.ref.p, ref.segment, ref_piece, ref_s));
       f.max_error = std::max(f.max_error, c.error);
       f.max_tracking = std::max(f.max_tracking, c.tracking);
       sum2 += c.error * c.error;

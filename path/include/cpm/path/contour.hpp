@@ -44,6 +44,7 @@ struct ContourFigures {
   double max_error = 0.0;     // m
   double rms_error = 0.0;     // m
   double max_tracking = 0.0;  // m, |p - p_ref| at the same time
+  double max_rounding = 0.0;  // m, of the plan's own reference from the programmed path (its corner blends)
   // Share of the distance run on feed moves at >= 95 % of the programmed feed.
   double feed_held = 0.0;
   Vec3 peak_force = Vec3::Zero();  // N, largest command per actuator over the whole run
