@@ -129,6 +129,10 @@ void collect(const PathQueue& q, std::vector<Motion>& motions, std::vector<doubl
   if (motions.empty()) throw Error("path: the queue holds no motion");
 }
 
+void set_lines(Geometry& g, const PathQueue& q) {
+  for (const Segment& s : q.segments()) g.lines.push_back(s.line);
+}
+
 void add_piece(Geometry& g, Piece pc, int segment) {
   pc.s0 = g.length();
   pc.segment = segment;
@@ -155,6 +159,7 @@ Geometry blend(const PathQueue& q) {
     m[i - 1].trim_out = m[i].trim_in = js[i].trim;
   }
   Geometry g;
+  set_lines(g, q);
   g.stops.push_back(Stop{0.0, std::max(dwell_before[0], 0.0), -1});
   for (std::size_t i = 0; i < m.size(); ++i) {
     const Segment& S = segs[static_cast<std::size_t>(m[i].seg)];
@@ -170,6 +175,7 @@ Geometry blend(const PathQueue& q) {
 
 Geometry programmed(const PathQueue& q) {
   Geometry g;
+  set_lines(g, q);
   const auto& segs = q.segments();
   for (std::size_t i = 0; i < segs.size(); ++i) {
     const double L = segment_length(segs[i]);

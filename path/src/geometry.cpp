@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <sstream>
 
 #include "internal.hpp"
 
@@ -135,6 +136,16 @@ int Geometry::find(double s, int lo, int hi, int* steps) const noexcept {
     else hi = mid - 1;
   }
   return lo;
+}
+
+std::string Geometry::where(double s) const {
+  std::ostringstream o;
+  const int seg = pieces[static_cast<std::size_t>(find(s, 0, static_cast<int>(pieces.size()) - 1))].segment;
+  const int line = seg >= 0 && static_cast<std::size_t>(seg) < lines.size() ? lines[static_cast<std::size_t>(seg)] : 0;
+  if (line > 0) o << "line " << line;
+  else o << "segment " << seg;
+  o << ", " << s * 1e3 << " mm along the path";
+  return o.str();
 }
 
 double segment_length(const Segment& seg) {

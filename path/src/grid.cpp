@@ -4,7 +4,6 @@
 #include <algorithm>
 #include <cmath>
 #include <numbers>
-#include <sstream>
 
 namespace cpm::path::detail {
 namespace {
@@ -20,10 +19,7 @@ int intervals_of(const Piece& pc, double step) {
 }
 
 [[noreturn]] void refuse(const Geometry& g, const Point& pt, const std::string& why) {
-  std::ostringstream o;
-  o << "path: at " << pt.s * 1e3 << " mm along the path (segment " << g.pieces[static_cast<std::size_t>(pt.piece)].segment
-    << "): " << why;
-  throw Error(o.str());
+  throw Error("path: at " + g.where(pt.s) + ": " + why);
 }
 
 // Bound on |effects(d, d_dot)| per actuator for speeds up to v_max along
@@ -142,6 +138,7 @@ void junction_caps(Grid& grid, const Geometry& g, const PlannerOptions& o) {
 
 Grid build_grid(const Geometry& g, const ctl::Machine& m, const PlannerOptions& o) {
   Grid grid;
+  grid.geometry = &g;
   std::size_t count = 0;
   for (const Piece& pc : g.pieces) count += static_cast<std::size_t>(intervals_of(pc, o.grid_step)) + 1;
   grid.pts.reserve(count);

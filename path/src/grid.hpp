@@ -38,6 +38,7 @@ struct Point {
 };
 
 struct Grid {
+  const Geometry* geometry = nullptr;  // what it was built from
   std::vector<Point> pts;
   std::vector<double> mvc;     // largest feasible x at each point
   std::vector<double> steady;  // largest x at which u = 0 is feasible (<= mvc)

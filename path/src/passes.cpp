@@ -81,7 +81,8 @@ void max_velocity_curve(Grid& grid) {
   for (std::size_t i = 0; i < n; ++i) {
     const Point& p = grid.pts[i];
     double lo, hi;
-    if (!interval(p, 0.0, lo, hi)) throw Error("path: the actuators cannot hold the platform at rest on the path");
+    if (!interval(p, 0.0, lo, hi))
+      throw Error("path: at " + grid.geometry->where(p.s) + ": the actuators cannot hold the platform at rest there");
     grid.mvc[i] = largest(p.cap, [&](double x) { return interval(p, x, lo, hi); });
     grid.steady[i] = largest(grid.mvc[i], [&](double x) { return interval(p, x, lo, hi) && lo <= 0.0 && hi >= 0.0; });
     grid.mvc_by[i] = p.cap_by;

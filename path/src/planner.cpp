@@ -53,19 +53,9 @@ void repair(Grid& grid, std::vector<double>& caps, const Profile& pr, const std:
     if (tighten[j]) grid.pts[j].scale = std::max(0.5, grid.pts[j].scale * 0.97);
 }
 
-std::string where(const PathQueue& q, const Geometry& g, double s) {
-  const int seg = g.pieces[static_cast<std::size_t>(g.find(s, 0, static_cast<int>(g.pieces.size()) - 1))].segment;
+[[noreturn]] void refuse(const Geometry& g, const Violation& v) {
   std::ostringstream o;
-  const int line = seg >= 0 ? q.segments()[static_cast<std::size_t>(seg)].line : 0;
-  if (line > 0) o << "line " << line;
-  else o << "segment " << seg;
-  o << ", " << s * 1e3 << " mm along the path";
-  return o.str();
-}
-
-[[noreturn]] void refuse(const PathQueue& q, const Geometry& g, const Violation& v) {
-  std::ostringstream o;
-  o << "path: no plan within the limits was found: at " << where(q, g, v.s) << " (t = " << v.t << " s) ";
+  o << "path: no plan within the limits was found: at " << g.where(v.s) << " (t = " << v.t << " s) ";
   if (v.by == Limit::none) o << "the planned path leaves the workspace";
   else {
     o << limit_name(v.by);
@@ -134,7 +124,7 @@ Plan plan_path(const PathQueue& q, const ctl::Machine& m, const PlannerOptions& 
     if (bad.empty() || round >= o.max_repairs) break;
     repair(grid, caps, pr, bad, T, o.grid_step);
   }
-  if (!bad.empty()) refuse(q, g, bad.front());
+  if (!bad.empty()) refuse(g, bad.front());
   sum.length = g.length();
   sum.filter_time = T;
   sum.tangential_acceleration = a_t;

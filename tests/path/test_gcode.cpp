@@ -120,6 +120,13 @@ TEST(Gcode, PointsOutsideTheWorkspaceAreRefusedBeforeMotion) {
     EXPECT_EQ(e.diagnostics()[0].column, 6);
     EXPECT_NE(e.diagnostics()[0].message.find("outside the workspace"), std::string::npos);
   }
+  // The planner, given it anyway, names the line too.
+  try {
+    (void)plan_path(to_queue(out, ProgramFrame{}, 1e-4), elkady(), PlannerOptions{});
+    FAIL() << "planned outside the workspace";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("line 4"), std::string::npos) << e.what();
+  }
   SoftLimits soft;
   soft.max = Vec3(0.5, 1, 1);
   EXPECT_THROW(check_workspace(ok, elkady(), ProgramFrame{}, soft), ProgramError);

@@ -22,6 +22,7 @@
 
 #include <array>
 #include <cstdint>
+#include <string>
 #include <vector>
 
 #include "cpm/path/path.hpp"
@@ -69,9 +70,12 @@ struct Stop {
 struct Geometry {
   std::vector<Piece> pieces;
   std::vector<Stop> stops;  // in increasing s; the first at 0, the last at length()
+  std::vector<int> lines;   // the program line of each programmed segment (0: none)
   [[nodiscard]] double length() const noexcept {
     return pieces.empty() ? 0.0 : pieces.back().s0 + pieces.back().length;
   }
+  // Where s is, for people: "line 12, 345.6 mm along the path" (or the segment's index).
+  [[nodiscard]] std::string where(double s) const;
   // Index of the piece containing s, searched in [lo, hi] (binary search);
   // `steps` (optional) counts the search's steps.
   [[nodiscard]] int find(double s, int lo, int hi, int* steps = nullptr) const noexcept;
