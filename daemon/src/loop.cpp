@@ -99,15 +99,18 @@ void ControlLoop::enter(Mode m) noexcept {
   mode_atomic_.store(m, std::memory_order_release);
 }
 
-void ControlLoop::latch(std::uint32_t bit, int axis, double value, double limit, std::int64_t k) noexcept {
+void ControlLoop::latch(std::uint32_t bit, int axis, double value, double limit, std::int64_t k,
+                        const char* cause) noexcept {
   if (faults_ == 0) {
     first_fault_ = bit;
     fault_axis_ = axis;
     fault_value_ = value;
     fault_limit_ = limit;
     fault_cycle_ = k;
-    // The backend's own words for the faults it reports (e.g. which drive lost its heartbeat).
-    const char* why = (bit & (kFaultDrive | kFaultBackendIo | kFaultEstop | kFaultLimitSwitch)) ? backend_->fault_text() : "";
+    // The backend's own words for the faults it reports (e.g. which drive lost
+    // its heartbeat), else the kinematic cause, which says what the value and
+    // limit measure (fault_report: a stroke in m, an elbow angle in rad).
+    const char* why = (bit & (kFaultDrive | kFaultBackendIo | kFaultEstop | kFaultLimitSwitch)) ? backend_->fault_text() : cause;
     std::strncpy(fault_text_, why, sizeof fault_text_ - 1);
     fault_text_[sizeof fault_text_ - 1] = '\0';
   }
@@ -557,14 +560,16 @@ void ControlLoop::latch_input_faults(std::int64_t k) noexcept {
     overrun_fault_pending_ = false;
   }
   if (read_result_ == BackendResult::ok && !estimate_status_.ok())
-    latch(kFaultEstimate, estimate_status_.index, estimate_status_.value, estimate_status_.limit, k);
+    latch(kFaultEstimate, estimate_status_.index, estimate_status_.value, estimate_status_.limit, k,
+          cpm::fault_name(estimate_status_.fault));
 }
 
 void ControlLoop::latch_motion_faults(std::int64_t k, double error) noexcept {
   if (!ik_status_.ok())
-    latch(kFaultController, ik_status_.index, ik_status_.value, ik_status_.limit, k);
+    latch(kFaultController, ik_status_.index, ik_status_.value, ik_status_.limit, k, cpm::fault_name(ik_status_.fault));
   else if (!control_status_.ok())
-    latch(kFaultController, control_status_.index, control_status_.value, control_status_.limit, k);
+    latch(kFaultController, control_status_.index, control_status_.value, control_status_.limit, k,
+          cpm::fault_name(control_status_.fault));
   if (error > cfg_.limits.following_error) latch(kFaultFollowingError, -1, error, cfg_.limits.following_error, k);
   int axis = -1;
   double v = 0, lim = 0;
@@ -578,7 +583,7 @@ void ControlLoop::latch_motion_faults(std::int64_t k, double error) noexcept {
     const Vec3 ahead = ref_.p + ref_.v * dt_;
     const Status wr = kin::check_pose(machine_->kinematics(), machine_->model().strokes, ahead, cin_.kin);
     const Status wm = wr.ok() ? kin::check_pose(machine_->kinematics(), machine_->model().strokes, est_.p, cin_.kin) : wr;
-    if (!wm.ok()) latch(kFaultSoftLimit, wm.index, wm.value, wm.limit, k);
+    if (!wm.ok()) latch(kFaultSoftLimit, wm.index, wm.value, wm.limit, k, cpm::fault_name(wm.fault));
   }
   if (est_.p_dot.norm() > cfg_.limits.overspeed) latch(kFaultOverspeed, -1, est_.p_dot.norm(), cfg_.limits.overspeed, k);
 }

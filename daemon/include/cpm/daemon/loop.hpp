@@ -188,7 +188,10 @@ class ControlLoop {
   void handle(const Command& c, std::int64_t k) noexcept;
   void reply(const Command& c, bool ok, std::int16_t reason, const char* msg,
              const ctl::Machine* retired = nullptr) noexcept;
-  void latch(std::uint32_t bit, int axis, double value, double limit, std::int64_t k) noexcept;
+  // `cause`: a string literal for fault_text when the backend has no words
+  // for the fault (the kinematic fault's name).
+  void latch(std::uint32_t bit, int axis, double value, double limit, std::int64_t k,
+             const char* cause = "") noexcept;
   void enter(Mode m) noexcept;
   void flush_queue() noexcept;
   void start_stop(std::int64_t k) noexcept;
@@ -220,7 +223,7 @@ class ControlLoop {
   int fault_axis_ = -1;
   double fault_value_ = 0, fault_limit_ = 0;
   std::int64_t fault_cycle_ = -1;
-  char fault_text_[96] = {};       // the backend's words for the first fault
+  char fault_text_[96] = {};       // the backend's words for the first fault, or its kinematic cause
   std::int64_t enabling_since_ = 0;
   bool disable_after_stop_ = false;
   std::atomic<bool> shutdown_{false};
