@@ -99,15 +99,18 @@ void ControlLoop::enter(Mode m) noexcept {
   mode_atomic_.store(m, std::memory_order_release);
 }
 
-void ControlLoop::latch(std::uint32_t bit, int axis, double value, double limit, std::int64_t k) noexcept {
+void ControlLoop::latch(std::uint32_t bit, int axis, double value, double limit, std::int64_t k,
+                        const char* cause) noexcept {
   if (faults_ == 0) {
     first_fault_ = bit;
     fault_axis_ = axis;
     fault_value_ = value;
     fault_limit_ = limit;
     fault_cycle_ = k;
-    // The backend's own words for the faults it reports (e.g. which drive lost its heartbeat).
-    const char* why = (bit & (kFaultDrive | kFaultBackendIo | kFaultEstop | kFaultLimitSwitch)) ? backend_->fault_text() : "";
+    // The backend's own words for the faults it reports (e.g. which drive lost
+    // its heartbeat), else the kinematic cause, which says what the value and
+    // limit measure (fault_report: a stroke in m, an elbow angle in rad).
+    const char* why = (bit & (kFaultDrive | kFaultBackendIo | kFaultEstop | kFaultLimitSwitch)) ? backend_->fault_text() : cause;
     std::strncpy(fault_text_, why, sizeof fault_text_ - 1);
     fault_text_[sizeof fault_text_ - 1] = '\0';
   }
@@ -445,62 +448,108 @@ void ControlLoop::record_schedule(bool overrun, std::int64_t skipped) noexcept {
 }
 
 void ControlLoop::cycle(std::int64_t k, std::int64_t latency_ns) noexcept {
+  // The phases of loop.hpp, in order; each timed into its statistics series
+  // (the commands are timed with the estimate, as they always were).
+  PhaseTimes t{};
+  record_latency(latency_ns);
+  t[0] = now_ns();
+  if (mode_ == Mode::init) enter(Mode::disabled);
+  read_inputs(k);
+  t[kSeriesRead] = now_ns();
+  estimate(k);
+  apply_commands(k);
+  t[kSeriesEstimate] = now_ns();
+  trajectory(k);
+  t[kSeriesTrajectory] = now_ns();
+  inverse_kinematics();
+  t[kSeriesInverseKinematics] = now_ns();
+  control(k);
+  t[kSeriesController] = now_ns();
+  safety(k);
+  t[kSeriesSafety] = now_ns();
+  write_outputs(k);
+  t[kSeriesWrite] = now_ns();
+  publish(k);
+  t[kSeriesPublish] = now_ns();
+  finish_cycle(k, t);
+}
+
+void ControlLoop::record_latency(std::int64_t latency_ns) noexcept {
   add_sample(kSeriesLatency, latency_ns);
   latency_us_[static_cast<std::size_t>(std::clamp<std::int64_t>(latency_ns / 1000, 0, kFineLatencyBins - 1))]++;
-  const std::int64_t t0 = now_ns();
-  if (mode_ == Mode::init) enter(Mode::disabled);
+}
 
-  // 1. Read the backend.
-  const BackendResult rr = backend_->read(k, in_);
-  backend_ok_ = rr == BackendResult::ok && backend_write_ok_;
-  const std::int64_t t1 = now_ns();
+bool ControlLoop::drives_on() const noexcept {
+  return mode_ == Mode::enabling || mode_ == Mode::holding || mode_ == Mode::moving || mode_ == Mode::stopping;
+}
 
-  // 2. Estimate the platform state through the calibrated kinematics.
+void ControlLoop::read_inputs(std::int64_t k) noexcept {
+  read_result_ = backend_->read(k, in_);
+  backend_ok_ = read_result_ == BackendResult::ok && backend_write_ok_;
+}
+
+void ControlLoop::estimate(std::int64_t k) noexcept {
   cin_.d = Vec3(in_.position[0], in_.position[1], in_.position[2]);
   cin_.d_dot = Vec3(in_.velocity[0], in_.velocity[1], in_.velocity[2]);
+  // The direction each actuator last moved in, for the model's backlash.
   for (int i = 0; i < 3; ++i)
     if (std::abs(cin_.d_dot[i]) > 1e-6) cin_.kin.dir[i] = cin_.d_dot[i] > 0 ? 1 : -1;
   cin_.kin.t = static_cast<double>(k) * dt_;
-  const Status se = rr == BackendResult::ok ? machine_->task_state(cin_.d, cin_.d_dot, cin_.kin, est_)
-                                            : Status::failure(Fault::not_finite);
-  estimate_ok_ = se.ok();
+  estimate_status_ = read_result_ == BackendResult::ok ? machine_->task_state(cin_.d, cin_.d_dot, cin_.kin, est_)
+                                                       : Status::failure(Fault::not_finite);
+  estimate_ok_ = estimate_status_.ok();
+}
+
+void ControlLoop::apply_commands(std::int64_t k) noexcept {
   if (shutdown_.load(std::memory_order_acquire) && mode_ != Mode::fault && mode_ != Mode::disabled) {
     flush_queue();
     enter(Mode::disabled);
   }
   handle_commands(k);
-  const std::int64_t t2 = now_ns();
+}
 
-  // 3. Trajectory at the cycle's nominal time.
-  ref_ = reference(k);
-  const std::int64_t t3 = now_ns();
+void ControlLoop::trajectory(std::int64_t k) noexcept { ref_ = reference(k); }
 
-  // 4. Calibrated inverse kinematics of the reference.
-  const Status sik = kin::inverse(machine_->kinematics(), ref_.p, cin_.kin, d_ref_);
-  const std::int64_t t4 = now_ns();
+void ControlLoop::inverse_kinematics() noexcept {
+  ik_status_ = kin::inverse(machine_->kinematics(), ref_.p, cin_.kin, d_ref_);
+}
 
-  // 5. Controller.
-  const bool powered = mode_ == Mode::enabling || mode_ == Mode::holding || mode_ == Mode::moving ||
-                       mode_ == Mode::stopping;
-  Status sc;
-  if (powered) {
+void ControlLoop::control(std::int64_t k) noexcept {
+  powered_ = drives_on();
+  control_status_ = Status{};
+  if (powered_) {
     // With an actuation delay in the model the command acts from t + tau:
     // the controller aims at the reference then.
     const double ahead = controller_.lookahead();
     cin_.ref = ahead > 0.0 ? reference_ahead(k, ahead) : ref_;
-    sc = controller_.step(cin_, ctl_state_, cout_);
-  } else {
-    saturated_cycles_ = {};
-    cout_.force.setZero();
-    cout_.force_unlimited.setZero();
-    cout_.saturated = {false, false, false};
-    cout_.d_ref = d_ref_;
-    cout_.d_dot_ref.setZero();
+    control_status_ = controller_.step(cin_, ctl_state_, cout_);
+    return;
   }
-  const std::int64_t t5 = now_ns();
+  saturated_cycles_ = {};
+  cout_.force.setZero();
+  cout_.force_unlimited.setZero();
+  cout_.saturated = {false, false, false};
+  cout_.d_ref = d_ref_;
+  cout_.d_dot_ref.setZero();
+}
 
-  // 6. Safety: conditions become latched faults.
-  if (rr != BackendResult::ok) latch(kFaultBackendIo, -1, static_cast<double>(rr), 0, k);
+void ControlLoop::safety(std::int64_t k) noexcept {
+  latch_input_faults(k);
+  if (!powered_ || mode_ == Mode::fault) return;
+  // The error is measured before any latch below ends the segment it belongs to.
+  const double error = (ref_.p - est_.p).norm();
+  latch_motion_faults(k, error);
+  latch_saturation(k);
+  finish_enabling(k);
+  if (playing_) {
+    seg_sum_e2_ += error * error;
+    seg_max_e_ = std::max(seg_max_e_, error);
+    seg_n_++;
+  }
+}
+
+void ControlLoop::latch_input_faults(std::int64_t k) noexcept {
+  if (read_result_ != BackendResult::ok) latch(kFaultBackendIo, -1, static_cast<double>(read_result_), 0, k);
   for (int i = 0; i < 3; ++i)
     if (in_.drive_fault[i]) latch(kFaultDrive, i, in_.statusword[i], 0, k);
   if (in_.estop) latch(kFaultEstop, -1, 1, 0, k);
@@ -510,79 +559,73 @@ void ControlLoop::cycle(std::int64_t k, std::int64_t latency_ns) noexcept {
     latch(kFaultOverrun, -1, consecutive_overruns_, cfg_.loop.max_consecutive_overruns, k);
     overrun_fault_pending_ = false;
   }
-  if (rr == BackendResult::ok && !se.ok()) latch(kFaultEstimate, se.index, se.value, se.limit, k);
-  if (powered && mode_ != Mode::fault) {
-    if (!sik.ok()) latch(kFaultController, sik.index, sik.value, sik.limit, k);
-    else if (!sc.ok()) latch(kFaultController, sc.index, sc.value, sc.limit, k);
-    const Vec3 e = ref_.p - est_.p;
-    const double en = e.norm();
-    int axis = -1;
-    double v = 0, lim = 0;
-    if (en > cfg_.limits.following_error) latch(kFaultFollowingError, -1, en, cfg_.limits.following_error, k);
-    if (!inside(est_.p, cfg_.limits.workspace_min, cfg_.limits.workspace_max, axis, v, lim))
-      latch(kFaultSoftLimit, axis, v, lim, k);
-    // The machine's own workspace (strokes, limb reach, elbow singularity):
-    // the reference one cycle ahead is checked first, so that a path running
-    // towards a stroke end or a singularity stops before the platform (which
-    // follows the reference within micrometres) gets there.
-    if (mode_ != Mode::fault) {
-      const Vec3 ahead = ref_.p + ref_.v * dt_;
-      const Status wr = kin::check_pose(machine_->kinematics(), machine_->model().strokes, ahead, cin_.kin);
-      const Status wm = wr.ok() ? kin::check_pose(machine_->kinematics(), machine_->model().strokes, est_.p, cin_.kin) : wr;
-      if (!wm.ok()) latch(kFaultSoftLimit, wm.index, wm.value, wm.limit, k);
-    }
-    if (est_.p_dot.norm() > cfg_.limits.overspeed)
-      latch(kFaultOverspeed, -1, est_.p_dot.norm(), cfg_.limits.overspeed, k);
-    // Force saturation held too long: the axis cannot follow (blocked,
-    // overloaded, a gain too high); the following error may not show it yet.
-    for (int i = 0; i < 3 && mode_ != Mode::fault; ++i) {
-      saturated_cycles_[i] = cout_.saturated[i] ? saturated_cycles_[i] + 1 : 0;
-      const double held = static_cast<double>(saturated_cycles_[i]) * dt_;
-      if (held > cfg_.limits.saturation_time + 1e-12) latch(kFaultSaturation, i, held, cfg_.limits.saturation_time, k);
-    }
-    if (mode_ == Mode::enabling) {
-      if (in_.drive_enabled[0] && in_.drive_enabled[1] && in_.drive_enabled[2]) {
-        enter(Mode::holding);
-      } else if (static_cast<double>(k - enabling_since_) * dt_ > cfg_.limits.enable_timeout) {
-        latch(kFaultEnableTimeout, -1, static_cast<double>(k - enabling_since_) * dt_,
-              cfg_.limits.enable_timeout, k);
-      }
-    }
-    if (playing_) {
-      seg_sum_e2_ += en * en;
-      seg_max_e_ = std::max(seg_max_e_, en);
-      seg_n_++;
-    }
-  }
-  const bool drive_on = mode_ == Mode::enabling || mode_ == Mode::holding || mode_ == Mode::moving ||
-                        mode_ == Mode::stopping;
-  const std::int64_t t6 = now_ns();
+  if (read_result_ == BackendResult::ok && !estimate_status_.ok())
+    latch(kFaultEstimate, estimate_status_.index, estimate_status_.value, estimate_status_.limit, k,
+          cpm::fault_name(estimate_status_.fault));
+}
 
-  // 7. Write the backend.
-  for (int i = 0; i < 3; ++i) out_.force[i] = drive_on ? cout_.force[i] : 0.0;
-  out_.enable = drive_on;
+void ControlLoop::latch_motion_faults(std::int64_t k, double error) noexcept {
+  if (!ik_status_.ok())
+    latch(kFaultController, ik_status_.index, ik_status_.value, ik_status_.limit, k, cpm::fault_name(ik_status_.fault));
+  else if (!control_status_.ok())
+    latch(kFaultController, control_status_.index, control_status_.value, control_status_.limit, k,
+          cpm::fault_name(control_status_.fault));
+  if (error > cfg_.limits.following_error) latch(kFaultFollowingError, -1, error, cfg_.limits.following_error, k);
+  int axis = -1;
+  double v = 0, lim = 0;
+  if (!inside(est_.p, cfg_.limits.workspace_min, cfg_.limits.workspace_max, axis, v, lim))
+    latch(kFaultSoftLimit, axis, v, lim, k);
+  // The machine's own workspace (strokes, limb reach, elbow singularity):
+  // the reference one cycle ahead is checked first, so that a path running
+  // towards a stroke end or a singularity stops before the platform (which
+  // follows the reference within micrometres) gets there.
+  if (mode_ != Mode::fault) {
+    const Vec3 ahead = ref_.p + ref_.v * dt_;
+    const Status wr = kin::check_pose(machine_->kinematics(), machine_->model().strokes, ahead, cin_.kin);
+    const Status wm = wr.ok() ? kin::check_pose(machine_->kinematics(), machine_->model().strokes, est_.p, cin_.kin) : wr;
+    if (!wm.ok()) latch(kFaultSoftLimit, wm.index, wm.value, wm.limit, k, cpm::fault_name(wm.fault));
+  }
+  if (est_.p_dot.norm() > cfg_.limits.overspeed) latch(kFaultOverspeed, -1, est_.p_dot.norm(), cfg_.limits.overspeed, k);
+}
+
+void ControlLoop::latch_saturation(std::int64_t k) noexcept {
+  // Force saturation held too long: the axis cannot follow (blocked,
+  // overloaded, a gain too high); the following error may not show it yet.
+  for (int i = 0; i < 3 && mode_ != Mode::fault; ++i) {
+    saturated_cycles_[i] = cout_.saturated[i] ? saturated_cycles_[i] + 1 : 0;
+    const double held = static_cast<double>(saturated_cycles_[i]) * dt_;
+    if (held > cfg_.limits.saturation_time + 1e-12) latch(kFaultSaturation, i, held, cfg_.limits.saturation_time, k);
+  }
+}
+
+void ControlLoop::finish_enabling(std::int64_t k) noexcept {
+  if (mode_ != Mode::enabling) return;
+  if (in_.drive_enabled[0] && in_.drive_enabled[1] && in_.drive_enabled[2]) {
+    enter(Mode::holding);
+  } else if (static_cast<double>(k - enabling_since_) * dt_ > cfg_.limits.enable_timeout) {
+    latch(kFaultEnableTimeout, -1, static_cast<double>(k - enabling_since_) * dt_, cfg_.limits.enable_timeout, k);
+  }
+}
+
+void ControlLoop::write_outputs(std::int64_t k) noexcept {
+  const bool on = drives_on();
+  for (int i = 0; i < 3; ++i) out_.force[i] = on ? cout_.force[i] : 0.0;
+  out_.enable = on;
   const BackendResult rw = backend_->write(k, out_);
   backend_write_ok_ = rw == BackendResult::ok;
-  if (rw != BackendResult::ok) {
-    latch(kFaultBackendIo, -1, static_cast<double>(rw), 0, k);
-  }
-  const std::int64_t t7 = now_ns();
+  if (rw != BackendResult::ok) latch(kFaultBackendIo, -1, static_cast<double>(rw), 0, k);
+}
 
-  // 8. Publish a snapshot.
+void ControlLoop::publish(std::int64_t k) noexcept {
   fill_state(k);
   if (cfg_.lcm.state_decimation <= 1 || k % cfg_.lcm.state_decimation == 0) {
     if (!snapshots_.push(state_)) dropped_++;
   }
-  const std::int64_t t8 = now_ns();
-  add_sample(1, t1 - t0);
-  add_sample(2, t2 - t1);
-  add_sample(3, t3 - t2);
-  add_sample(4, t4 - t3);
-  add_sample(5, t5 - t4);
-  add_sample(6, t6 - t5);
-  add_sample(7, t7 - t6);
-  add_sample(8, t8 - t7);
-  add_sample(kSeriesCycle, t8 - t0);
+}
+
+void ControlLoop::finish_cycle(std::int64_t k, const PhaseTimes& t) noexcept {
+  for (int s = kSeriesRead; s <= kSeriesPublish; ++s) add_sample(s, t[s] - t[s - 1]);
+  add_sample(kSeriesCycle, t[kSeriesPublish] - t[0]);
   stats_.cycles++;
   // Statistics once a second (copied whole; the ring holds a few).
   const auto per_second = static_cast<std::int64_t>(std::lround(cfg_.loop.rate_hz));

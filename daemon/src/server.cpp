@@ -16,6 +16,7 @@
 #include <random>
 #include <sstream>
 
+#include "cpm/daemon/fault_report.hpp"
 #include "cpm/daemon/log.hpp"
 
 namespace cpm::daemon {
@@ -708,6 +709,7 @@ int Server::drain() {
     lcm_->publish(cfg_.lcm.state_channel, &st);
     latest_ = st;
     have_state_ = true;
+    journal_fault(st);
     ack_newer_than_state_ = false;
     ++n;
     s = loop_.snapshots().front();
@@ -723,6 +725,14 @@ int Server::drain() {
   publish_security(now);
   log_security(now);
   return n;
+}
+
+void Server::journal_fault(const cpm_msgs::state_t& st) {
+  // The loop never logs; its first fault (cycle, figures) stays in the state
+  // until a reset, so each latched fault is written once, when first seen.
+  if (st.first_fault == 0 || st.fault_cycle == journaled_fault_cycle_) return;
+  journaled_fault_cycle_ = st.fault_cycle;
+  log::warning("fault at cycle %lld: %s", static_cast<long long>(st.fault_cycle), fault_report(st).c_str());
 }
 
 void Server::run(const std::atomic<bool>& stop) {

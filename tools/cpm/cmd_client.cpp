@@ -6,6 +6,7 @@
 #include <thread>
 
 #include "cmd_client_common.hpp"
+#include "cpm/daemon/fault_report.hpp"
 #include "cpm/daemon/loop.hpp"
 
 namespace cpm::cli::client {
@@ -71,6 +72,7 @@ Json json_state(const state_t& s) {
           {"faults", faults},
           {"fault_text", std::string(why, strnlen(why, sizeof s.fault_text))},
           {"first_fault", s.first_fault ? daemon::fault_bit_name(static_cast<std::uint32_t>(s.first_fault)) : ""},
+          {"fault_report", daemon::fault_report(s)},
           {"controller", ctl::law_name(static_cast<ctl::ControlLaw>(s.controller))},
           {"segment_id", s.segment_id},
           {"queue_depth", s.queue_depth},
@@ -102,12 +104,7 @@ int status(const StateOptions& o) {
   std::printf("controller %s, cycle %lld, overruns %lld, worst wake-up latency %.1f us\n",
               ctl::law_name(static_cast<ctl::ControlLaw>(s->controller)), static_cast<long long>(s->cycles),
               static_cast<long long>(s->overruns), s->max_latency_ns * 1e-3);
-  if (s->faults)
-    std::printf("first fault: %s (axis %d, value %g, limit %g)\n",
-                daemon::fault_bit_name(static_cast<std::uint32_t>(s->first_fault)), s->fault_axis + 1, s->fault_value,
-                s->fault_limit);
-  if (s->faults && s->fault_text[0])
-    std::printf("fault: %.*s\n", static_cast<int>(sizeof s->fault_text), reinterpret_cast<const char*>(s->fault_text));
+  if (s->faults) std::printf("first fault: %s\n", daemon::fault_report(*s).c_str());
   if (s->last_segment_id >= 0)
     std::printf("last segment %lld: tracking error RMS %.1f um, max %.1f um\n",
                 static_cast<long long>(s->last_segment_id), s->last_segment_rmse * 1e6, s->last_segment_max * 1e6);

@@ -1,19 +1,39 @@
 // The control loop of cpmd: the state machine and one control cycle.
 //
-// cycle() is the real-time part: a straight list of phases over preallocated
-// data (docs/daemon.md), allocation-free, lock-free, noexcept, and with no
-// system call but the backend's I/O (and clock_gettime, a vDSO read, for the
-// phase timers):
-//   1 read backend   drive feedback, drive status, e-stop
-//   2 estimate       calibrated forward kinematics: p, p_dot, J
-//      (commands)    at most a few commands from the command queue
-//   3 trajectory     reference at the cycle's nominal time k / rate
-//   4 inverse kin.   d_ref = IK(p_ref) of the calibrated model
-//   5 controller     the selected law, actuator forces, force limit
-//   6 safety         following error, soft limits, overspeed, drives, e-stop,
-//                    overruns -> latched faults
-//   7 write backend  forces, enable
-//   8 publish        state snapshot into the SPSC ring for the LCM thread
+// cycle() is the real-time part, shaped like LinuxCNC's emcmotController
+// (src/emc/motion/control.c): a short list of calls, one function per phase,
+// over preallocated data (docs/daemon.md); every phase is allocation-free,
+// lock-free, noexcept, and makes no system call but the backend's I/O (and
+// clock_gettime, a vDSO read, for the phase timers). Each phase is described
+// here once; its statistics series (loop_stats_t, --stats-json) in brackets.
+//   read_inputs        the backend's feedback: actuator positions and
+//                      velocities, drive status words, e-stop, limit
+//                      switches ["read"]
+//   estimate           calibrated forward kinematics: p, p_dot, J ["estimate"]
+//   apply_commands     a shutdown request, then at most kCommandsPerCycle
+//                      commands from the command queue (timed with estimate)
+//   trajectory         the reference at the cycle's nominal time k / rate:
+//                      the playing segment, the stop profile or the hold
+//                      point (homing and jog will take their turn here)
+//                      ["trajectory"]
+//   inverse_kinematics d_ref = IK(p_ref) of the calibrated model
+//                      ["inverse_kinematics"]
+//   control            the selected law, actuator forces, force limit; with
+//                      an actuation delay, aimed at the reference at t + tau
+//                      ["controller"]
+//   safety             conditions become latched faults: backend, drives,
+//                      e-stop, limit switches, overruns, estimate
+//                      (latch_input_faults); controller, following error,
+//                      soft limits, workspace, overspeed
+//                      (latch_motion_faults); force saturation held too long
+//                      (latch_saturation); enabling ends or times out
+//                      (finish_enabling); the segment's tracking error
+//                      ["safety"]
+//   write_outputs      forces and enable to the backend ["write"]
+//   publish            state snapshot into the SPSC ring for the LCM thread
+//                      ["publish"]
+// then finish_cycle records the phase times ("cycle": all of them) and hands
+// the statistics on once a second.
 // The schedule (clock_nanosleep on an absolute time) lives in rt.hpp; tests
 // call cycle() directly, deterministic and without threads.
 //
@@ -85,7 +105,9 @@ struct Ack {
 };
 
 // Timing statistics: histograms as in loop_stats_t.
-inline constexpr int kSeriesLatency = 0, kSeriesCycle = 9, kSeries = 10, kBins = 237;
+inline constexpr int kSeriesLatency = 0, kSeriesRead = 1, kSeriesEstimate = 2, kSeriesTrajectory = 3,
+                     kSeriesInverseKinematics = 4, kSeriesController = 5, kSeriesSafety = 6, kSeriesWrite = 7,
+                     kSeriesPublish = 8, kSeriesCycle = 9, kSeries = 10, kBins = 237;
 int histogram_bin(std::int64_t ns) noexcept;
 // Lower edge of bin k (ns).
 std::int64_t histogram_bin_floor(int k) noexcept;
@@ -141,12 +163,35 @@ class ControlLoop {
   [[nodiscard]] double period() const noexcept { return dt_; }
 
  private:
-  struct Timer;
+  // The phases of cycle(), in order (the list at the top of this file).
+  // The clock reading at the start of the cycle, then at the end of each phase.
+  using PhaseTimes = std::array<std::int64_t, kSeriesPublish + 1>;
+  void record_latency(std::int64_t latency_ns) noexcept;
+  void read_inputs(std::int64_t k) noexcept;
+  void estimate(std::int64_t k) noexcept;
+  void apply_commands(std::int64_t k) noexcept;
+  void trajectory(std::int64_t k) noexcept;
+  void inverse_kinematics() noexcept;
+  void control(std::int64_t k) noexcept;
+  void safety(std::int64_t k) noexcept;
+  void latch_input_faults(std::int64_t k) noexcept;
+  void latch_motion_faults(std::int64_t k, double error) noexcept;
+  void latch_saturation(std::int64_t k) noexcept;
+  void finish_enabling(std::int64_t k) noexcept;
+  void write_outputs(std::int64_t k) noexcept;
+  void publish(std::int64_t k) noexcept;
+  void finish_cycle(std::int64_t k, const PhaseTimes& t) noexcept;
+  // The drives are (to be) powered: enabling, holding, moving or stopping.
+  [[nodiscard]] bool drives_on() const noexcept;
+
   void handle_commands(std::int64_t k) noexcept;
   void handle(const Command& c, std::int64_t k) noexcept;
   void reply(const Command& c, bool ok, std::int16_t reason, const char* msg,
              const ctl::Machine* retired = nullptr) noexcept;
-  void latch(std::uint32_t bit, int axis, double value, double limit, std::int64_t k) noexcept;
+  // `cause`: a string literal for fault_text when the backend has no words
+  // for the fault (the kinematic fault's name).
+  void latch(std::uint32_t bit, int axis, double value, double limit, std::int64_t k,
+             const char* cause = "") noexcept;
   void enter(Mode m) noexcept;
   void flush_queue() noexcept;
   void start_stop(std::int64_t k) noexcept;
@@ -178,7 +223,7 @@ class ControlLoop {
   int fault_axis_ = -1;
   double fault_value_ = 0, fault_limit_ = 0;
   std::int64_t fault_cycle_ = -1;
-  char fault_text_[96] = {};       // the backend's words for the first fault
+  char fault_text_[96] = {};       // the backend's words for the first fault, or its kinematic cause
   std::int64_t enabling_since_ = 0;
   bool disable_after_stop_ = false;
   std::atomic<bool> shutdown_{false};
@@ -220,6 +265,10 @@ class ControlLoop {
   ctl::TrajectorySample ref_;
   Vec3 d_ref_ = Vec3::Zero();
   bool estimate_ok_ = false;
+  // What one phase hands the later ones within a cycle.
+  BackendResult read_result_ = BackendResult::ok;
+  Status estimate_status_, ik_status_, control_status_;
+  bool powered_ = false;  // the drives were on when the controller ran
   cpm_msgs::state_t state_{};
   cpm_msgs::loop_stats_t stats_{};
   FineLatencyHistogram latency_us_{};  // series 0 again, in 1 us bins

@@ -127,6 +127,8 @@ class Server {
              const Operator& op);
   void acquire(const cpm_msgs::control_command_t& m, const Operator& op);
   void log_security(double now);
+  // A newly latched fault goes to the journal once, in fault_report's words.
+  void journal_fault(const cpm_msgs::state_t& st);
   void publish_security(double now);
 
   DaemonConfig cfg_;
@@ -135,6 +137,7 @@ class Server {
   std::unique_ptr<lcm::LCM> lcm_;
   cpm_msgs::state_t latest_{};
   bool have_state_ = false;
+  std::int64_t journaled_fault_cycle_ = -1;  // the fault last written to the journal
   int inflight_segments_ = 0;
   Vec3 planned_end_ = Vec3::Zero();
   bool ack_newer_than_state_ = false;
