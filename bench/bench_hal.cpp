@@ -24,7 +24,7 @@ void master_cycle(benchmark::State& state) {
   cfg.velocity_from_drive = velocity;
   const char* names[] = {"x", "y", "z"};
   for (int i = 1; i <= 3; ++i) {
-    cfg.drives.push_back(DriveConfig{names[i - 1], i, 1e6, 0, 400, 2000, 1, 0});
+    cfg.drives.push_back(DriveConfig{names[i - 1], i, 1e6, 0, 400, 2000, 1, 0, {}});
     VirtualDriveConfig vc;
     vc.node_id = static_cast<std::uint8_t>(i);
     drives.push_back(std::make_unique<VirtualDrive>(net.add_port("drive"), vc));

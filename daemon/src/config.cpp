@@ -201,7 +201,8 @@ void parse_canopen(const Reader& r, const YAML::Node& n, double rate_hz, bool sk
   // GPIO: the machine's safety and auxiliary lines.
   const auto g = r.map(n["gpio"], "canopen.gpio", {"estop", "drive_enable"},
                        {"consumer", "limit_low_x", "limit_low_y", "limit_low_z", "limit_high_x", "limit_high_y",
-                        "limit_high_z", "brake_release_z"});
+                        "limit_high_z", "brake_release_z", "home_x", "home_y", "home_z", "index_x", "index_y",
+                        "index_z"});
   if (g["consumer"]) c.gpio.consumer = r.text(g["consumer"], "canopen.gpio.consumer");
   for (std::size_t k = 0; k < hal::kLineCount; ++k) {
     const auto line = static_cast<hal::Line>(k);

@@ -11,6 +11,8 @@ const char* mode_name(Mode m) noexcept {
     case Mode::moving: return "moving";
     case Mode::stopping: return "stopping";
     case Mode::fault: return "fault";
+    case Mode::homing: return "homing";
+    case Mode::jogging: return "jogging";
   }
   return "?";
 }
@@ -30,6 +32,7 @@ const char* fault_bit_name(std::uint32_t bit) noexcept {
     case kFaultLimitSwitch: return "limit_switch";
     case kFaultSaturation: return "force_saturation";
     case kFaultStreamUnderrun: return "stream_underrun";
+    case kFaultHoming: return "homing";
     default: return "unknown";
   }
 }

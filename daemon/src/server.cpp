@@ -193,8 +193,9 @@ std::string bad_number(const trajectory_command_t& c) {
 }
 
 std::string bad_number(const control_command_t& c) {
-  for (const std::string& b : {bad_in(c.kp, "kp"), bad_in(c.kd, "kd")})
+  for (const std::string& b : {bad_in(c.kp, "kp"), bad_in(c.kd, "kd"), bad_in(c.jog_velocity, "jog_velocity")})
     if (!b.empty()) return b;
+  if (bad(c.param_value)) return "param_value";
   return {};
 }
 
@@ -259,13 +260,14 @@ std::int32_t be32(const std::uint8_t* p) {
                                    (std::uint32_t{p[2]} << 8) | std::uint32_t{p[3]});
 }
 
-// control_command_t's only string, model_path, follows 91 fixed bytes; after
-// it come operator_name and mac (64 bytes). Its int32 length prefix counts the
-// NUL. A length below 1 makes the generated decoder call std::string::assign
-// with a negative size; any other length that does not account for the
-// message's exact size is not a message we sent (nor one the MAC covers).
+// control_command_t's only string, model_path, follows 173 fixed bytes;
+// after it come operator_name and mac (64 bytes). Its int32 length prefix
+// counts the NUL. A length below 1 makes the generated decoder call
+// std::string::assign with a negative size; any other length that does not
+// account for the message's exact size is not a message we sent (nor one the
+// MAC covers).
 bool control_layout_ok(const void* data, std::size_t size) {
-  constexpr std::size_t kFixed = 8 + 8 + 8 + 8 + 8 + 1 + 1 + 1 + 3 * 8 + 3 * 8;  // hash .. kd
+  constexpr std::size_t kFixed = kControlModelPathOffset;
   constexpr std::size_t kTail = kOperatorNameBytes + kMacBytes;
   if (size < kFixed + 4 + 1 + kTail) return false;
   const std::int32_t len = be32(static_cast<const std::uint8_t*>(data) + kFixed);

@@ -56,8 +56,8 @@ std::vector<std::uint8_t> tame_control(const std::uint8_t* d, std::size_t n) {
   std::vector<std::uint8_t> out(d, d + n);
   control_command_t m;
   try {
-    if (n < 95) return out;
-    const std::uint8_t* p = d + 91;  // model_path's length prefix (after session and seq)
+    if (n < kControlModelPathOffset + 4) return out;
+    const std::uint8_t* p = d + kControlModelPathOffset;  // model_path's length prefix
     const std::int32_t len = static_cast<std::int32_t>((std::uint32_t{p[0]} << 24) | (std::uint32_t{p[1]} << 16) |
                                                        (std::uint32_t{p[2]} << 8) | p[3]);
     if (len < 1) return out;  // the server must drop this one itself

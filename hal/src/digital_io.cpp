@@ -13,6 +13,12 @@ const char* line_name(Line l) noexcept {
     case Line::limit_high_z: return "limit_high_z";
     case Line::drive_enable: return "drive_enable";
     case Line::brake_release_z: return "brake_release_z";
+    case Line::home_x: return "home_x";
+    case Line::home_y: return "home_y";
+    case Line::home_z: return "home_z";
+    case Line::index_x: return "index_x";
+    case Line::index_y: return "index_y";
+    case Line::index_z: return "index_z";
     case Line::count_: break;
   }
   return "invalid";

@@ -84,6 +84,8 @@ Status GpiodIo::read(DigitalInputs& in) noexcept {
   for (int a = 0; a < kAxes && st.ok(); ++a) {
     st = get(static_cast<Line>(static_cast<int>(Line::limit_low_x) + a), got.limit_low[static_cast<std::size_t>(a)]);
     if (st.ok()) st = get(static_cast<Line>(static_cast<int>(Line::limit_high_x) + a), got.limit_high[static_cast<std::size_t>(a)]);
+    if (st.ok()) st = get(static_cast<Line>(static_cast<int>(Line::home_x) + a), got.home[static_cast<std::size_t>(a)]);
+    if (st.ok()) st = get(static_cast<Line>(static_cast<int>(Line::index_x) + a), got.index[static_cast<std::size_t>(a)]);
   }
   in = st.ok() ? got : DigitalInputs{};  // on error: estop asserted
   return st;

@@ -129,7 +129,7 @@ TEST(BusLoad, ThreeDrivesAt1kHzOn1Mbit) {
   MasterConfig c;
   c.rate_hz = 1000;
   c.bitrate = 1e6;
-  for (int i = 1; i <= 3; ++i) c.drives.push_back(DriveConfig{"d", i, 1e6, 0, 400, 1000, 1, 0});
+  for (int i = 1; i <= 3; ++i) c.drives.push_back(DriveConfig{"d", i, 1e6, 0, 400, 1000, 1, 0, {}});
   // Full mapping: SYNC 55 + 3 x (RPDO1 4 B = 95, TPDO1 6 B = 115, TPDO2 4 B = 95) = 970 bits per 1000.
   c.velocity_from_drive = true;
   BusLoad l = bus_load(c);
@@ -161,7 +161,7 @@ TEST(BusLoad, ThreeDrivesAt1kHzOn1Mbit) {
 TEST(BusLoad, MasterRefusesAConfigurationThatDoesNotFitWithTheFigures) {
   MasterConfig c;
   c.rate_hz = 1000;
-  for (int i = 1; i <= 3; ++i) c.drives.push_back(DriveConfig{"d", i, 1e6, 0, 400, 1000, 1, 0});
+  for (int i = 1; i <= 3; ++i) c.drives.push_back(DriveConfig{"d", i, 1e6, 0, 400, 1000, 1, 0, {}});
   FakeClock clock;
   FakeCanNetwork net(clock);
   auto& port = net.add_port("m");

@@ -383,7 +383,7 @@ TEST(Malformed, TruncatedOversizedAndGarbledPacketsOnEveryChannel) {
     bad.push_back(hash);
   }
   // model_path's length prefix: 0, -1, INT32_MIN, huge, one off either way.
-  const std::size_t at = 91;
+  const std::size_t at = cpm::daemon::kControlModelPathOffset;
   const std::int32_t len = (good_c[at] << 24) | (good_c[at + 1] << 16) | (good_c[at + 2] << 8) | good_c[at + 3];
   for (std::uint32_t v : {0u, 0xFFFFFFFFu, 0x80000000u, 0x7FFFFFFFu, static_cast<std::uint32_t>(len - 1),
                           static_cast<std::uint32_t>(len + 1)}) {

@@ -7,6 +7,8 @@
 // Relative file paths in the config are relative to the config file's folder.
 #pragma once
 
+#include <array>
+#include <limits>
 #include <string>
 
 #include "cpm/control/controller.hpp"
@@ -40,11 +42,69 @@ struct LimitsConfig {
   double stop_deceleration = 2.0;   // deceleration of a stop (m/s^2)
   double enable_timeout = 0.5;      // drives must report enabled within this (s)
   double saturation_time = 0.2;     // an actuator at the force limit longer than this is a fault (s)
+  // Accept a trajectory that starts with a velocity step when its command asks
+  // (trajectory_command_t.allow_velocity_step) on a backend other than the
+  // simulator: a bench whose drives are simulated (the SIL tests). Never on a
+  // machine.
+  bool allow_velocity_step = false;
 };
 
 struct ControllerConfig {
   ctl::ControlLaw law = ctl::ControlLaw::computed_torque;
   ctl::Gains gains = ctl::table3_gains(ctl::ControlLaw::computed_torque);
+  // A controller switch while holding fades the force difference between the
+  // old law and the new one out over this time (s), so the force does not jump.
+  double transfer_time = 0.5;
+};
+
+// How an actuator finds its zero (docs/operating.md).
+enum class HomingMethod : std::uint8_t {
+  absolute,  // absolute encoder: known from the start, no motion
+  switch_,   // the daemon moves the actuator to its home switch (GPIO home_x..), optionally to the index after it
+  drive,     // the drive's own homing mode (CiA 402 mode 6), with the drive's method
+};
+const char* homing_method_name(HomingMethod m) noexcept;  // "absolute", "switch", "drive"
+
+struct AxisHomingConfig {
+  HomingMethod method = HomingMethod::absolute;
+  // switch: velocity of the search for the switch (m/s; its sign is the
+  // direction), of the slow approach that latches the switch's edge (and
+  // then the index) (m/s, > 0; opposite to the search, leaving the switch),
+  // whether to go on to the index after the edge, where the actuator is at
+  // the homing event (m of d), how far the search may go before it gives up
+  // (m), and where to go once homed (m of d; NaN: stay).
+  // drive: search_velocity and latch_velocity are the drive's search speeds
+  // (0x6099:1, :2; their magnitude), acceleration its 0x609A, drive_method
+  // its 0x6098, home_position the position it reports at home (0x607C).
+  double search_velocity = -0.02;
+  double latch_velocity = 0.002;
+  double acceleration = 0.2;        // m/s^2 of every homing move
+  bool use_index = false;
+  double home_position = 0.0;
+  double max_travel = 0.45;
+  double final_position = std::numeric_limits<double>::quiet_NaN();
+  int drive_method = 0;
+  double timeout = 60.0;            // s for the whole of this actuator's homing
+};
+
+struct HomingConfig {
+  std::array<AxisHomingConfig, 3> axes{};  // actuators 1, 2, 3
+  std::array<int, 3> order = {2, 0, 1};    // the order CMD_HOME with axes 0 homes them in (z first: away from the work)
+  int order_count = 3;
+  // The PD law each actuator is held by before every actuator is homed (N/m, N s/m).
+  ctl::Gains actuator_gains{Vec3::Constant(12691.0), Vec3::Constant(436.0)};
+  [[nodiscard]] bool all_absolute() const noexcept;
+};
+
+// Jogging (docs/operating.md): the deadman and how far a let-go jog may go.
+struct JogConfig {
+  double max_velocity = 0.05;       // m/s (per actuator, or of the platform)
+  double acceleration = 0.5;        // m/s^2 to start, change and end a jog
+  double keepalive = 0.2;           // s a jog command holds
+  // When the jog commands stop coming at max_velocity, the platform is at
+  // rest within this distance of where it was at the last one (m). Checked
+  // at load: max_velocity * keepalive + max_velocity^2 / (2 acceleration).
+  double stop_distance = 0.0125;
 };
 
 // Who may command and what may be read for the network (docs/security.md).
@@ -72,6 +132,12 @@ struct SimConfig {
   sim::PlantOptions plant;
   Vec3 initial_position = Vec3(0.600, 0.425, 0.300);
   double enable_delay = 0.005;    // s
+  // Incremental encoders: what the encoders read is d - encoder_zero (m), so
+  // until homed the daemon does not know where the platform is. 0 = absolute.
+  Vec3 encoder_zero = Vec3::Zero();
+  // Home switches in the plant: actuator i's switch is actuated while
+  // d_i < home_switch[i] (m); NaN: none.
+  Vec3 home_switch = Vec3::Constant(std::numeric_limits<double>::quiet_NaN());
 };
 
 // The CANopen backend (docs/canopen-backend.md): three CiA 402 drives in
@@ -93,6 +159,8 @@ struct DaemonConfig {
   LoopConfig loop;
   ControllerConfig controller;
   LimitsConfig limits;
+  HomingConfig homing;
+  JogConfig jog;
   LcmConfig lcm;
   SecurityConfig security;
 };

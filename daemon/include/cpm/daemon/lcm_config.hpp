@@ -15,6 +15,8 @@ struct LcmConfig {
   std::string control_channel = "CPMD_CONTROL";
   std::string ack_channel = "CPMD_ACK";
   std::string security_channel = "CPMD_SECURITY";  // security_t, 1 Hz
+  std::string drives_channel = "CPMD_DRIVES";      // drives_t, 10 Hz
+  std::string params_channel = "CPMD_PARAMS";      // params_t, 1 Hz and on change
   int state_decimation = 1;  // publish the state every N cycles
   // A commander's session ends after this long without a command or ping
   // from it (s); clients ping every 0.25 s while they hold one.

@@ -6,7 +6,7 @@
 
 namespace cpm::daemon {
 
-enum class Mode : std::uint8_t { init = 0, disabled, enabling, holding, moving, stopping, fault };
+enum class Mode : std::uint8_t { init = 0, disabled, enabling, holding, moving, stopping, fault, homing, jogging };
 const char* mode_name(Mode m) noexcept;
 
 // Latched fault bits (= state_t.FAULT_*).
@@ -27,6 +27,9 @@ enum FaultBit : std::uint32_t {
   // A setpoint stream ran dry while moving (its next chunk was late): the
   // loop stops along the path at limits.stop_deceleration, then latches this.
   kFaultStreamUnderrun = 4096,
+  // Homing failed: the switch was not found within its travel, it timed out,
+  // or the drive reported a homing error (fault_text says which).
+  kFaultHoming = 8192,
 };
 // "following_error,estop" for a mask (static storage per bit; the joined text
 // is built in `buf`, not for the real-time path).

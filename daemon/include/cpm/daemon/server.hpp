@@ -52,6 +52,13 @@ struct Validation {
   Segment segment;
 };
 
+// Where control_command_t's one string (model_path) begins in its LCM
+// encoding: the 8-byte type hash and every fixed field before it (id ..
+// param_value). The server checks the string's length prefix there before
+// decoding (lcm-gen's decoder trusts it).
+inline constexpr std::size_t kControlModelPathOffset = 8 + 8 + 8 + 8 + 8 + 1 + 1 + 1 + 3 * 8 + 3 * 8  // hash .. kd
+                                                       + 1 + 1 + 3 * 8 + 48 + 8;  // home_axes .. param_value
+
 // The longest segment accepted (s): validation samples a segment at the
 // loop's period in the LCM thread, so its length bounds that thread's pause.
 inline constexpr double kMaxSegmentDuration = 600.0;

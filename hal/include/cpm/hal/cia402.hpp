@@ -24,6 +24,30 @@ inline constexpr std::uint16_t kRatedTorque = 0x6076;        // u32, mNm (mN for
 inline constexpr std::uint16_t kTorqueActual = 0x6077;       // i16, per mille of rated torque
 inline constexpr std::uint16_t kInterpolationPeriod = 0x60C2;  // rec: sub1 u8 value, sub2 i8 exponent (s)
 inline constexpr std::int8_t kModeCyclicSyncTorque = 10;     // CST
+inline constexpr std::int8_t kModeHoming = 6;
+// Homing mode objects.
+inline constexpr std::uint16_t kHomeOffset = 0x607C;         // i32, position units
+inline constexpr std::uint16_t kHomingMethod = 0x6098;       // i8
+inline constexpr std::uint16_t kHomingSpeeds = 0x6099;       // rec: sub1 search for switch, sub2 search for zero (u32, velocity units)
+inline constexpr std::uint16_t kHomingAcceleration = 0x609A; // u32, acceleration units (velocity units per s)
+// Controlword bit 4 in homing mode: homing operation start (rising edge starts, 0 interrupts).
+inline constexpr std::uint16_t kCwHomingStart = 1u << 4;
+// Statusword bits 12, 13 in homing mode (bit 10: target reached).
+inline constexpr std::uint16_t kSwHomingAttained = 1u << 12;
+inline constexpr std::uint16_t kSwHomingError = 1u << 13;
+
+// The homing status of a statusword in homing mode (CiA 402 homing mode,
+// the table of bits 13, 12, 10).
+enum class HomingStatus : std::uint8_t {
+  idle,          // not started, or not in homing mode
+  in_progress,   // 0 0 0
+  interrupted,   // 0 0 1: interrupted or not started
+  attained,      // 0 1 0: attained, target not reached (still moving to the home position)
+  completed,     // 0 1 1: homing completed successfully
+  error,         // 1 x x: homing error (velocity not zero: 1 0 0 / 1 1 0; zero: 1 0 1)
+};
+HomingStatus decode_homing(std::uint16_t sw) noexcept;
+const char* homing_status_name(HomingStatus h) noexcept;
 
 enum class State : std::uint8_t {
   not_ready_to_switch_on,

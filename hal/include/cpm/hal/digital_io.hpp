@@ -5,6 +5,8 @@
 //   inputs   estop            true = emergency stop requested (an NC chain opened: wire it active-low)
 //            limit_low[i]     true = axis i at its low-end limit switch
 //            limit_high[i]    true = axis i at its high-end limit switch
+//            home[i]          true = axis i's home switch actuated (homing by the daemon)
+//            index[i]         true = axis i's encoder index pulse (read as a level each cycle)
 //   outputs  drive_enable     true = drives' power / enable chain closed
 //            brake_release_z  true = z brake released (coil energised); false = brake engaged
 //
@@ -27,6 +29,8 @@ enum class Line : std::uint8_t {
   limit_high_x, limit_high_y, limit_high_z,
   drive_enable,
   brake_release_z,
+  home_x, home_y, home_z,
+  index_x, index_y, index_z,
   count_,
 };
 inline constexpr std::size_t kLineCount = static_cast<std::size_t>(Line::count_);
@@ -56,6 +60,8 @@ struct DigitalInputs {
   bool estop = true;   // until read, assume the worst
   std::array<bool, kAxes> limit_low{};
   std::array<bool, kAxes> limit_high{};
+  std::array<bool, kAxes> home{};
+  std::array<bool, kAxes> index{};
 };
 struct DigitalOutputs {
   bool drive_enable = false;
@@ -78,7 +84,7 @@ class FakeDigitalIo final : public DigitalIo {
  public:
   Status read(DigitalInputs& in) noexcept override;
   Status write(const DigitalOutputs& out) noexcept override;
-  DigitalInputs inputs{.estop = false, .limit_low = {}, .limit_high = {}};
+  DigitalInputs inputs{.estop = false, .limit_low = {}, .limit_high = {}, .home = {}, .index = {}};
   DigitalOutputs outputs{};
   std::uint64_t writes = 0;
   bool fail_reads = false;    // read() reports io_error

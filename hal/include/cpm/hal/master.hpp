@@ -33,6 +33,20 @@ namespace cpm::hal {
 
 inline constexpr std::size_t kMaxDrives = 8;
 
+// The drive's own homing (CiA 402 homing mode 6), when the daemon's
+// configuration homes this actuator with it (docs/operating.md): written to
+// the drive by SDO at start(); the modes of operation 0x6060 then travel in
+// RPDO1 and the modes display 0x6061 in TPDO1, so that the cycle can switch
+// between homing and cyclic synchronous torque.
+struct DriveHomingConfig {
+  bool enabled = false;
+  int method = 0;                   // 0x6098 (CiA 402 homing method, e.g. 19)
+  double speed_search_mps = 0;      // 0x6099:1 speed during search for the switch (m/s, > 0)
+  double speed_zero_mps = 0;        // 0x6099:2 speed during search for zero (m/s, > 0)
+  double acceleration_mps2 = 0;     // 0x609A homing acceleration (m/s^2, > 0)
+  double offset_m = 0;              // 0x607C home offset (m): the position the drive reports at its home
+};
+
 struct DriveConfig {
   std::string name;               // "x", "y", "z": for messages
   int node_id = 0;                // 1..127
@@ -42,6 +56,7 @@ struct DriveConfig {
   int max_torque_permille = 1000;  // clamp of 0x6071, also written to 0x6072 (1..32767)
   int direction = 1;              // +1 or -1
   double position_offset_m = 0;   // actuator displacement at count 0
+  DriveHomingConfig homing;
 };
 
 struct MasterConfig {
@@ -106,6 +121,11 @@ struct DriveFeedback {
   std::uint16_t controlword = 0;     // last sent
   std::int16_t torque_permille = 0;  // last sent
   Code torque_code = Code::ok;       // saturated / not_finite for the last write
+  std::int8_t mode_display = 0;      // 0x6061 (when mapped; 0 otherwise)
+  // The homing status the statusword reports while the drive is in homing
+  // mode (bits 10, 12, 13); idle in any other mode.
+  cia402::HomingStatus homing = cia402::HomingStatus::idle;
+  bool position_lost = false;        // the drive booted again since the last read() (its counts restart)
 };
 
 struct Feedback {
@@ -130,6 +150,12 @@ struct DriveCommand {
   cia402::Target target = cia402::Target::disabled;
   double force_n = 0;                // applied only in operation enabled with target enabled
   bool reset_fault = false;          // send fault reset (edge made by the master) while in fault
+  // Homing (only for drives configured with DriveHomingConfig::enabled):
+  // the modes of operation 6 instead of 10, and controlword bit 4 (homing
+  // operation start) while start_homing; the master keeps bit 4 low for one
+  // cycle after entering the mode so the drive sees a rising edge.
+  bool homing = false;
+  bool start_homing = false;
 };
 
 struct Commands {
