@@ -32,6 +32,7 @@ void BM_DaemonCycleMoving(benchmark::State& st) {
     c.kind = CommandKind::segment;
     c.id = k;
     c.segment.traj.emplace<ctl::CircleTrajectory>(ctl::CircleSpec{});
+    c.segment.allow_step = true;  // Elkady's start at speed
     c.segment.start = Vec3(0.600, 0.425, 0.300);
     c.segment.end = c.segment.start;
     return c;

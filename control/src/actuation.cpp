@@ -34,6 +34,11 @@ void CommandHistory::push(double t, const Vec3& force) noexcept {
   head_ = (head_ + 1) % kCommandHistoryCapacity;
 }
 
+void CommandHistory::amend_last(const Vec3& force) noexcept {
+  if (size_ == 0) return;
+  buf_[static_cast<std::size_t>((head_ - 1 + kCommandHistoryCapacity) % kCommandHistoryCapacity)].force = force;
+}
+
 const Vec3* CommandHistory::acting(double s, double tau, double snap) const noexcept {
   for (int k = 0; k < size_; ++k)
     if (at(k).t + tau <= s + snap) return &at(k).force;

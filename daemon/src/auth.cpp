@@ -125,7 +125,8 @@ std::optional<Role> role_needed(std::int8_t command) noexcept {
   switch (command) {
     case C::CMD_STOP: return std::nullopt;
     case C::CMD_SELECT_CONTROLLER:
-    case C::CMD_LOAD_MODEL: return Role::engineer;
+    case C::CMD_LOAD_MODEL:
+    case C::CMD_SET_PARAM: return Role::engineer;
     default: return Role::operator_;  // unknown commands too: refused later, but never for free
   }
 }

@@ -60,6 +60,30 @@ Words soft_limit(const cpm_msgs::state_t& s, const std::string& cause) {
           "it left the configured workspace (limits.workspace_min/max)", todo};
 }
 
+Words homing_words(const cpm_msgs::state_t& s, const std::string& cause) {
+  const std::string where = axis_name(s.fault_axis);
+  const char* todo = "check the switch, its wiring and the homing configuration, then reset, enable and home again";
+  if (cause == "switch_not_found")
+    return {where, format("the home switch was not found after %s of travel against a limit of %s", mm(s.fault_value).c_str(), mm(s.fault_limit).c_str()),
+            "the search passed where the switch should be (a switch not wired, broken, or searched in the wrong direction)", todo};
+  if (cause == "switch_stuck")
+    return {where, format("the home switch did not release after %s of travel against a limit of %s", mm(s.fault_value).c_str(), mm(s.fault_limit).c_str()),
+            "the switch stays actuated (stuck, or wired the other way: active_low)", todo};
+  if (cause == "index_not_found")
+    return {where, format("no index mark after %s of travel against a limit of %s", mm(s.fault_value).c_str(), mm(s.fault_limit).c_str()),
+            "the index line gave nothing past the switch", todo};
+  if (cause == "timeout")
+    return {where, format("homing took %.1f s against a limit of %.1f s", s.fault_value, s.fault_limit),
+            "the axis did not finish its sequence in time (too slow, blocked, or the drive never reported the end)",
+            "check the axis and the homing speeds (homing.axes timeout), then reset, enable and home again"};
+  if (cause == "drive_error")
+    return {where, format("the drive reported a homing error after %.1f s", s.fault_value),
+            "the drive's own homing failed (its switch not found, a limit reached)",
+            "read the drive's error, check its home switch and method (homing.axes drive_method), then reset, enable and home again"};
+  return {where, "homing failed (" + (cause.empty() ? std::string("no cause given") : cause) + ")",
+          "the homing sequence could not complete", todo};
+}
+
 Words motion_words(std::uint32_t bit, const cpm_msgs::state_t& s, const std::string& cause) {
   switch (bit) {
     case kFaultFollowingError:
@@ -80,6 +104,8 @@ Words motion_words(std::uint32_t bit, const cpm_msgs::state_t& s, const std::str
       return {axis_name(s.fault_axis), format("the actuator held its force limit for %s against a limit of %s", ms(s.fault_value).c_str(), ms(s.fault_limit).c_str()),
               "the axis could not follow (blocked, overloaded, or a gain too high)",
               "check the axis for a collision or a load, and the gains, then reset and enable"};
+    case kFaultHoming:
+      return homing_words(s, cause);
     case kFaultStreamUnderrun:
       return {"", format("the setpoint stream ran dry at %s: its next chunk came late", mm_s(s.fault_value).c_str()),
               "cpmd stopped the platform along the path, then latched this",
@@ -131,7 +157,8 @@ std::string fault_report(const cpm_msgs::state_t& s) {
   if (!w.what) return r + ": a fault this client does not know (bit " + std::to_string(bit) + ")";
   r += ": " + w.figures + ": " + w.what + "; " + w.todo;
   // The backend's own words (which drive, which message) close the line.
-  const bool cause_used = bit == kFaultSoftLimit || bit == kFaultController || bit == kFaultEstimate;
+  const bool cause_used =
+      bit == kFaultSoftLimit || bit == kFaultController || bit == kFaultEstimate || bit == kFaultHoming;
   if (!cause.empty() && !cause_used) r += " (" + cause + ")";
   return r;
 }

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <limits>
 
 #include <cpm_msgs/ack_t.hpp>
 
@@ -76,6 +77,39 @@ ControlLoop::ControlLoop(const DaemonConfig& config, Backend& backend, const ctl
   state_.last_segment_id = -1;
   state_.fault_axis = -1;
   state_.fault_cycle = -1;
+  state_.homing_axis = -1;
+  // Absolute encoders know their zero from the start; the others wait for
+  // homing, and until then the loop holds and moves each actuator on its own.
+  for (int i = 0; i < 3; ++i) homed_[i] = cfg_.homing.axes[i].method == HomingMethod::absolute;
+  ramp_active_ = !all_homed();
+  ramp_task_ = false;
+}
+
+void segment_end_motion(const Segment& s, Vec3& velocity, Vec3& acceleration) noexcept {
+  const ctl::Trajectory* tr = s.get();
+  const auto* stream = std::get_if<StreamTrajectory>(&s.traj);
+  if (!tr || !stream) {
+    // Moves and circles end at rest (a circle's ramp, or Elkady's abrupt
+    // stop, which the hold then takes as a step: the loop plays what it was
+    // given, and the next segment starts from rest).
+    velocity.setZero();
+    acceleration.setZero();
+    return;
+  }
+  velocity = stream->end_velocity();
+  acceleration = tr->sample(tr->duration()).a;
+}
+
+StartCheck check_start(const ctl::Trajectory& tr, const Vec3& end_velocity, const LimitsConfig& limits,
+                       double dt) noexcept {
+  const ctl::TrajectorySample s = tr.sample(0.0);
+  StartCheck c;
+  c.velocity_step = (s.v - end_velocity).norm();
+  c.acceleration = s.a.norm();
+  // With a relative margin for the rounding of a segment's own samples.
+  c.velocity_allowed = limits.acceleration * dt * (1.0 + 1e-6) + 1e-9;
+  c.acceleration_allowed = limits.acceleration * (1.0 + 1e-6) + 1e-9;
+  return c;
 }
 
 void ControlLoop::set_scheduling_info(bool realtime, bool memory_locked) noexcept {
@@ -121,6 +155,11 @@ void ControlLoop::latch(std::uint32_t bit, int axis, double value, double limit,
     if (playing_) finish_segment();
     flush_queue();
     disable_after_stop_ = false;
+    // Homing ends: the actuator being homed stays unhomed.
+    if (homing_axis_ >= 0) end_homing(false, k);
+    jog_target_.setZero();
+    transfer_pending_ = false;
+    transfer_force_.setZero();
     enter(Mode::fault);
   }
 }
@@ -130,6 +169,8 @@ void ControlLoop::flush_queue() noexcept {
   q_head_ = 0;
   q_count_ = 0;
   playing_ = false;
+  queue_end_v_.setZero();
+  queue_end_a_.setZero();
 }
 
 void ControlLoop::finish_segment() noexcept {
@@ -154,6 +195,16 @@ bool ControlLoop::start_next_segment(std::int64_t k) noexcept {
 }
 
 void ControlLoop::start_stop(std::int64_t k) noexcept {
+  if (ramp_active_) {
+    // A ramp motion (homing, a jog, anything before homing): its speed goes
+    // to zero at the stop's deceleration (trajectory()); a homing stopped
+    // leaves its actuator unhomed.
+    if (homing_axis_ >= 0) end_homing(false, k);
+    jog_target_.setZero();
+    flush_queue();
+    enter(Mode::stopping);
+    return;
+  }
   // Decelerate along the reference's current direction of motion at the
   // configured rate, from where the reference is now.
   stop_p0_ = ref_.p;
@@ -201,6 +252,8 @@ void ControlLoop::reply(const Command& c, bool ok, std::int16_t reason, const ch
   a.queue_depth = static_cast<std::int16_t>(q_count_);
   a.retired = retired;
   a.queue_end = queue_end_;
+  a.queue_end_velocity = queue_end_v_;
+  a.queue_end_acceleration = queue_end_a_;
   // The LCM thread drains 64 acks per millisecond at least; a full ring
   // would lose only the ack, never the command's effect.
   (void)acks_.push(a);
@@ -216,6 +269,7 @@ void ControlLoop::handle(const Command& c, std::int64_t k) noexcept {
       if (mode_ == Mode::disabled) {
         hold_ = est_.p;  // resynchronise: hold where the platform is
         queue_end_ = hold_;
+        ramp_.reset(cin_.d);  // (the actuator space's hold)
         ctl_state_.reset();  // the drives were given nothing while off
         enabling_since_ = k;
         enter(Mode::enabling);
@@ -231,7 +285,7 @@ void ControlLoop::handle(const Command& c, std::int64_t k) noexcept {
         flush_queue();
         enter(Mode::disabled);
         reply(c, true, 0, "disabled");
-      } else if (mode_ == Mode::moving) {
+      } else if (mode_ == Mode::moving || mode_ == Mode::homing || mode_ == Mode::jogging) {
         start_stop(k);
         disable_after_stop_ = true;
         reply(c, true, 0, "stopping, then disabling");
@@ -245,14 +299,14 @@ void ControlLoop::handle(const Command& c, std::int64_t k) noexcept {
       }
       return;
     case CommandKind::stop:
-      if (mode_ == Mode::moving) {
+      if (mode_ == Mode::moving || mode_ == Mode::homing || mode_ == Mode::jogging) {
         start_stop(k);
         reply(c, true, 0, "stopping");
       } else if (mode_ == Mode::holding || mode_ == Mode::stopping) {
         flush_queue();
         reply(c, true, 0, "already at rest or stopping; queue cleared");
       } else {
-        reply(c, false, kIllegal, "stop needs the drives enabled (holding, moving or stopping)");
+        reply(c, false, kIllegal, "stop needs the drives enabled (holding, moving, homing, jogging or stopping)");
       }
       return;
     case CommandKind::reset:
@@ -283,13 +337,17 @@ void ControlLoop::handle(const Command& c, std::int64_t k) noexcept {
       overrun_fault_pending_ = false;
       hold_ = est_.p;
       queue_end_ = hold_;
+      ramp_.reset(cin_.d);
       enter(Mode::disabled);
       reply(c, true, 0, "fault reset; disabled, setpoint at the measured position");
       return;
     case CommandKind::select_controller:
       if (mode_ == Mode::disabled || mode_ == Mode::holding) {
+        // While holding in the task space the new law starts from the force
+        // the old one gave: the difference is faded out (bumpless).
+        if (mode_ == Mode::holding && all_homed() && !ramp_active_) transfer_pending_ = true;
         controller_ = *c.controller;
-        reply(c, true, 0, "controller selected");
+        reply(c, true, 0, mode_ == Mode::holding ? "controller selected; the force difference fades out" : "controller selected");
       } else {
         reply(c, false, kIllegal, "select the controller when disabled or holding");
       }
@@ -305,34 +363,211 @@ void ControlLoop::handle(const Command& c, std::int64_t k) noexcept {
         reply(c, false, kIllegal, "load a model only when disabled", c.machine);
       }
       return;
-    case CommandKind::segment: {
-      if (mode_ != Mode::holding && mode_ != Mode::moving) {
-        reply(c, false, kIllegal, "trajectories are accepted only when holding or moving");
-        return;
-      }
-      if (q_count_ >= kQueueCapacity) {
-        reply(c, false, ack_t::REASON_QUEUE_FULL, "the trajectory queue is full");
-        return;
-      }
-      if ((c.segment.start - queue_end_).norm() > 1e-6) {
-        reply(c, false, ack_t::REASON_NOT_CONTINUOUS,
-              "the segment does not start where the queue ends (the state changed meanwhile)");
-        return;
-      }
-      Segment& slot = (*queue_)[(q_head_ + q_count_) % kQueueCapacity];
-      slot = c.segment;
-      slot.id = c.id;  // the command's id is the segment's
-      q_count_++;
-      queue_end_ = c.segment.end;
-      if (mode_ == Mode::holding) {
-        enter(Mode::moving);
-        start_next_segment(k);
-      }
-      reply(c, true, 0, "queued");
+    case CommandKind::home:
+      handle_home(c, k);
       return;
-    }
+    case CommandKind::jog:
+      handle_jog(c, k);
+      return;
+    case CommandKind::set_params:
+      handle_settings(c);
+      return;
+    case CommandKind::segment:
+      handle_segment(c, k);
+      return;
     case CommandKind::none:
       return;
+  }
+}
+
+void ControlLoop::handle_segment(const Command& c, std::int64_t k) noexcept {
+  if (!all_homed()) {
+    reply(c, false, ack_t::REASON_NOT_HOMED,
+          "not every actuator is homed: the platform's position is not known; home the machine first (cpm home)");
+    return;
+  }
+  if (mode_ != Mode::holding && mode_ != Mode::moving) {
+    reply(c, false, ack_t::REASON_ILLEGAL_IN_MODE, "trajectories are accepted only when holding or moving");
+    return;
+  }
+  if (q_count_ >= kQueueCapacity) {
+    reply(c, false, ack_t::REASON_QUEUE_FULL, "the trajectory queue is full");
+    return;
+  }
+  if ((c.segment.start - queue_end_).norm() > 1e-6) {
+    reply(c, false, ack_t::REASON_NOT_CONTINUOUS,
+          "the segment does not start where the queue ends (the state changed meanwhile)");
+    return;
+  }
+  const ctl::Trajectory* tr = c.segment.get();
+  if (!c.segment.allow_step && !check_start(*tr, queue_end_v_, cfg_.limits, dt_).ok()) {
+    reply(c, false, ack_t::REASON_NOT_CONTINUOUS,
+          "the segment does not start with the velocity and acceleration the queue ends with (a step the "
+          "acceleration limit does not allow in one period)");
+    return;
+  }
+  Segment& slot = (*queue_)[(q_head_ + q_count_) % kQueueCapacity];
+  slot = c.segment;
+  slot.id = c.id;  // the command's id is the segment's
+  q_count_++;
+  queue_end_ = c.segment.end;
+  segment_end_motion(slot, queue_end_v_, queue_end_a_);
+  if (mode_ == Mode::holding) {
+    enter(Mode::moving);
+    start_next_segment(k);
+  }
+  reply(c, true, 0, "queued");
+}
+
+void ControlLoop::handle_home(const Command& c, std::int64_t k) noexcept {
+  if (mode_ != Mode::holding) {
+    reply(c, false, ack_t::REASON_ILLEGAL_IN_MODE,
+          mode_ == Mode::homing ? "homing already runs" : "homing needs the drives enabled and the platform at rest (holding)");
+    return;
+  }
+  // The configured order, filtered by the request.
+  home_count_ = 0;
+  for (int n = 0; n < cfg_.homing.order_count; ++n) {
+    const int i = cfg_.homing.order[static_cast<std::size_t>(n)];
+    if (c.home_axes == 0 || (c.home_axes & (1u << i))) home_queue_[static_cast<std::size_t>(home_count_++)] = i;
+  }
+  // Absolute actuators asked for but not in the order: homed already.
+  if (home_count_ == 0) {
+    reply(c, true, 0, "nothing to home: the actuators asked for have absolute encoders");
+    return;
+  }
+  for (int n = 0; n < home_count_; ++n) homed_[static_cast<std::size_t>(home_queue_[static_cast<std::size_t>(n)])] = false;
+  ramp_in_actuators();
+  home_next_ = 0;
+  enter(Mode::homing);
+  begin_axis_homing(k);
+  reply(c, true, 0, "homing");
+}
+
+void ControlLoop::begin_axis_homing(std::int64_t k) noexcept {
+  const int i = home_queue_[static_cast<std::size_t>(home_next_++)];
+  homing_axis_ = i;
+  const AxisHomingConfig& h = cfg_.homing.axes[static_cast<std::size_t>(i)];
+  // A drive that homes itself redefines its own counts: no offset of ours.
+  if (h.method == HomingMethod::drive) {
+    offset_[i] = 0.0;
+    cin_.d[i] = raw_[i];
+    ramp_.p[i] = raw_[i];
+    ramp_.v[i] = 0.0;
+  }
+  axis_homing_.start(h, static_cast<double>(k) * dt_, in_.home_switch[static_cast<std::size_t>(i)]);
+}
+
+void ControlLoop::end_homing(bool completed, std::int64_t k) noexcept {
+  (void)k;
+  if (!completed) axis_homing_.abort();
+  homing_axis_ = -1;
+  home_count_ = home_next_ = 0;
+  homing_request_ = {};
+}
+
+void ControlLoop::handle_jog(const Command& c, std::int64_t k) noexcept {
+  if (mode_ != Mode::holding && mode_ != Mode::jogging) {
+    reply(c, false, ack_t::REASON_ILLEGAL_IN_MODE, "jogging needs the drives enabled and no other motion (holding or jogging)");
+    return;
+  }
+  const bool machine_frame = c.jog_frame == 1;
+  if (machine_frame && !all_homed()) {
+    reply(c, false, ack_t::REASON_NOT_HOMED,
+          "a jog in the machine frame needs every actuator homed (the platform's position); jog the actuators, or home first");
+    return;
+  }
+  const double speed = machine_frame ? c.jog_velocity.norm() : c.jog_velocity.cwiseAbs().maxCoeff();
+  if (speed > cfg_.jog.max_velocity * (1.0 + 1e-9)) {
+    reply(c, false, ack_t::REASON_LIMIT, "the jog is faster than jog.max_velocity");
+    return;
+  }
+  if (mode_ == Mode::jogging && machine_frame != ramp_task_ && !ramp_.at_rest()) {
+    reply(c, false, ack_t::REASON_ILLEGAL_IN_MODE, "the jog in the other frame is still moving: let it stop first");
+    return;
+  }
+  // Where the jog starts from, in its frame.
+  if (mode_ == Mode::holding || machine_frame != ramp_task_ || !ramp_active_) {
+    if (machine_frame) {
+      ramp_.reset(hold_);
+      ramp_task_ = true;
+      ramp_active_ = true;
+    } else {
+      ramp_in_actuators();
+    }
+  }
+  // Refused outside the workspace: toward an end the reference is at (or
+  // beyond), nothing moves.
+  Vec3 lo, hi;
+  ramp_box(lo, hi);
+  for (int i = 0; i < 3; ++i) {
+    const double v = c.jog_velocity[i];
+    if ((v > 0.0 && ramp_.p[i] >= hi[i] - 1e-9) || (v < 0.0 && ramp_.p[i] <= lo[i] + 1e-9)) {
+      if (mode_ == Mode::holding && all_homed()) {
+        ramp_active_ = false;  // nothing moved: the task space holds as before
+      }
+      reply(c, false, ack_t::REASON_WORKSPACE,
+            machine_frame ? "the jog leads out of the workspace (limits.workspace_min/max): the platform is at its edge"
+                          : "the jog leads beyond the actuator's stroke: the actuator is at its end");
+      return;
+    }
+  }
+  jog_frame_ = c.jog_frame;
+  jog_target_ = c.jog_velocity;
+  jog_deadline_ = k + static_cast<std::int64_t>(std::ceil(cfg_.jog.keepalive / dt_ - 1e-9));
+  if (mode_ == Mode::holding) {
+    flush_queue();
+    enter(Mode::jogging);
+  }
+  reply(c, true, 0, "jogging");
+}
+
+void ControlLoop::handle_settings(const Command& c) noexcept {
+  const bool at_rest = mode_ == Mode::disabled || mode_ == Mode::holding || mode_ == Mode::fault ||
+                       mode_ == Mode::init || mode_ == Mode::enabling;
+  if (!at_rest && !c.while_moving) {
+    reply(c, false, ack_t::REASON_ILLEGAL_IN_MODE,
+          "this parameter may change only when disabled or holding: what moves now was checked against its old value");
+    return;
+  }
+  cfg_.limits = c.settings.limits;
+  cfg_.jog = c.settings.jog;
+  cfg_.controller.transfer_time = c.settings.transfer_time;
+  reply(c, true, 0, "set");
+}
+
+void ControlLoop::ramp_in_actuators() noexcept {
+  if (ramp_active_ && !ramp_task_) return;  // already there
+  // From the actuator reference the task space last had: nothing jumps.
+  ramp_.reset(d_ref_);
+  ramp_task_ = false;
+  ramp_active_ = true;
+  if (all_homed()) return;
+  // Leaving the task space: the actuator law starts from the force the
+  // task law gave.
+  transfer_pending_ = true;
+}
+
+void ControlLoop::leave_ramp() noexcept {
+  // In the task space, hold where the ramp came to rest.
+  if (!all_homed()) return;  // the actuator space holds on the ramp itself
+  hold_ = ref_.p;
+  queue_end_ = hold_;
+  queue_end_v_.setZero();
+  queue_end_a_.setZero();
+  ramp_active_ = false;
+}
+
+void ControlLoop::ramp_box(Vec3& lo, Vec3& hi) const noexcept {
+  if (ramp_task_) {
+    lo = cfg_.limits.workspace_min;
+    hi = cfg_.limits.workspace_max;
+    return;
+  }
+  const kin::Strokes& s = machine_->model().strokes;
+  for (int i = 0; i < 3; ++i) {
+    lo[i] = homed_[i] ? s.min[i] : -std::numeric_limits<double>::infinity();
+    hi[i] = homed_[i] ? s.max[i] : std::numeric_limits<double>::infinity();
   }
 }
 
@@ -449,7 +684,8 @@ void ControlLoop::record_schedule(bool overrun, std::int64_t skipped) noexcept {
 
 void ControlLoop::cycle(std::int64_t k, std::int64_t latency_ns) noexcept {
   // The phases of loop.hpp, in order; each timed into its statistics series
-  // (the commands are timed with the estimate, as they always were).
+  // (the commands are timed with the estimate, as they always were; homing
+  // and jog with the trajectory, whose reference they steer).
   PhaseTimes t{};
   record_latency(latency_ns);
   t[0] = now_ns();
@@ -459,6 +695,8 @@ void ControlLoop::cycle(std::int64_t k, std::int64_t latency_ns) noexcept {
   estimate(k);
   apply_commands(k);
   t[kSeriesEstimate] = now_ns();
+  homing(k);
+  jog(k);
   trajectory(k);
   t[kSeriesTrajectory] = now_ns();
   inverse_kinematics();
@@ -480,16 +718,25 @@ void ControlLoop::record_latency(std::int64_t latency_ns) noexcept {
 }
 
 bool ControlLoop::drives_on() const noexcept {
-  return mode_ == Mode::enabling || mode_ == Mode::holding || mode_ == Mode::moving || mode_ == Mode::stopping;
+  return mode_ == Mode::enabling || mode_ == Mode::holding || mode_ == Mode::moving || mode_ == Mode::stopping ||
+         mode_ == Mode::homing || mode_ == Mode::jogging;
 }
 
 void ControlLoop::read_inputs(std::int64_t k) noexcept {
   read_result_ = backend_->read(k, in_);
   backend_ok_ = read_result_ == BackendResult::ok && backend_write_ok_;
+  raw_ = Vec3(in_.position[0], in_.position[1], in_.position[2]);
+  // A drive that lost its position (it rebooted) must be homed again; the
+  // loop falls back to the actuator space, from the reference it has.
+  for (int i = 0; i < 3; ++i)
+    if (in_.position_lost[i] && homed_[i] && cfg_.homing.axes[i].method != HomingMethod::absolute) {
+      ramp_in_actuators();
+      homed_[i] = false;
+    }
 }
 
 void ControlLoop::estimate(std::int64_t k) noexcept {
-  cin_.d = Vec3(in_.position[0], in_.position[1], in_.position[2]);
+  cin_.d = raw_ + offset_;
   cin_.d_dot = Vec3(in_.velocity[0], in_.velocity[1], in_.velocity[2]);
   // The direction each actuator last moved in, for the model's backlash.
   for (int i = 0; i < 3; ++i)
@@ -508,23 +755,160 @@ void ControlLoop::apply_commands(std::int64_t k) noexcept {
   handle_commands(k);
 }
 
-void ControlLoop::trajectory(std::int64_t k) noexcept { ref_ = reference(k); }
+void ControlLoop::homing(std::int64_t k) noexcept {
+  if (mode_ != Mode::homing || homing_axis_ < 0) {
+    homing_request_ = {};
+    return;
+  }
+  const int i = homing_axis_;
+  AxisHoming::Inputs h;
+  h.t = static_cast<double>(k) * dt_;
+  h.raw = raw_[i];
+  h.reference = ramp_.p[i] - offset_[i];
+  h.reference_at_rest = ramp_.v[i] == 0.0;
+  h.home_switch = in_.home_switch[static_cast<std::size_t>(i)];
+  h.index = in_.index_pulse[static_cast<std::size_t>(i)];
+  h.drive = in_.drive_homing[static_cast<std::size_t>(i)];
+  const AxisHoming::Outcome o = axis_homing_.step(h, homing_request_);
+  if (axis_homing_.event_seen() && offset_[i] != axis_homing_.offset()) {
+    // The homing event: the actuator's zero is known. The reference and the
+    // reading move together, so nothing moves on the machine.
+    const double delta = axis_homing_.offset() - offset_[i];
+    offset_[i] = axis_homing_.offset();
+    cin_.d[i] += delta;
+    ramp_.p[i] += delta;
+  }
+  if (o == AxisHoming::Outcome::failed) {
+    const AxisHoming::Failure& f = axis_homing_.failure();
+    latch(kFaultHoming, i, f.value, f.limit, k, f.cause);
+    return;
+  }
+  if (o != AxisHoming::Outcome::homed) return;
+  homed_[static_cast<std::size_t>(i)] = true;
+  homing_request_ = {};
+  if (home_next_ < home_count_) {
+    begin_axis_homing(k);
+    return;
+  }
+  end_homing(true, k);
+  enter(Mode::holding);
+}
+
+void ControlLoop::jog(std::int64_t k) noexcept {
+  // The deadman: a jog holds for jog.keepalive after its command.
+  if (mode_ == Mode::jogging && k >= jog_deadline_) jog_target_.setZero();
+}
+
+void ControlLoop::trajectory(std::int64_t k) noexcept {
+  if (!ramp_active_) {
+    ref_ = reference(k);
+    return;
+  }
+  Vec3 lo, hi;
+  ramp_box(lo, hi);
+  switch (mode_) {
+    case Mode::homing: {
+      const int i = homing_axis_;
+      const double acc = cfg_.homing.axes[static_cast<std::size_t>(i)].acceleration;
+      if (homing_request_.kind == AxisHoming::Request::Kind::drive) {
+        // The drive moves itself: the reference follows it.
+        ramp_.step(Vec3::Zero(), acc, lo, hi, dt_);
+        ramp_.p[i] = cin_.d[i];
+        ramp_.v[i] = 0.0;
+      } else if (homing_request_.kind == AxisHoming::Request::Kind::position) {
+        Vec3 target = ramp_.p;
+        target[i] = homing_request_.position + offset_[i];
+        ramp_.step_to(target, homing_request_.speed, acc, dt_);
+      } else {
+        Vec3 v = Vec3::Zero();
+        v[i] = homing_request_.velocity;
+        ramp_.step(v, acc, lo, hi, dt_);
+      }
+      break;
+    }
+    case Mode::jogging:
+      ramp_.step(jog_target_, cfg_.jog.acceleration, lo, hi, dt_);
+      if (jog_target_.isZero(0.0) && ramp_.at_rest()) enter(Mode::holding);
+      break;
+    case Mode::stopping: {
+      ramp_.step(Vec3::Zero(), std::max(cfg_.jog.acceleration, cfg_.limits.stop_deceleration), lo, hi, dt_);
+      if (ramp_.at_rest()) {
+        enter(disable_after_stop_ ? Mode::disabled : Mode::holding);
+        disable_after_stop_ = false;
+      }
+      break;
+    }
+    case Mode::holding:
+    case Mode::enabling:
+    case Mode::moving:
+      break;
+    default:
+      // Drives off: the reference follows the measurement.
+      if (all_homed()) {
+        ramp_active_ = false;
+        ref_ = reference(k);
+        return;
+      }
+      ramp_task_ = false;
+      ramp_.reset(cin_.d);
+      break;
+  }
+  if (ramp_task_) {
+    ref_.p = ramp_.p;
+    ref_.v = ramp_.v;
+    ref_.a = ramp_.a;
+  } else {
+    reference_of_actuators(ramp_.p, ramp_.v, ramp_.a);
+  }
+  // A ramp motion in the task space (a jog, or the first hold after homing)
+  // ends at rest: the hold point takes over.
+  if (mode_ == Mode::holding && all_homed() && ramp_.at_rest()) leave_ramp();
+}
+
+void ControlLoop::reference_of_actuators(const Vec3& d, const Vec3& d_dot, const Vec3& d_dd) noexcept {
+  ctl::TaskState ts;
+  if (machine_->task_state(d, d_dot, cin_.kin, ts).ok()) {
+    ref_.p = ts.p;
+    ref_.v = ts.p_dot;
+    ref_.a = ts.J * d_dd;
+  }
+  // else (an unhomed actuator far off): the last reference stays on show.
+}
 
 void ControlLoop::inverse_kinematics() noexcept {
+  if (ramp_active_ && !ramp_task_) {
+    // The ramp is the actuator reference itself.
+    d_ref_ = ramp_.p;
+    ik_status_ = Status{};
+    return;
+  }
   ik_status_ = kin::inverse(machine_->kinematics(), ref_.p, cin_.kin, d_ref_);
 }
 
 void ControlLoop::control(std::int64_t k) noexcept {
   powered_ = drives_on();
   control_status_ = Status{};
+  const bool actuator_law = !all_homed();
   if (powered_) {
-    // With an actuation delay in the model the command acts from t + tau:
-    // the controller aims at the reference then.
-    const double ahead = controller_.lookahead();
-    cin_.ref = ahead > 0.0 ? reference_ahead(k, ahead) : ref_;
-    control_status_ = controller_.step(cin_, ctl_state_, cout_);
+    // The law changes (homing done, or a position lost): fade the difference.
+    if (actuator_law != actuator_law_) transfer_pending_ = true;
+    actuator_law_ = actuator_law;
+    if (actuator_law) {
+      control_actuators();
+    } else {
+      // With an actuation delay in the model the command acts from t + tau:
+      // the controller aims at the reference then.
+      const double ahead = controller_.lookahead();
+      cin_.ref = ahead > 0.0 && !ramp_active_ ? reference_ahead(k, ahead) : ref_;
+      control_status_ = controller_.step(cin_, ctl_state_, cout_);
+    }
+    fade_transfer(k);
     return;
   }
+  actuator_law_ = actuator_law;
+  transfer_pending_ = false;
+  transfer_force_.setZero();
+  transfer_now_.setZero();
   saturated_cycles_ = {};
   cout_.force.setZero();
   cout_.force_unlimited.setZero();
@@ -533,11 +917,61 @@ void ControlLoop::control(std::int64_t k) noexcept {
   cout_.d_dot_ref.setZero();
 }
 
+void ControlLoop::control_actuators() noexcept {
+  // Each actuator on its own PD law toward the ramp, plus the force that
+  // holds the platform's weight (at the estimate when it has one, else at
+  // the middle of the workspace: the weight hardly changes with the pose).
+  const ctl::Gains& g = cfg_.homing.actuator_gains;
+  Vec3 hold = Vec3::Zero();
+  const Vec3 at = estimate_ok_ ? est_.p : Vec3(0.5 * (cfg_.limits.workspace_min + cfg_.limits.workspace_max));
+  if (!machine_->holding_command(at, cin_.kin, hold).ok()) hold.setZero();
+  Vec3 f = g.kp.cwiseProduct(d_ref_ - cin_.d) + g.kd.cwiseProduct(ramp_.v - cin_.d_dot) + hold;
+  if (mode_ == Mode::homing && homing_axis_ >= 0 && homing_request_.kind == AxisHoming::Request::Kind::drive)
+    f[homing_axis_] = 0.0;  // the drive drives itself
+  const double lim = machine_->force_limit();
+  cout_.force_unlimited = f;
+  for (int i = 0; i < 3; ++i) {
+    cout_.saturated[static_cast<std::size_t>(i)] = std::abs(f[i]) > lim;
+    cout_.force[i] = std::clamp(f[i], -lim, lim);
+  }
+  cout_.d_ref = d_ref_;
+  cout_.d_dot_ref = ramp_.v;
+  ctl_state_.sent.push(cin_.kin.t, cout_.force);
+}
+
+void ControlLoop::fade_transfer(std::int64_t k) noexcept {
+  // Bumpless: the new law starts from the force the old one gave (the force
+  // written last cycle); the difference fades out linearly.
+  if (transfer_pending_) {
+    transfer_pending_ = false;
+    transfer_force_ = Vec3(out_.force[0], out_.force[1], out_.force[2]) - cout_.force_unlimited;
+    transfer_start_ = k;
+  }
+  if (transfer_force_.isZero(0.0)) {
+    transfer_now_.setZero();
+    return;
+  }
+  const double T = cfg_.controller.transfer_time;
+  const double w = std::max(0.0, 1.0 - static_cast<double>(k - transfer_start_) * dt_ / T);
+  transfer_now_ = w * transfer_force_;
+  if (w == 0.0) transfer_force_.setZero();
+  const Vec3 f = cout_.force_unlimited + transfer_now_;
+  const double lim = machine_->force_limit();
+  for (int i = 0; i < 3; ++i) {
+    cout_.saturated[static_cast<std::size_t>(i)] = std::abs(f[i]) > lim;
+    cout_.force[i] = std::clamp(f[i], -lim, lim);
+  }
+  // What the drives are given is what the prediction across a delay uses.
+  ctl_state_.sent.amend_last(cout_.force);
+}
+
 void ControlLoop::safety(std::int64_t k) noexcept {
   latch_input_faults(k);
   if (!powered_ || mode_ == Mode::fault) return;
-  // The error is measured before any latch below ends the segment it belongs to.
-  const double error = (ref_.p - est_.p).norm();
+  // The error is measured before any latch below ends the segment it
+  // belongs to; in the actuator space, of the actuators (the platform's
+  // position is not known).
+  const double error = all_homed() ? (ref_.p - est_.p).norm() : (d_ref_ - cin_.d).norm();
   latch_motion_faults(k, error);
   latch_saturation(k);
   finish_enabling(k);
@@ -559,7 +993,8 @@ void ControlLoop::latch_input_faults(std::int64_t k) noexcept {
     latch(kFaultOverrun, -1, consecutive_overruns_, cfg_.loop.max_consecutive_overruns, k);
     overrun_fault_pending_ = false;
   }
-  if (read_result_ == BackendResult::ok && !estimate_status_.ok())
+  // Before homing an actuator's reading may be anything: no pose to estimate.
+  if (read_result_ == BackendResult::ok && !estimate_status_.ok() && all_homed())
     latch(kFaultEstimate, estimate_status_.index, estimate_status_.value, estimate_status_.limit, k,
           cpm::fault_name(estimate_status_.fault));
 }
@@ -571,6 +1006,18 @@ void ControlLoop::latch_motion_faults(std::int64_t k, double error) noexcept {
     latch(kFaultController, control_status_.index, control_status_.value, control_status_.limit, k,
           cpm::fault_name(control_status_.fault));
   if (error > cfg_.limits.following_error) latch(kFaultFollowingError, -1, error, cfg_.limits.following_error, k);
+  if (!all_homed()) {
+    // The actuator space: the strokes of the homed actuators, the speed of all.
+    const kin::Strokes& st = machine_->model().strokes;
+    for (int i = 0; i < 3 && mode_ != Mode::fault; ++i) {
+      if (!homed_[static_cast<std::size_t>(i)]) continue;
+      if (cin_.d[i] < st.min[i]) latch(kFaultSoftLimit, i, cin_.d[i], st.min[i], k, "stroke_low");
+      else if (cin_.d[i] > st.max[i]) latch(kFaultSoftLimit, i, cin_.d[i], st.max[i], k, "stroke_high");
+    }
+    const double speed = cin_.d_dot.norm();
+    if (speed > cfg_.limits.overspeed) latch(kFaultOverspeed, -1, speed, cfg_.limits.overspeed, k);
+    return;
+  }
   int axis = -1;
   double v = 0, lim = 0;
   if (!inside(est_.p, cfg_.limits.workspace_min, cfg_.limits.workspace_max, axis, v, lim))
@@ -611,6 +1058,13 @@ void ControlLoop::write_outputs(std::int64_t k) noexcept {
   const bool on = drives_on();
   for (int i = 0; i < 3; ++i) out_.force[i] = on ? cout_.force[i] : 0.0;
   out_.enable = on;
+  // The actuator a drive homes itself: its own homing mode, started.
+  for (int i = 0; i < 3; ++i) {
+    const bool drive_homes = on && mode_ == Mode::homing && homing_axis_ == i &&
+                             homing_request_.kind == AxisHoming::Request::Kind::drive;
+    out_.axis_drive[static_cast<std::size_t>(i)] = drive_homes ? AxisDrive::homing : AxisDrive::torque;
+    out_.start_homing[static_cast<std::size_t>(i)] = drive_homes;
+  }
   const BackendResult rw = backend_->write(k, out_);
   backend_write_ok_ = rw == BackendResult::ok;
   if (rw != BackendResult::ok) latch(kFaultBackendIo, -1, static_cast<double>(rw), 0, k);
@@ -621,6 +1075,49 @@ void ControlLoop::publish(std::int64_t k) noexcept {
   if (cfg_.lcm.state_decimation <= 1 || k % cfg_.lcm.state_decimation == 0) {
     if (!snapshots_.push(state_)) dropped_++;
   }
+  const auto every = std::max<std::int64_t>(1, std::lround(cfg_.loop.rate_hz / 10.0));
+  if (k % every == 0) publish_drives(k);
+}
+
+void ControlLoop::publish_drives(std::int64_t k) noexcept {
+  backend_->diagnostics(diagnostics_);
+  const BackendDiagnostics& d = diagnostics_;
+  cpm_msgs::drives_t& m = drives_msg_;
+  m.utime = 0;  // stamped by the publisher
+  m.cycle = k;
+  m.backend = d.backend;
+  for (std::size_t i = 0; i < 3; ++i) {
+    const DriveDiagnostics& v = d.drive[i];
+    m.node_id[i] = static_cast<std::int16_t>(v.node_id);
+    m.nmt_state[i] = v.nmt;
+    m.cia402_state[i] = v.cia402;
+    m.statusword[i] = v.statusword;
+    m.controlword[i] = v.controlword;
+    m.mode_display[i] = v.mode_display;
+    m.enabled[i] = in_.drive_enabled[i];
+    m.fault[i] = in_.drive_fault[i];
+    m.homed[i] = homed_[i];
+    m.heartbeat_age_ms[i] =
+        v.heartbeat_age_ns < 0 ? -1 : static_cast<std::int32_t>(std::min<std::int64_t>(v.heartbeat_age_ns / 1000000, INT32_MAX));
+    m.master_faults[i] = static_cast<std::int32_t>(v.master_faults);
+    m.emcy_count[i] = static_cast<std::int32_t>(std::min<std::uint32_t>(v.emcy_count, INT32_MAX));
+    m.last_emcy_code[i] = v.last_emcy_code;
+    m.last_emcy_register[i] = v.last_emcy_register;
+    m.position[i] = cin_.d[static_cast<Eigen::Index>(i)];
+    m.force[i] = out_.force[i];
+    m.limit_low[i] = d.limit_low[i];
+    m.limit_high[i] = d.limit_high[i];
+    m.home_switch[i] = in_.home_switch[i];
+  }
+  m.bus_state = d.bus_state;
+  m.error_frames = static_cast<std::int64_t>(d.error_frames);
+  m.tx_error_counter = d.tx_error_counter;
+  m.rx_error_counter = d.rx_error_counter;
+  m.rx_dropped = static_cast<std::int64_t>(d.rx_dropped);
+  m.tx_failures = static_cast<std::int64_t>(d.tx_failures);
+  m.bus_load = d.bus_load;
+  m.estop = in_.estop;
+  (void)drives_out_.push(m);  // a full ring drops this view; the next comes in 0.1 s
 }
 
 void ControlLoop::finish_cycle(std::int64_t k, const PhaseTimes& t) noexcept {
@@ -676,6 +1173,16 @@ void ControlLoop::fill_state(std::int64_t k) noexcept {
   }
   s.queue_depth = static_cast<std::int16_t>(playing_ ? q_count_ - 1 : q_count_);
   put(s.queue_end, queue_end_);
+  put(s.queue_end_velocity, queue_end_v_);
+  put(s.queue_end_acceleration, queue_end_a_);
+  for (std::size_t i = 0; i < 3; ++i) s.homed[i] = homed_[i];
+  s.homing_axis = static_cast<std::int8_t>(homing_axis_);
+  s.homing_phase = static_cast<std::int8_t>(homing_axis_ >= 0 ? axis_homing_.phase() : HomingPhase::idle);
+  s.control_space = all_homed() ? state_t::SPACE_TASK : state_t::SPACE_ACTUATOR;
+  s.jog_frame = jog_frame_;
+  put(s.jog_velocity, mode_ == Mode::jogging ? jog_target_ : Vec3::Zero());
+  s.jog_keepalive_left = mode_ == Mode::jogging ? std::max<double>(0.0, static_cast<double>(jog_deadline_ - k) * dt_) : 0.0;
+  put(s.transfer_force, transfer_now_);
   s.last_segment_id = last_seg_id_;
   s.last_segment_rmse = last_seg_rmse_;
   s.last_segment_max = last_seg_max_;

@@ -51,6 +51,12 @@ std::string mm(const Vec3& p) {
   return b;
 }
 
+std::string mm_s(double v) {
+  char b[48];
+  std::snprintf(b, sizeof b, "%.1f mm/s", v * 1e3);
+  return b;
+}
+
 bool finite3(const double* v) { return std::isfinite(v[0]) && std::isfinite(v[1]) && std::isfinite(v[2]); }
 
 Validation reject(std::int16_t reason, std::string msg) {
@@ -556,6 +562,24 @@ void Server::on_control(const std::uint8_t* raw, std::size_t size, const control
     case control_command_t::CMD_STOP: c.kind = CommandKind::stop; break;
     case control_command_t::CMD_RESET: c.kind = CommandKind::reset; break;
     case control_command_t::CMD_PING: c.kind = CommandKind::ping; break;
+    case control_command_t::CMD_HOME:
+      if (m->home_axes < 0 || m->home_axes > 7)
+        return refuse(ack_t::REASON_INVALID, "home_axes must be a mask of actuators 1-3 (bits 0-2), or 0 for all");
+      c.kind = CommandKind::home;
+      c.home_axes = static_cast<std::uint8_t>(m->home_axes);
+      break;
+    case control_command_t::CMD_JOG:
+      if (m->jog_frame != control_command_t::JOG_ACTUATOR && m->jog_frame != control_command_t::JOG_MACHINE)
+        return refuse(ack_t::REASON_INVALID, "jog_frame must be 0 (actuators) or 1 (machine frame)");
+      c.kind = CommandKind::jog;
+      c.jog_frame = m->jog_frame;
+      c.jog_velocity = Vec3(m->jog_velocity[0], m->jog_velocity[1], m->jog_velocity[2]);
+      if (const double v = m->jog_frame == control_command_t::JOG_MACHINE ? c.jog_velocity.norm()
+                                                                            : c.jog_velocity.cwiseAbs().maxCoeff();
+          v > cfg_.jog.max_velocity * (1.0 + 1e-9))
+        return refuse(ack_t::REASON_LIMIT, "jog: " + mm_s(v) + " is faster than jog.max_velocity " +
+                                               mm_s(cfg_.jog.max_velocity));
+      break;
     case control_command_t::CMD_SELECT_CONTROLLER: {
       if (m->law < 0 || m->law > 3) return refuse(ack_t::REASON_INVALID, "law must be 0..3");
       const auto law = static_cast<ctl::ControlLaw>(m->law);
@@ -624,15 +648,51 @@ void Server::on_trajectory(const std::uint8_t* raw, std::size_t size, const traj
                 loop_.mode(), latest_.queue_depth);
     return;
   }
-  Vec3 start;
-  if (inflight_segments_ > 0) start = planned_end_;
-  else if (ack_newer_than_state_ || !have_state_) start = ack_end_;
-  else start = Vec3(latest_.queue_end[0], latest_.queue_end[1], latest_.queue_end[2]);
-  Validation v = validate_segment(*m, start, models_.current(), cfg_.limits, 1.0 / cfg_.loop.rate_hz);
-  if (!v.ok) {
-    publish_ack(m->id, 2, m->kind, false, v.reason, v.message, loop_.mode(), latest_.queue_depth);
-    return;
+  auto refuse = [&](std::int16_t reason, const std::string& why) {
+    publish_ack(m->id, 2, m->kind, false, reason, why, loop_.mode(), latest_.queue_depth);
+  };
+  if (have_state_ && !(latest_.homed[0] && latest_.homed[1] && latest_.homed[2])) {
+    std::string which;
+    for (int i = 0; i < 3; ++i)
+      if (!latest_.homed[i]) which += (which.empty() ? "" : ", ") + std::to_string(i + 1) + " (" + "xyz"[i] + ")";
+    return refuse(ack_t::REASON_NOT_HOMED, "actuator " + which +
+                                               " not homed: the platform's position is not known; home the machine "
+                                               "first (cpm home), jog the actuators meanwhile");
   }
+  // Where and how the queue will end when this segment arrives.
+  Vec3 start, end_v;
+  if (inflight_segments_ > 0) {
+    start = planned_end_;
+    end_v = planned_end_v_;
+  } else if (ack_newer_than_state_ || !have_state_) {
+    start = ack_end_;
+    end_v = ack_end_v_;
+  } else {
+    start = Vec3(latest_.queue_end[0], latest_.queue_end[1], latest_.queue_end[2]);
+    end_v = Vec3(latest_.queue_end_velocity[0], latest_.queue_end_velocity[1], latest_.queue_end_velocity[2]);
+  }
+  const double dt = 1.0 / cfg_.loop.rate_hz;
+  Validation v = validate_segment(*m, start, models_.current(), cfg_.limits, dt);
+  if (!v.ok) return refuse(v.reason, v.message);
+  // The start must meet the motion the queue ends with, unless the step is
+  // asked for where it may be granted (the paper's test on the simulator).
+  const bool grant = m->allow_velocity_step && (cfg_.backend == "sim" || cfg_.limits.allow_velocity_step);
+  if (const StartCheck sc = check_start(*v.segment.get(), end_v, cfg_.limits, dt); !sc.ok() && !grant) {
+    char b[400];
+    if (sc.velocity_step > sc.velocity_allowed)
+      std::snprintf(b, sizeof b,
+                    "the segment starts with a velocity step of %.1f mm/s from the %.1f mm/s the queue ends with; "
+                    "limits.acceleration (%.3g m/s^2) allows %.1f mm/s in one period: ramp it in%s",
+                    sc.velocity_step * 1e3, end_v.norm() * 1e3, cfg_.limits.acceleration, sc.velocity_allowed * 1e3,
+                    m->allow_velocity_step ? " (allow_velocity_step is granted only on the simulator backend, or with "
+                                             "limits.allow_velocity_step on a bench with simulated drives)"
+                                           : "");
+    else
+      std::snprintf(b, sizeof b, "the segment starts with an acceleration of %.3f m/s^2, more than limits.acceleration %.3g m/s^2",
+                    sc.acceleration, cfg_.limits.acceleration);
+    return refuse(ack_t::REASON_NOT_CONTINUOUS, b);
+  }
+  v.segment.allow_step = grant;
   Command& c = *scratch_;
   c = Command{};
   c.kind = CommandKind::segment;
@@ -643,6 +703,8 @@ void Server::on_trajectory(const std::uint8_t* raw, std::size_t size, const traj
   if (send(c)) {
     inflight_segments_++;
     planned_end_ = v.segment.end;
+    Vec3 end_a;
+    segment_end_motion(v.segment, planned_end_v_, end_a);
   }
 }
 
@@ -683,6 +745,7 @@ int Server::drain() {
     if (a.source == 2) inflight_segments_ = std::max(0, inflight_segments_ - 1);
     ack_newer_than_state_ = true;
     ack_end_ = a.queue_end;
+    ack_end_v_ = a.queue_end_velocity;
     if (a.source == 1 && a.code == control_command_t::CMD_LOAD_MODEL) {
       const auto it = pending_models_.find(a.id);
       if (a.accepted && it != pending_models_.end()) models_.make_current(it->second);
@@ -715,6 +778,13 @@ int Server::drain() {
     ack_newer_than_state_ = false;
     ++n;
     s = loop_.snapshots().front();
+  }
+  cpm_msgs::drives_t drives;
+  while (loop_.drives().pop(drives)) {
+    drives.utime = std::chrono::duration_cast<std::chrono::microseconds>(
+                       std::chrono::system_clock::now().time_since_epoch()).count();
+    lcm_->publish(cfg_.lcm.drives_channel, &drives);
+    ++n;
   }
   cpm_msgs::loop_stats_t stats;
   while (loop_.stats().pop(stats)) {

@@ -36,6 +36,7 @@ inline Command circle_command(const Vec3& start, const ctl::CircleTrajectory& ci
   c.segment.start = start;
   c.segment.end = circle.sample(circle.duration()).p;
   c.segment.traj = circle;
+  c.segment.allow_step = true;  // Elkady's start at speed: a bench with simulated drives
   return c;
 }
 

@@ -56,6 +56,7 @@ TEST(CanopenBackend, EnableCircleAndDisableMatchTheInProcessSimulatorInLockstep)
   c.segment.start = r.queue_end();
   c.segment.end = circle.sample(circle.duration()).p;
   c.segment.traj = circle;
+  c.segment.allow_step = true;  // Elkady's start at speed: a bench with simulated drives
   ASSERT_TRUE(r.command(c).accepted);
   const int n = r.run_until([&] { return r.mode() == Mode::holding; }, static_cast<int>(circle.duration() * 500) + 50);
   ASSERT_GE(n, 0) << "the circle did not finish; " << r.fault_text();

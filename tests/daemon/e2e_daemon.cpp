@@ -50,6 +50,7 @@ trajectory_command_t paper_circle() {
   m.radius = 0.175;
   m.angular_speed = M_PI / 2;
   m.cruise_time = 4.0;
+  m.allow_velocity_step = true;  // Elkady's start at speed: granted on the simulator
   return m;
 }
 

@@ -44,6 +44,7 @@ TEST(NoAllocation, EveryModeOfTheCycle) {
   circle.segment.traj.emplace<ctl::CircleTrajectory>(ctl::CircleSpec{});
   circle.segment.start = h.queue_end();
   circle.segment.end = std::get<ctl::CircleTrajectory>(circle.segment.traj).sample(4.0).p;
+  circle.segment.allow_step = true;  // Elkady's start at speed (the simulator's grant)
   ASSERT_TRUE(h.loop->commands().push(circle));
   Command move = h.move_to(Vec3(0.45, 0.40, 0.35));
   move.segment.start = circle.segment.end;

@@ -134,6 +134,7 @@ inline trajectory_command_t paper_circle() {
   m.kind = trajectory_command_t::KIND_CIRCLE;
   m.centre[0] = 0.425, m.centre[1] = 0.425, m.centre[2] = 0.300;
   m.radius = 0.175, m.angular_speed = M_PI / 2, m.cruise_time = 4.0;
+  m.allow_velocity_step = true;  // Elkady's start at speed: granted on the simulator
   return m;
 }
 // A stream from `a` along -x, at rest at both ends, n points over T s.

@@ -55,6 +55,7 @@ TEST(NothingLost, StateStreamHasNoGapsAtTheLoopRate) {
   circle.radius = 0.175;
   circle.angular_speed = M_PI / 2;
   circle.cruise_time = 4.0;
+  circle.allow_velocity_step = true;  // Elkady's start at speed, on the simulator
   c.handle(0.2);
   (void)c.send_trajectory(circle);
   const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);

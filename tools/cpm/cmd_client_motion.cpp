@@ -81,6 +81,9 @@ int circle(const Options& o) {
   m.start_angle = spec.start_angle;
   m.cruise_time = spec.cruise_time;
   m.ramp_time = spec.ramp_time;
+  // Elkady's test starts at full speed from rest: cpmd grants the step only
+  // on its simulator (or a bench that allows it); every other circle ramps in.
+  m.allow_velocity_step = paper;
   spec.plane = static_cast<ctl::CirclePlane>(pl);
   const Vec3 start = ctl::CircleTrajectory(spec).sample(0.0).p;
 

@@ -40,6 +40,9 @@ class CommandHistory {
   // decrease. When the ring is full the oldest command is dropped; it
   // stays known as the force before the others.
   void push(double t, const Vec3& force) noexcept;
+  // The last command pushed was changed after it was made (a controller
+  // switch's force difference added): record what was really given.
+  void amend_last(const Vec3& force) noexcept;
 
   // The force acting at time s under the delay tau: the latest command with
   // t_j + tau <= s (switching instants within `snap` of s count as reached).

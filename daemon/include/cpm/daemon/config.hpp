@@ -104,7 +104,7 @@ struct JogConfig {
   // When the jog commands stop coming at max_velocity, the platform is at
   // rest within this distance of where it was at the last one (m). Checked
   // at load: max_velocity * keepalive + max_velocity^2 / (2 acceleration).
-  double stop_distance = 0.0125;
+  double stop_distance = 0.015;
 };
 
 // Who may command and what may be read for the network (docs/security.md).

@@ -7,19 +7,28 @@
 // clock_gettime, a vDSO read, for the phase timers). Each phase is described
 // here once; its statistics series (loop_stats_t, --stats-json) in brackets.
 //   read_inputs        the backend's feedback: actuator positions and
-//                      velocities, drive status words, e-stop, limit
-//                      switches ["read"]
+//                      velocities (plus the zero homing found), drive status
+//                      words, e-stop, limit and home switches ["read"]
 //   estimate           calibrated forward kinematics: p, p_dot, J ["estimate"]
 //   apply_commands     a shutdown request, then at most kCommandsPerCycle
 //                      commands from the command queue (timed with estimate)
+//   homing             the actuator being homed: one step of its sequence
+//                      (homing.hpp), which asks the reference for a speed or a
+//                      place, or hands the axis to the drive's own homing
+//   jog                the deadman: a jog command holds for jog.keepalive;
+//                      then the jog's target speed drops to zero
 //   trajectory         the reference at the cycle's nominal time k / rate:
-//                      the playing segment, the stop profile or the hold
-//                      point (homing and jog will take their turn here)
-//                      ["trajectory"]
-//   inverse_kinematics d_ref = IK(p_ref) of the calibrated model
+//                      from the ramp (ramp.hpp: actuator space before homing,
+//                      homing moves, jogs, their stops), or the playing
+//                      segment, the stop profile or the hold point
+//                      ["trajectory"; homing and jog are timed with it]
+//   inverse_kinematics d_ref = IK(p_ref) of the calibrated model; in actuator
+//                      space (and for an actuator jog) the ramp is d_ref
 //                      ["inverse_kinematics"]
-//   control            the selected law, actuator forces, force limit; with
-//                      an actuation delay, aimed at the reference at t + tau
+//   control            the selected law (task space) or each actuator's PD
+//                      law on its own (actuator space), the force limit, and
+//                      a switch's force difference faded out; with an
+//                      actuation delay, aimed at the reference at t + tau
 //                      ["controller"]
 //   safety             conditions become latched faults: backend, drives,
 //                      e-stop, limit switches, overruns, estimate
@@ -29,20 +38,30 @@
 //                      (latch_saturation); enabling ends or times out
 //                      (finish_enabling); the segment's tracking error
 //                      ["safety"]
-//   write_outputs      forces and enable to the backend ["write"]
-//   publish            state snapshot into the SPSC ring for the LCM thread
-//                      ["publish"]
+//   write_outputs      forces, enable and each drive's mode to the backend
+//                      ["write"]
+//   publish            state snapshot into the SPSC ring for the LCM thread,
+//                      the drives' view ten times a second ["publish"]
 // then finish_cycle records the phase times ("cycle": all of them) and hands
 // the statistics on once a second.
 // The schedule (clock_nanosleep on an absolute time) lives in rt.hpp; tests
 // call cycle() directly, deterministic and without threads.
 //
+// Spaces (as LinuxCNC's joint and teleop modes): until every actuator is
+// homed the platform's position is unknown, so each actuator is held and
+// moved on its own (the actuator space: a PD law per actuator, references
+// from the ramp, no soft limits but the homed actuators' strokes); once all
+// are homed the calibrated kinematics and the selected law take over (the
+// task space), with the force difference faded out.
+//
 // States and commands (docs/daemon.md has the full table):
 //   init -> disabled            when the loop starts
 //   disabled --enable--> enabling --drives enabled--> holding
-//   holding --segment--> moving --queue empty--> holding
-//   moving --stop--> stopping --at rest--> holding
-//   moving/stopping --disable--> stopping --at rest--> disabled
+//   holding --segment--> moving --queue empty--> holding      (every actuator homed)
+//   holding --home--> homing --all asked homed--> holding
+//   holding --jog--> jogging --deadman or zero speed, at rest--> holding
+//   moving/homing/jogging --stop--> stopping --at rest--> holding
+//   moving/homing/jogging/stopping --disable--> stopping --at rest--> disabled
 //   enabling/holding --disable--> disabled
 //   any --fault--> fault (latched, drives off) --reset--> disabled
 // On every entry to enabling and on reset the hold point is resynchronised
@@ -55,12 +74,15 @@
 #include <optional>
 #include <variant>
 
+#include <cpm_msgs/drives_t.hpp>
 #include <cpm_msgs/loop_stats_t.hpp>
 #include <cpm_msgs/state_t.hpp>
 
 #include "cpm/daemon/backend.hpp"
 #include "cpm/daemon/config.hpp"
+#include "cpm/daemon/homing.hpp"
 #include "cpm/daemon/modes.hpp"
+#include "cpm/daemon/ramp.hpp"
 #include "cpm/daemon/spsc.hpp"
 #include "cpm/daemon/stream_trajectory.hpp"
 
@@ -71,13 +93,44 @@ struct Segment {
   std::int64_t id = -1;
   std::variant<std::monostate, ctl::CircleTrajectory, ctl::PointToPoint, StreamTrajectory> traj;
   Vec3 start = Vec3::Zero(), end = Vec3::Zero();
+  // Accept a start whose velocity or acceleration steps from the queue's end
+  // (granted by the server: the simulator, or limits.allow_velocity_step).
+  bool allow_step = false;
   [[nodiscard]] const ctl::Trajectory* get() const noexcept;
 };
+
+// How a segment's start meets the motion it follows: the step in velocity
+// from the queue's end (m/s), which must be within what the acceleration
+// limit builds in one period (limits.acceleration * dt), and the
+// acceleration the start asks for (m/s^2), within limits.acceleration. (The
+// position is checked on its own: the start is the queue's end.) The server
+// (with the queue's end it expects) and the loop (with the one it has) both
+// check it.
+struct StartCheck {
+  double velocity_step = 0.0, velocity_allowed = 0.0;
+  double acceleration = 0.0, acceleration_allowed = 0.0;
+  [[nodiscard]] bool ok() const noexcept {
+    return velocity_step <= velocity_allowed && acceleration <= acceleration_allowed;
+  }
+};
+// The velocity and acceleration a queued segment ends with: a stream chunk
+// the velocity it was given (the stream goes on), every other kind at rest.
+void segment_end_motion(const Segment& s, Vec3& velocity, Vec3& acceleration) noexcept;
+StartCheck check_start(const ctl::Trajectory& tr, const Vec3& end_velocity, const LimitsConfig& limits,
+                       double dt) noexcept;
 
 // Command codes (= control_command_t.CMD_* and ack_t sources).
 enum class CommandKind : std::uint8_t {
   none = 0, enable = 1, disable = 2, stop = 3, reset = 4, select_controller = 5, load_model = 6,
-  ping = 7, segment = 16,
+  ping = 7, home = 10, jog = 11, set_params = 12, segment = 16,
+};
+
+// What CMD_SET_PARAM changes in the loop: the limits and the jog, whole (the
+// server checked the new values and their ranges).
+struct Settings {
+  LimitsConfig limits;
+  JogConfig jog;
+  double transfer_time = 0.5;
 };
 
 // A command the non-real-time side has decoded and validated, for the loop.
@@ -89,6 +142,12 @@ struct Command {
   std::optional<ctl::Controller> controller;  // select_controller, load_model
   const ctl::Machine* machine = nullptr;      // load_model
   Segment segment;                            // segment
+  std::uint8_t home_axes = 0;                 // home: bit i = actuator i + 1; 0 = all, in order
+  std::int8_t jog_frame = 0;                  // jog: control_command_t.JOG_*
+  Vec3 jog_velocity = Vec3::Zero();           // jog: m/s
+  Settings settings;                          // set_params
+  bool while_moving = false;                  // set_params: the parameter may change while moving
+  const char* param = "";                     // set_params: its name (static storage), for the refusal
 };
 
 // The loop's answer to a command. `message` is a string literal.
@@ -102,6 +161,8 @@ struct Ack {
   std::int16_t queue_depth = 0;
   const ctl::Machine* retired = nullptr;  // a model the loop no longer uses (load_model)
   Vec3 queue_end = Vec3::Zero();           // where the next segment must start
+  Vec3 queue_end_velocity = Vec3::Zero();  // and how fast (m/s)
+  Vec3 queue_end_acceleration = Vec3::Zero();
 };
 
 // Timing statistics: histograms as in loop_stats_t.
@@ -150,6 +211,7 @@ class ControlLoop {
   SpscRing<Ack, 64>& acks() noexcept { return acks_; }
   SpscRing<cpm_msgs::state_t, 4096>& snapshots() noexcept { return snapshots_; }
   SpscRing<cpm_msgs::loop_stats_t, 4>& stats() noexcept { return stats_out_; }
+  SpscRing<cpm_msgs::drives_t, 8>& drives() noexcept { return drives_out_; }
   // Cycles completed (the watchdog is fed only while this advances).
   [[nodiscard]] std::int64_t cycles_done() const noexcept { return cycles_done_.load(std::memory_order_acquire); }
   // Latest mode (any thread).
@@ -170,9 +232,13 @@ class ControlLoop {
   void read_inputs(std::int64_t k) noexcept;
   void estimate(std::int64_t k) noexcept;
   void apply_commands(std::int64_t k) noexcept;
+  void homing(std::int64_t k) noexcept;
+  void jog(std::int64_t k) noexcept;
   void trajectory(std::int64_t k) noexcept;
   void inverse_kinematics() noexcept;
   void control(std::int64_t k) noexcept;
+  void control_actuators() noexcept;
+  void fade_transfer(std::int64_t k) noexcept;
   void safety(std::int64_t k) noexcept;
   void latch_input_faults(std::int64_t k) noexcept;
   void latch_motion_faults(std::int64_t k, double error) noexcept;
@@ -181,8 +247,31 @@ class ControlLoop {
   void write_outputs(std::int64_t k) noexcept;
   void publish(std::int64_t k) noexcept;
   void finish_cycle(std::int64_t k, const PhaseTimes& t) noexcept;
-  // The drives are (to be) powered: enabling, holding, moving or stopping.
+  // The drives are (to be) powered: enabling, holding, moving, homing,
+  // jogging or stopping.
   [[nodiscard]] bool drives_on() const noexcept;
+  // Every actuator homed: the task space.
+  [[nodiscard]] bool all_homed() const noexcept { return homed_[0] && homed_[1] && homed_[2]; }
+
+  // Commands, one function each where they grew (handle() dispatches).
+  void handle_home(const Command& c, std::int64_t k) noexcept;
+  void handle_jog(const Command& c, std::int64_t k) noexcept;
+  void handle_segment(const Command& c, std::int64_t k) noexcept;
+  void handle_settings(const Command& c) noexcept;
+  void begin_axis_homing(std::int64_t k) noexcept;
+  void end_homing(bool completed, std::int64_t k) noexcept;
+  // The ramp drives the reference in actuator coordinates from where the
+  // reference is now (entering the actuator space, or an actuator jog).
+  void ramp_in_actuators() noexcept;
+  // A ramp motion in the task space ended at rest: hold there.
+  void leave_ramp() noexcept;
+  // The box the ramp stays in: the soft limits (machine frame), the strokes
+  // of homed actuators, nothing for the others.
+  void ramp_box(Vec3& lo, Vec3& hi) const noexcept;
+  // The task-space reference of an actuator reference (calibrated forward
+  // kinematics), for an actuator jog once homed and for the display before.
+  void reference_of_actuators(const Vec3& d, const Vec3& d_dot, const Vec3& d_dd) noexcept;
+  void publish_drives(std::int64_t k) noexcept;
 
   void handle_commands(std::int64_t k) noexcept;
   void handle(const Command& c, std::int64_t k) noexcept;
@@ -214,6 +303,7 @@ class ControlLoop {
   SpscRing<Ack, 64> acks_;
   SpscRing<cpm_msgs::state_t, 4096> snapshots_;
   SpscRing<cpm_msgs::loop_stats_t, 4> stats_out_;
+  SpscRing<cpm_msgs::drives_t, 8> drives_out_;
 
   // State machine.
   Mode mode_ = Mode::init;
@@ -243,6 +333,7 @@ class ControlLoop {
   std::int64_t segment_start_cycle_ = 0;
   Vec3 hold_ = Vec3::Zero();      // hold point = end of the queue when idle
   Vec3 queue_end_ = Vec3::Zero();
+  Vec3 queue_end_v_ = Vec3::Zero(), queue_end_a_ = Vec3::Zero();  // the motion the queue ends with
   // Stop profile.
   Vec3 stop_p0_ = Vec3::Zero(), stop_dir_ = Vec3::Zero();
   double stop_v0_ = 0, stop_T_ = 0;
@@ -255,6 +346,34 @@ class ControlLoop {
   double last_seg_rmse_ = 0, last_seg_max_ = 0;
   std::int32_t last_seg_n_ = 0;
 
+  // Homing (homing.hpp). The offset is added to the backend's positions:
+  // the zero each actuator's homing found (m); an absolute actuator's is 0.
+  std::array<bool, 3> homed_{};
+  Vec3 offset_ = Vec3::Zero();
+  AxisHoming axis_homing_;
+  std::array<int, 3> home_queue_{};  // the actuators to home, in order
+  int home_count_ = 0, home_next_ = 0;
+  int homing_axis_ = -1;             // the one homing now, -1 none
+  AxisHoming::Request homing_request_{};
+  // The ramp (ramp.hpp): the reference in actuator space, and of any jog.
+  Ramp ramp_;
+  bool ramp_active_ = false;        // the reference comes from the ramp
+  bool ramp_task_ = false;          // its coordinates: machine frame (true) or actuators
+  // Jogging.
+  std::int8_t jog_frame_ = 0;
+  Vec3 jog_target_ = Vec3::Zero();  // commanded velocity (m/s), zero after the deadman
+  std::int64_t jog_deadline_ = 0;   // the cycle the last jog command stops holding
+  // A law switched while the drives hold the platform: the force difference
+  // at the switch, faded out over transfer_time from transfer_start_.
+  bool transfer_pending_ = false;
+  bool actuator_law_ = false;       // the actuator law ran last cycle
+  Vec3 transfer_force_ = Vec3::Zero();
+  Vec3 transfer_now_ = Vec3::Zero();
+  std::int64_t transfer_start_ = 0;
+  // The drives' view (drives_t), every rate/10 cycles.
+  BackendDiagnostics diagnostics_{};
+  cpm_msgs::drives_t drives_msg_{};
+
   // Per-cycle data.
   BackendInput in_;
   BackendOutput out_;
@@ -264,6 +383,7 @@ class ControlLoop {
   ctl::TaskState est_;
   ctl::TrajectorySample ref_;
   Vec3 d_ref_ = Vec3::Zero();
+  Vec3 raw_ = Vec3::Zero();        // the backend's actuator positions, before the homing offset (m)
   bool estimate_ok_ = false;
   // What one phase hands the later ones within a cycle.
   BackendResult read_result_ = BackendResult::ok;

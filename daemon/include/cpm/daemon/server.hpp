@@ -147,8 +147,10 @@ class Server {
   std::int64_t journaled_fault_cycle_ = -1;  // the fault last written to the journal
   int inflight_segments_ = 0;
   Vec3 planned_end_ = Vec3::Zero();
+  Vec3 planned_end_v_ = Vec3::Zero();   // the velocity the queue will end with (m/s)
   bool ack_newer_than_state_ = false;
   Vec3 ack_end_ = Vec3::Zero();
+  Vec3 ack_end_v_ = Vec3::Zero();
   ctl::ControlLaw law_;
   ctl::Gains gains_;
   std::unique_ptr<Command> scratch_;

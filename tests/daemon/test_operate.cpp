@@ -1,0 +1,248 @@
+// Operating the machine (issue 17), cycle by cycle on the simulator backend:
+// jogging with its deadman and the workspace's edge, trajectories that must
+// start with the motion the queue ends with, and a controller switched while
+// the platform is held without the force jumping.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+
+#include "loop_fixture.hpp"
+#include "server_fixture.hpp"
+
+namespace cpm::daemon {
+namespace {
+
+using cpm_msgs::ack_t;
+using cpm_msgs::control_command_t;
+using cpm_msgs::state_t;
+using cpm_msgs::trajectory_command_t;
+using test::LoopHarness;
+
+Command jog_command(std::int8_t frame, const Vec3& v) {
+  Command c;
+  c.kind = CommandKind::jog;
+  c.jog_frame = frame;
+  c.jog_velocity = v;
+  return c;
+}
+
+Vec3 measured(const LoopHarness& h) { return h.position(); }
+Vec3 reference(const LoopHarness& h) {
+  const auto& s = h.state();
+  return Vec3(s.position_ref[0], s.position_ref[1], s.position_ref[2]);
+}
+
+TEST(Jog, WhenTheKeepAliveStopsAtFullSpeedThePlatformStopsWithinTheConfiguredDistance) {
+  LoopHarness h;
+  h.to_holding();
+  const JogConfig& j = h.cfg.jog;
+  const Vec3 v(-j.max_velocity, 0, 0);
+  // Keep-alives every 50 ms for 1 s: full speed long before the last.
+  Vec3 at_last;
+  for (int n = 0; n < 20; ++n) {
+    const Ack a = h.command(jog_command(control_command_t::JOG_MACHINE, v));
+    ASSERT_TRUE(a.accepted) << a.message;
+    at_last = measured(h);
+    if (n < 19) h.run(49);
+  }
+  ASSERT_EQ(h.mode(), Mode::jogging);
+  EXPECT_NEAR(h.state().velocity[0], -j.max_velocity, 2e-4);
+  int cycles = 0;
+  while (h.mode() == Mode::jogging && cycles < 5000) {
+    h.run(1);
+    ++cycles;
+  }
+  ASSERT_EQ(h.mode(), Mode::holding);
+  h.run(300);  // settled
+  const double travelled = (measured(h) - at_last).norm();
+  // The closed form: the keep-alive's time at full speed, then v^2 / 2a.
+  const double expected = j.max_velocity * j.keepalive + j.max_velocity * j.max_velocity / (2 * j.acceleration);
+  std::printf("jog at %.0f mm/s, deadman let go: at rest %.3f mm on (closed form %.3f mm, jog.stop_distance %.3f mm) "
+              "after %.0f ms\n",
+              j.max_velocity * 1e3, travelled * 1e3, expected * 1e3, j.stop_distance * 1e3, cycles * 1.0);
+  EXPECT_LE(travelled, j.stop_distance);
+  EXPECT_NEAR(travelled, expected, 1e-4);
+  EXPECT_NEAR(cycles * 1e-3, j.keepalive + j.max_velocity / j.acceleration, 3e-3);
+}
+
+TEST(Jog, StopsAtTheWorkspaceEdgeAndAJogOutwardThereIsRefused) {
+  LoopHarness h;
+  h.to_holding();
+  const double edge = h.cfg.limits.workspace_max.x();  // 15 mm from P1
+  double farthest = 0.0;
+  for (int n = 0; n < 60; ++n) {
+    (void)h.command(jog_command(control_command_t::JOG_MACHINE, Vec3(h.cfg.jog.max_velocity, 0, 0)));
+    for (int i = 0; i < 49; ++i) {
+      h.run(1);
+      farthest = std::max(farthest, reference(h).x());
+    }
+  }
+  EXPECT_LE(farthest, edge);
+  EXPECT_NEAR(reference(h).x(), edge, 1e-6);
+  EXPECT_EQ(h.state().faults, 0);
+  // At the edge: outward refused, nothing moves; inward accepted.
+  h.run(400);
+  ASSERT_EQ(h.mode(), Mode::holding);
+  const Ack out = h.command(jog_command(control_command_t::JOG_MACHINE, Vec3(0.01, 0.0, 0)));
+  EXPECT_FALSE(out.accepted);
+  EXPECT_EQ(out.reason, ack_t::REASON_WORKSPACE);
+  std::printf("jog outward at the edge: %s\n", out.message);
+  EXPECT_EQ(h.mode(), Mode::holding);
+  const Ack in = h.command(jog_command(control_command_t::JOG_MACHINE, Vec3(-0.01, 0.0, 0)));
+  EXPECT_TRUE(in.accepted) << in.message;
+}
+
+TEST(Jog, FasterThanTheJogLimitIsRefused) {
+  LoopHarness h;
+  h.to_holding();
+  const Ack a = h.command(jog_command(control_command_t::JOG_MACHINE, Vec3(0, -2 * h.cfg.jog.max_velocity, 0)));
+  EXPECT_FALSE(a.accepted);
+  EXPECT_EQ(a.reason, ack_t::REASON_LIMIT);
+  EXPECT_EQ(h.mode(), Mode::holding);
+}
+
+TEST(Homed, BeforeHomingOnlyActuatorJogsAreTakenAndTheyMoveOneActuator) {
+  DaemonConfig c = test::test_config();
+  c.homing.axes[1].method = HomingMethod::switch_;  // y needs homing
+  LoopHarness h(c);
+  EXPECT_EQ(h.state().control_space, state_t::SPACE_ACTUATOR);
+  EXPECT_FALSE(h.state().homed[1]);
+  h.to_holding();
+  const Ack seg = h.command(h.move_to(h.queue_end() + Vec3(-0.01, 0, 0)));
+  EXPECT_FALSE(seg.accepted);
+  EXPECT_EQ(seg.reason, ack_t::REASON_NOT_HOMED);
+  const Ack cart = h.command(jog_command(control_command_t::JOG_MACHINE, Vec3(-0.01, 0, 0)));
+  EXPECT_FALSE(cart.accepted);
+  EXPECT_EQ(cart.reason, ack_t::REASON_NOT_HOMED);
+  const Vec3 d0(h.state().d[0], h.state().d[1], h.state().d[2]);
+  const Ack jog = h.command(jog_command(control_command_t::JOG_ACTUATOR, Vec3(0, 0.01, 0)));
+  ASSERT_TRUE(jog.accepted) << jog.message;
+  h.run(150);  // within the keep-alive, then the deadman
+  h.run(600);
+  EXPECT_EQ(h.mode(), Mode::holding);
+  const Vec3 d1(h.state().d[0], h.state().d[1], h.state().d[2]);
+  // 10 mm/s for 0.2 s plus the ramps: about 2 mm on d2, the others held.
+  EXPECT_NEAR(d1.y() - d0.y(), 0.01 * 0.2 + 0.01 * 0.01 / (2 * h.cfg.jog.acceleration), 2e-4);
+  EXPECT_NEAR(d1.x(), d0.x(), 2e-5);
+  EXPECT_NEAR(d1.z(), d0.z(), 2e-5);
+  EXPECT_EQ(h.state().faults, 0);
+}
+
+TEST(StartCheck, AVelocityStepIsRefusedByTheLoopUnlessGranted) {
+  LoopHarness h;
+  h.to_holding();
+  Command c;
+  c.kind = CommandKind::segment;
+  c.source = 2;
+  const ctl::CircleTrajectory circle{ctl::CircleSpec{}};  // 275 mm/s at t = 0
+  c.segment.start = h.queue_end();
+  c.segment.end = circle.sample(circle.duration()).p;
+  c.segment.traj = circle;
+  const Ack refused = h.command(c);
+  EXPECT_FALSE(refused.accepted);
+  EXPECT_EQ(refused.reason, ack_t::REASON_NOT_CONTINUOUS);
+  EXPECT_EQ(h.mode(), Mode::holding);
+  c.segment.allow_step = true;
+  EXPECT_TRUE(h.command(c).accepted);
+  // A ramped circle starts at rest: no grant needed.
+  LoopHarness g;
+  g.to_holding();
+  ctl::CircleSpec ramped;
+  ramped.ramp_time = 0.5;
+  c.segment.traj = ctl::CircleTrajectory{ramped};
+  c.segment.start = g.queue_end();
+  c.segment.allow_step = false;
+  EXPECT_TRUE(g.command(c).accepted);
+}
+
+// The server's view: the paper's circle on the simulator with the flag,
+// refused on the CANopen backend whatever the flag, unless the bench says so.
+struct PaperCase {
+  const char* backend;
+  bool bench_allows;
+  bool flag;
+  bool accepted;
+};
+
+TEST(StartCheck, ThePapersCircleIsAcceptedOnlyOnTheSimulatorWithTheFlagOrOnABenchThatAllowsIt) {
+  for (const PaperCase pc : {PaperCase{"sim", false, false, false}, PaperCase{"sim", false, true, true},
+                             PaperCase{"canopen", false, true, false}, PaperCase{"canopen", false, false, false},
+                             PaperCase{"canopen", true, true, true}}) {
+    DaemonConfig cfg = test::ServerCell::config();
+    cfg.backend = pc.backend;  // the server's judgement only: the loop runs on the simulator here
+    cfg.limits.allow_velocity_step = pc.bench_allows;
+    test::ServerCell cell(cfg);
+    const std::int64_t s = cell.acquire(7);
+    ASSERT_NE(s, 0);
+    ASSERT_TRUE(cell.control(control_command_t::CMD_ENABLE, s, 1).accepted);
+    cell.cycles(30);
+    trajectory_command_t m{};
+    m.id = cell.next_id++;
+    m.session = s;
+    m.seq = 2;
+    m.kind = trajectory_command_t::KIND_CIRCLE;
+    m.centre[0] = 0.425, m.centre[1] = 0.425, m.centre[2] = 0.300;
+    m.radius = 0.175, m.angular_speed = M_PI / 2, m.cruise_time = 4.0;
+    m.allow_velocity_step = pc.flag;
+    const ack_t a = cell.send(cfg.lcm.trajectory_channel, m);
+    EXPECT_EQ(a.accepted, pc.accepted) << pc.backend << " bench " << pc.bench_allows << " flag " << pc.flag << ": "
+                                       << a.message;
+    if (!a.accepted) {
+      EXPECT_EQ(a.reason, ack_t::REASON_NOT_CONTINUOUS);
+      EXPECT_NE(a.message.find("275.0 mm/s"), std::string::npos) << a.message;
+      if (std::string(pc.backend) == "canopen" && pc.flag) std::printf("canopen, flag set: %s\n", a.message.c_str());
+    }
+  }
+}
+
+// Runs the platform held at P1 and switches the law mid-way: how far the
+// platform moves, and the largest change of force between two cycles.
+struct Switch {
+  double moved = 0.0, force_step = 0.0, settled = 0.0;
+};
+Switch switch_while_holding(ctl::ControlLaw to) {
+  LoopHarness h;
+  h.to_holding();
+  h.run(500);
+  const Vec3 held = measured(h);
+  Switch r;
+  auto force = [&] { return Vec3(h.state().force[0], h.state().force[1], h.state().force[2]); };
+  Vec3 last = force();
+  Command c;
+  c.kind = CommandKind::select_controller;
+  c.controller.emplace(h.machine, to, ctl::table3_gains(to));
+  EXPECT_TRUE(h.command(c).accepted);
+  for (int i = 0; i < 3000; ++i) {
+    r.force_step = std::max(r.force_step, (force() - last).cwiseAbs().maxCoeff());
+    last = force();
+    r.moved = std::max(r.moved, (measured(h) - held).norm());
+    h.run(1);
+  }
+  r.settled = (measured(h) - held).norm();
+  EXPECT_EQ(h.state().faults, 0);
+  return r;
+}
+
+TEST(ControllerSwitch, WhileHoldingThePlatformMovesLessThanTenMicrometresAndTheForceDoesNotJump) {
+  for (const auto law : {ctl::ControlLaw::pd_gravity, ctl::ControlLaw::pd_feedforward}) {
+    const Switch s = switch_while_holding(law);
+    std::printf("computed_torque -> %s while holding: moved at most %.3f um, largest force change in one cycle %.4f N\n",
+                ctl::law_name(law), s.moved * 1e6, s.force_step);
+    EXPECT_LT(s.moved, 10e-6);
+    EXPECT_LT(s.force_step, 0.5);
+  }
+}
+
+TEST(ControllerSwitch, ToALawWithoutGravityTheForceFadesAndThePlatformSagsSmoothly) {
+  // pd holds the weight only by its stiffness: it sags E / kp (about 3 mm at
+  // Table 3's 12691 N/m), but over the transfer time, not in one cycle.
+  const Switch s = switch_while_holding(ctl::ControlLaw::pd);
+  std::printf("computed_torque -> pd while holding: sag %.3f mm, largest force change in one cycle %.4f N\n",
+              s.settled * 1e3, s.force_step);
+  EXPECT_LT(s.force_step, 0.5);
+  EXPECT_GT(s.settled, 2e-3);
+}
+
+}  // namespace
+}  // namespace cpm::daemon
