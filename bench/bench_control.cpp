@@ -3,6 +3,7 @@
 #include <benchmark/benchmark.h>
 
 #include "cpm/control/controller.hpp"
+#include "cpm/control/gain_check.hpp"
 #include "cpm/sim/plant.hpp"
 #include "bench_models.hpp"
 
@@ -58,5 +59,29 @@ void plant_step(benchmark::State& state, bool calibrated) {
 }
 BENCHMARK_CAPTURE(plant_step, nominal_1ms_rk4x10, false);
 BENCHMARK_CAPTURE(plant_step, calibrated_effects_1ms_rk4x10, true);
+
+// The gain check cpmd makes on its command thread before it takes a law or
+// gains (budget: well under 10 ms). Its cost grows with the delay in periods:
+// the loop's polynomial has degree ~ tau / T.
+void gain_check(benchmark::State& state, ctl::ControlLaw law, double rate_hz, double tau) {
+  ctl::MachineModel mm = ctl::MachineModel::elkady();
+  if (tau > 0.0) ctl::add_effect(mm, "actuation_delay", -1, {tau});
+  const ctl::Machine model(std::move(mm));
+  const ctl::Gains gains = ctl::table3_gains(law);
+  for (auto _ : state) {
+    ctl::GainVerdict v = ctl::check_gains(model, law, gains, rate_hz, 0.005);
+    benchmark::DoNotOptimize(v);
+  }
+}
+BENCHMARK_CAPTURE(gain_check, pd_1kHz, ctl::ControlLaw::pd, 1000.0, 0.0)->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(gain_check, pd_gravity_1kHz_delay_1_period, ctl::ControlLaw::pd_gravity, 1000.0, 1e-3)
+    ->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(gain_check, computed_torque_1kHz_delay_1_period, ctl::ControlLaw::computed_torque, 1000.0, 1e-3)
+    ->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(gain_check, pd_gravity_1kHz_delay_10_periods, ctl::ControlLaw::pd_gravity, 1000.0, 10e-3)
+    ->Unit(benchmark::kMillisecond);
+// The largest delay the model allows at the highest rate: 500 periods.
+BENCHMARK_CAPTURE(gain_check, pd_gravity_10kHz_delay_50ms, ctl::ControlLaw::pd_gravity, 10000.0, 50e-3)
+    ->Unit(benchmark::kMillisecond);
 
 }  // namespace
