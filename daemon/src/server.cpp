@@ -590,6 +590,10 @@ void Server::on_control(const std::uint8_t* raw, std::size_t size, const control
       }
       try {
         g.validate();
+        // A law and gains that cannot hold this machine at this rate are
+        // refused before anything changes, with the figure.
+        const ctl::GainVerdict verdict = check_gains_for(models_.current(), law, g);
+        if (!verdict.ok) return refuse(ack_t::REASON_LIMIT, "select_controller: " + verdict.reason);
         c.controller.emplace(models_.current(), law, g);
       } catch (const Error& e) {
         return refuse(ack_t::REASON_INVALID, std::string("select_controller: ") + e.what());
@@ -629,6 +633,19 @@ void Server::on_control(const std::uint8_t* raw, std::size_t size, const control
     pending_models_.erase(c.id);
     models_.release(c.machine);
   }
+}
+
+ctl::GainVerdict Server::check_gains_for(const ctl::Machine& model, ctl::ControlLaw law, const ctl::Gains& g) const {
+  return check_daemon_gains(cfg_, model, law, g);
+}
+
+ctl::GainVerdict check_daemon_gains(const DaemonConfig& cfg, const ctl::Machine& model, ctl::ControlLaw law,
+                                    const ctl::Gains& gains) {
+  // The velocity the law sees: differenced positions on drives that send no
+  // velocity (the stricter case), the encoders' own otherwise.
+  const bool differenced = cfg.backend == "canopen" && !cfg.canopen.master.velocity_from_drive;
+  return ctl::check_gains(model, law, gains, cfg.loop.rate_hz, cfg.limits.following_error,
+                          differenced ? ctl::VelocityMeasurement::difference : ctl::VelocityMeasurement::exact);
 }
 
 void Server::on_trajectory(const std::uint8_t* raw, std::size_t size, const trajectory_command_t* m) {

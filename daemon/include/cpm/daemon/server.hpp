@@ -20,6 +20,7 @@
 #include <cpm_msgs/security_t.hpp>
 #include <cpm_msgs/trajectory_command_t.hpp>
 
+#include "cpm/control/gain_check.hpp"
 #include "cpm/daemon/auth.hpp"
 #include "cpm/daemon/loop.hpp"
 
@@ -74,6 +75,12 @@ Validation validate_segment(const cpm_msgs::trajectory_command_t& cmd, const Vec
 // zero or normal. Unused fields count too: a clean sender leaves them 0.
 std::string bad_number(const cpm_msgs::trajectory_command_t& cmd);
 std::string bad_number(const cpm_msgs::control_command_t& cmd);
+
+// Whether a law and gains can hold the machine as cpmd runs it (the loop's
+// rate, the velocity its backend gives, limits.following_error for a law
+// without gravity): ctl::check_gains with the daemon's figures.
+ctl::GainVerdict check_daemon_gains(const DaemonConfig& cfg, const ctl::Machine& model, ctl::ControlLaw law,
+                                    const ctl::Gains& gains);
 
 class Server {
  public:
@@ -133,6 +140,8 @@ class Server {
   bool admit(std::int64_t id, std::int8_t source, std::int8_t code, std::int64_t session, std::int64_t seq,
              const Operator& op);
   void acquire(const cpm_msgs::control_command_t& m, const Operator& op);
+  [[nodiscard]] ctl::GainVerdict check_gains_for(const ctl::Machine& model, ctl::ControlLaw law,
+                                                const ctl::Gains& g) const;
   void log_security(double now);
   // A newly latched fault goes to the journal once, in fault_report's words.
   void journal_fault(const cpm_msgs::state_t& st);
