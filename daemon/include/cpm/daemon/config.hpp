@@ -136,8 +136,12 @@ struct SimConfig {
   // until homed the daemon does not know where the platform is. 0 = absolute.
   Vec3 encoder_zero = Vec3::Zero();
   // Home switches in the plant: actuator i's switch is actuated while
-  // d_i < home_switch[i] (m); NaN: none.
+  // d_i < home_switch[i] (m); NaN: none (YAML: null or .nan for that element).
   Vec3 home_switch = Vec3::Constant(std::numeric_limits<double>::quiet_NaN());
+  // Encoder index marks: one every index_pitch of the true d (at d = k pitch,
+  // k integer; m), the same on the three actuators; 0 = none. How the
+  // simulator reports them: SimBackendOptions::index_pitch.
+  double index_pitch = 0.0;
 };
 
 // The CANopen backend (docs/canopen-backend.md): three CiA 402 drives in
