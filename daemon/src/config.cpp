@@ -334,14 +334,18 @@ AxisHomingConfig parse_axis_homing(const Reader& r, const YAML::Node& n, const s
                n["search_velocity"].Scalar());
   if (n["latch_velocity"]) a.latch_velocity = r.positive(n["latch_velocity"], lv, 1.0, "m/s");
   const YAML::Node& latch_node = n["latch_velocity"] ? n["latch_velocity"] : n;
+  auto mm_s = [](double v) {
+    std::ostringstream os;
+    os << v * 1e3 << " mm/s";
+    return os.str();
+  };
   if (a.method == HomingMethod::switch_ && !(a.latch_velocity < std::abs(a.search_velocity)))
     r.fail(latch_node, lv,
-           "must be slower than |search_velocity| (" + std::to_string(std::abs(a.search_velocity)) + " m/s), got " +
-               std::to_string(a.latch_velocity) + " m/s");
+           "must be slower than |search_velocity| (" + mm_s(std::abs(a.search_velocity)) + "), got " +
+               mm_s(a.latch_velocity));
   if (a.method == HomingMethod::drive && a.latch_velocity > a.search_velocity)
     r.fail(latch_node, lv,
-           "must not be faster than search_velocity (" + std::to_string(a.search_velocity) + " m/s), got " +
-               std::to_string(a.latch_velocity) + " m/s");
+           "must not be faster than search_velocity (" + mm_s(a.search_velocity) + "), got " + mm_s(a.latch_velocity));
   if (n["acceleration"]) a.acceleration = r.positive(n["acceleration"], p + ".acceleration", 100.0, "m/s^2");
   a.home_position = r.number(n["home_position"], p + ".home_position", -10.0, 10.0, "m");
   a.final_position = position_or_none(r, n["final_position"], p + ".final_position", -10.0, 10.0);
@@ -632,7 +636,10 @@ DaemonConfig parse_config_checked(const std::string& text, const std::string& na
   }
 
   HomingNodes homing_nodes;
-  if (root["homing"]) parse_homing(r, root["homing"], c, c.homing, homing_nodes);
+  if (root["homing"])
+    parse_homing(r, root["homing"], c, c.homing, homing_nodes);
+  else
+    c.homing.order_count = 0;  // every actuator absolute: nothing to home
 
   const auto n = r.map(root["lcm"], "lcm", {"url"}, {"channels", "state_decimation", "session_timeout"});
   c.lcm.url = r.text(n["url"], "lcm.url");

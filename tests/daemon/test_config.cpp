@@ -5,20 +5,15 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
-#include <fstream>
 #include <sstream>
 
+#include "config_files.hpp"
 #include "cpm/daemon/config.hpp"
 
 namespace cpm::daemon {
 namespace {
 
-std::string sim_yaml() {
-  std::ifstream f(std::string(CPM_SOURCE_DIR) + "/config/sim.yaml");
-  std::stringstream ss;
-  ss << f.rdbuf();
-  return ss.str();
-}
+std::string sim_yaml() { return test::config_file("sim.yaml"); }
 
 std::string replace(std::string s, const std::string& from, const std::string& to) {
   const auto at = s.find(from);
@@ -90,13 +85,6 @@ TEST(Config, OutOfRangeIsRefused) {
 
 // --- issue 17: homing, jogging, safe commands -------------------------------
 
-std::string read_file(const std::string& name) {
-  std::ifstream f(std::string(CPM_SOURCE_DIR) + "/config/" + name);
-  std::stringstream ss;
-  ss << f.rdbuf();
-  return ss.str();
-}
-
 // The 1-based line of the first occurrence of `needle` in `text`.
 int line_of(const std::string& text, const std::string& needle) {
   const auto at = text.find(needle);
@@ -135,6 +123,7 @@ TEST(Config, NewKeysHaveTheirDefaults) {
   EXPECT_EQ(c.jog.keepalive, 0.2);
   EXPECT_EQ(c.jog.stop_distance, 0.0125);  // exactly what the defaults need: accepted despite rounding
   EXPECT_TRUE(c.homing.all_absolute());
+  EXPECT_EQ(c.homing.order_count, 0);  // nothing to home
   EXPECT_TRUE(c.sim.encoder_zero.isZero());
   EXPECT_TRUE(c.sim.home_switch.array().isNaN().all());
   EXPECT_EQ(c.sim.index_pitch, 0.0);
@@ -212,7 +201,7 @@ TEST(Config, ShippedSimHomingConfigLoads) {
 
 // canopen.yaml's commented example, uncommented: z by its drive, x and y on switches with the index.
 std::string canopen_with_homing() {
-  std::string t = read_file("canopen.yaml");
+  std::string t = test::config_file("canopen.yaml");
   std::string out;
   std::istringstream in(t);
   bool in_homing = false;
@@ -323,7 +312,8 @@ TEST(Config, HomingValuesOutOfRangeAreRefused) {
   expect_refused(homing_x(head + "      search_velocity: 0\n"), "search_velocity: 0", "homing.axes.x.search_velocity",
                  "must not be 0");
   expect_refused(homing_x(head + "      search_velocity: -0.02\n      latch_velocity: 0.02\n"), "latch_velocity",
-                 "homing.axes.x.latch_velocity", "must be slower than |search_velocity|");
+                 "homing.axes.x.latch_velocity",
+                 "must be slower than |search_velocity| (20 mm/s), got 20 mm/s");
   // Faster than the jog (50 mm/s): the actuator's zero is unknown while it homes.
   expect_refused(homing_x(head + "      search_velocity: -0.08\n"), "search_velocity", "homing.axes.x.search_velocity",
                  "must not be faster than jog.max_velocity (50 mm/s)");

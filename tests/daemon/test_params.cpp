@@ -4,23 +4,18 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
-#include <fstream>
 #include <functional>
 #include <iomanip>
 #include <map>
 #include <sstream>
 
+#include "config_files.hpp"
 #include "cpm/daemon/params.hpp"
 
 namespace cpm::daemon {
 namespace {
 
-std::string sim_yaml() {
-  std::ifstream f(std::string(CPM_SOURCE_DIR) + "/config/sim.yaml");
-  std::stringstream ss;
-  ss << f.rdbuf();
-  return ss.str();
-}
+std::string sim_yaml() { return test::config_file("sim.yaml"); }
 
 DaemonConfig shipped() { return parse_config(sim_yaml(), "sim.yaml"); }
 

@@ -9,6 +9,7 @@
 
 #include <cpm_msgs/drives_t.hpp>
 
+#include "cpm/daemon/config.hpp"
 #include "cpm/daemon/sim_backend.hpp"
 
 namespace cpm::daemon {
@@ -201,6 +202,34 @@ TEST(SimBackend, DiagnosticsShowTheDrivesStateEstopAndSwitches) {
   EXPECT_EQ(g.drive[1].cia402, D::CIA402_FAULT);
   EXPECT_EQ(g.drive[0].cia402, D::CIA402_SWITCH_ON_DISABLED);  // the e-stop cut the power
   EXPECT_TRUE(g.estop);
+}
+
+// config/sim-homing.yaml asks each actuator in turn to run past its switch
+// (by the stop from the search speed) and then to its final position: every
+// pose on the way is one the true machine reaches (the backend refuses to
+// start the plant anywhere else).
+TEST(SimBackend, TheShippedHomingConfigOnlyAsksForReachablePoses) {
+  const DaemonConfig c = load_config(std::string(CPM_SOURCE_DIR) + "/config/sim-homing.yaml");
+  Vec3 d = c.sim.initial_position - kD0;
+  int poses = 0;
+  auto reachable = [&](const Vec3& at) {
+    SimBackendOptions o;
+    o.initial_position = at + kD0;
+    EXPECT_NO_THROW(backend(o)) << "d = " << at.transpose();
+    ++poses;
+  };
+  for (int k = 0; k < c.homing.order_count; ++k) {
+    const int i = c.homing.order[static_cast<std::size_t>(k)];
+    const auto& a = c.homing.axes[static_cast<std::size_t>(i)];
+    ASSERT_LT(a.search_velocity, 0.0);
+    d[i] = c.sim.home_switch[i] - a.search_velocity * a.search_velocity / (2 * a.acceleration);
+    reachable(d);
+    d[i] = a.home_position;
+    reachable(d);
+    d[i] = a.final_position;
+    reachable(d);
+  }
+  EXPECT_EQ(poses, 9);
 }
 
 }  // namespace

@@ -90,6 +90,9 @@ struct AxisHomingConfig {
 struct HomingConfig {
   std::array<AxisHomingConfig, 3> axes{};  // actuators 1, 2, 3
   std::array<int, 3> order = {2, 0, 1};    // the order CMD_HOME with axes 0 homes them in (z first: away from the work)
+  // As loaded, order[0 .. order_count) are exactly the actuators that are not
+  // absolute (none without a homing section); the defaults here are for
+  // configurations built in code.
   int order_count = 3;
   // The PD law each actuator is held by before every actuator is homed (N/m, N s/m).
   ctl::Gains actuator_gains{Vec3::Constant(12691.0), Vec3::Constant(436.0)};
