@@ -15,6 +15,8 @@
 #include <set>
 #include <sstream>
 
+#include "cpm/daemon/params.hpp"
+
 #ifdef CPM_HAVE_IO
 #include "cpm/io/model_file.hpp"
 #endif
@@ -57,14 +59,17 @@ class Reader {
 
   static std::string join(const std::string& a, const std::string& b) { return a.empty() ? b : a + "." + b; }
 
-  double number(const YAML::Node& n, const std::string& path, double lo, double hi, const char* unit) const {
+  // Any number, NaN and infinities included (.nan, .inf): the caller checks the range.
+  double real(const YAML::Node& n, const std::string& path) const {
     if (!n.IsScalar()) fail(n, path, "expected a number");
-    double v = 0;
     try {
-      v = n.as<double>();
+      return n.as<double>();
     } catch (const YAML::Exception&) {
       fail(n, path, "expected a number, got '" + n.Scalar() + "'");
     }
+  }
+  double number(const YAML::Node& n, const std::string& path, double lo, double hi, const char* unit) const {
+    const double v = real(n, path);
     if (!std::isfinite(v) || v < lo || v > hi) {
       std::ostringstream os;
       os << "must be within " << lo << " .. " << hi << ' ' << unit << ", got " << n.Scalar();
@@ -102,10 +107,29 @@ class Reader {
     if (!n.IsScalar() || n.Scalar().empty()) fail(n, path, "expected a non-empty string");
     return n.Scalar();
   }
+  void three(const YAML::Node& n, const std::string& path, const std::string& unit) const {
+    if (!n.IsSequence() || n.size() != 3) fail(n, path, "expected a list of three numbers [x, y, z] in " + unit);
+  }
   Vec3 vec3(const YAML::Node& n, const std::string& path, double lo, double hi, const char* unit) const {
-    if (!n.IsSequence() || n.size() != 3) fail(n, path, std::string("expected a list of three numbers [x, y, z] in ") + unit);
+    three(n, path, unit);
     Vec3 v;
     for (int i = 0; i < 3; ++i) v[i] = number(n[i], path + "[" + std::to_string(i) + "]", lo, hi, unit);
+    return v;
+  }
+  // A run-time parameter (params.hpp): the range is the table's, the one `cpm set` checks.
+  double param(const YAML::Node& n, const std::string& path, const char* name,
+               ctl::ControlLaw law = ctl::ControlLaw::computed_torque) const {
+    const double v = real(n, path);
+    if (const std::string why = param_range_error(find_param(name), v, law); !why.empty()) fail(n, path, why);
+    return v;
+  }
+  // Three parameters NAME.x, NAME.y, NAME.z written as a list at `path`.
+  Vec3 param3(const YAML::Node& n, const std::string& path, const std::string& name,
+              ctl::ControlLaw law = ctl::ControlLaw::computed_torque) const {
+    three(n, path, param_unit(find_param(name + ".x"), law));
+    Vec3 v;
+    for (int i = 0; i < 3; ++i)
+      v[i] = param(n[i], path + "[" + std::to_string(i) + "]", (name + "." + "xyz"[i]).c_str(), law);
     return v;
   }
 
@@ -135,7 +159,8 @@ int milliseconds(const Reader& r, const YAML::Node& n, const std::string& path, 
   return static_cast<int>(r.integer(n, path, lo, hi));
 }
 
-void parse_canopen(const Reader& r, const YAML::Node& n, double rate_hz, bool skip_late_slots, CanopenConfig& c) {
+void parse_canopen(const Reader& r, const YAML::Node& n, double rate_hz, bool skip_late_slots,
+                   const HomingConfig& homing, CanopenConfig& c) {
   r.map(n, "canopen", {"interface", "bitrate", "drives", "gpio"},
         {"master_node_id", "velocity_from_drive", "max_bus_load", "heartbeat", "abort_connection_option",
          "pdo_timeout_cycles", "sdo_timeout_ms", "boot_timeout_ms", "reset_on_start", "feedback_wait_ms"});
@@ -196,6 +221,15 @@ void parse_canopen(const Reader& r, const YAML::Node& n, double rate_hz, bool sk
       if (dc.direction == 0) r.fail(d["direction"], p + ".direction", "must be 1 or -1");
     }
     if (d["position_offset"]) dc.position_offset_m = r.number(d["position_offset"], p + ".position_offset", -10, 10, "m");
+    // The drive's own homing (homing.axes.*.method: drive): its objects are
+    // written at start, and its PDOs carry the mode (the bus load below).
+    if (const auto& a = homing.axes[i]; a.method == HomingMethod::drive)
+      dc.homing = hal::DriveHomingConfig{.enabled = true,
+                                         .method = a.drive_method,
+                                         .speed_search_mps = std::abs(a.search_velocity),
+                                         .speed_zero_mps = a.latch_velocity,
+                                         .acceleration_mps2 = a.acceleration,
+                                         .offset_m = a.home_position};
     m.drives.push_back(dc);
   }
   // GPIO: the machine's safety and auxiliary lines.
@@ -229,7 +263,237 @@ void parse_canopen(const Reader& r, const YAML::Node& n, double rate_hz, bool sk
   }
 }
 
+constexpr const char* kAxisNames[3] = {"x", "y", "z"};
+
+// Which keys each homing method uses (a key of another method is refused by name).
+struct MethodKeys {
+  std::set<std::string> required, optional;
+};
+MethodKeys method_keys(HomingMethod m) {
+  switch (m) {
+    case HomingMethod::absolute: return {{"method"}, {}};
+    case HomingMethod::switch_:
+      return {{"method", "search_velocity", "home_position"},
+              {"latch_velocity", "acceleration", "use_index", "max_travel", "final_position", "timeout"}};
+    case HomingMethod::drive:
+      return {{"method", "drive_method", "search_velocity", "home_position"},
+              {"latch_velocity", "acceleration", "final_position", "timeout"}};
+  }
+  return {};
+}
+
+// CiA 402 homing methods (0x6098): 1-14 with the index, 17-30 without, 33-34
+// the index alone, 35 and 37 the current position; 15, 16, 31, 32, 36 are
+// reserved and the negative ones the manufacturer's.
+bool standard_drive_method(long m) { return (m >= 1 && m <= 14) || (m >= 17 && m <= 30) || (m >= 33 && m <= 35) || m == 37; }
+
+// An optional position that may be "none": absent, null or .nan.
+double position_or_none(const Reader& r, const YAML::Node& n, const std::string& path, double lo, double hi) {
+  if (!n || n.IsNull()) return std::numeric_limits<double>::quiet_NaN();
+  const double v = r.real(n, path);
+  if (std::isnan(v)) return v;
+  return r.number(n, path, lo, hi, "m (or null: none)");
+}
+
+AxisHomingConfig parse_axis_homing(const Reader& r, const YAML::Node& n, const std::string& p) {
+  if (!n.IsMap()) r.fail(n, p, "expected a mapping with method: absolute, switch or drive");
+  if (!n["method"]) r.fail(n, p + ".method", "missing (required: absolute, switch or drive)");
+  AxisHomingConfig a;
+  const std::string method = r.text(n["method"], p + ".method");
+  if (method == "absolute")
+    a.method = HomingMethod::absolute;
+  else if (method == "switch")
+    a.method = HomingMethod::switch_;
+  else if (method == "drive")
+    a.method = HomingMethod::drive;
+  else
+    r.fail(n["method"], p + ".method", "must be absolute, switch or drive, got '" + method + "'");
+  const MethodKeys keys = method_keys(a.method);
+  std::set<std::string> every;
+  for (HomingMethod m : {HomingMethod::absolute, HomingMethod::switch_, HomingMethod::drive}) {
+    const MethodKeys k = method_keys(m);
+    every.insert(k.required.begin(), k.required.end());
+    every.insert(k.optional.begin(), k.optional.end());
+  }
+  // A key of another method: a typo of the method, or a leftover that would
+  // silently do nothing.
+  for (const auto& kv : n)
+    if (kv.first.IsScalar() && every.count(kv.first.Scalar()) && !keys.required.count(kv.first.Scalar()) &&
+        !keys.optional.count(kv.first.Scalar()))
+      r.fail(kv.first, p + "." + kv.first.Scalar(), "not used by method " + method);
+  r.map(n, p, keys.required, keys.optional);
+  if (a.method == HomingMethod::absolute) return a;
+
+  const std::string sv = p + ".search_velocity", lv = p + ".latch_velocity";
+  a.search_velocity = r.number(n["search_velocity"], sv, -1.0, 1.0, "m/s");
+  if (a.method == HomingMethod::switch_ && a.search_velocity == 0.0)
+    r.fail(n["search_velocity"], sv, "must not be 0: its sign is the direction the switch is searched in (m/s)");
+  if (a.method == HomingMethod::drive && !(a.search_velocity > 0.0))
+    r.fail(n["search_velocity"], sv,
+           "must be > 0 m/s: the drive's method (drive_method) sets the direction, this is the speed, got " +
+               n["search_velocity"].Scalar());
+  if (n["latch_velocity"]) a.latch_velocity = r.positive(n["latch_velocity"], lv, 1.0, "m/s");
+  const YAML::Node& latch_node = n["latch_velocity"] ? n["latch_velocity"] : n;
+  auto mm_s = [](double v) {
+    std::ostringstream os;
+    os << v * 1e3 << " mm/s";
+    return os.str();
+  };
+  if (a.method == HomingMethod::switch_ && !(a.latch_velocity < std::abs(a.search_velocity)))
+    r.fail(latch_node, lv,
+           "must be slower than |search_velocity| (" + mm_s(std::abs(a.search_velocity)) + "), got " +
+               mm_s(a.latch_velocity));
+  if (a.method == HomingMethod::drive && a.latch_velocity > a.search_velocity)
+    r.fail(latch_node, lv,
+           "must not be faster than search_velocity (" + mm_s(a.search_velocity) + "), got " + mm_s(a.latch_velocity));
+  if (n["acceleration"]) a.acceleration = r.positive(n["acceleration"], p + ".acceleration", 100.0, "m/s^2");
+  a.home_position = r.number(n["home_position"], p + ".home_position", -10.0, 10.0, "m");
+  a.final_position = position_or_none(r, n["final_position"], p + ".final_position", -10.0, 10.0);
+  if (n["timeout"]) a.timeout = r.positive(n["timeout"], p + ".timeout", 3600.0, "s");
+  if (a.method == HomingMethod::drive) {
+    const long m = r.integer(n["drive_method"], p + ".drive_method", -128, 127);
+    if (!standard_drive_method(m))
+      r.fail(n["drive_method"], p + ".drive_method",
+             "must be a CiA 402 homing method: 1-14, 17-30, 33-35 or 37 (15, 16, 31, 32, 36 are reserved, the "
+             "negative ones the manufacturer's), got " + n["drive_method"].Scalar());
+    a.drive_method = static_cast<int>(m);
+    return a;
+  }
+  if (n["use_index"]) a.use_index = r.boolean(n["use_index"], p + ".use_index");
+  if (n["max_travel"]) a.max_travel = r.positive(n["max_travel"], p + ".max_travel", 10.0, "m");
+  // A timeout shorter than the search over max_travel would end every long search before its travel does.
+  const double search_time = a.max_travel / std::abs(a.search_velocity);
+  if (a.timeout < search_time) {
+    std::ostringstream os;
+    os << "must be at least the search over max_travel: " << a.max_travel * 1e3 << " mm at "
+       << std::abs(a.search_velocity) * 1e3 << " mm/s take " << search_time << " s, got " << a.timeout << " s";
+    r.fail(n["timeout"] ? n["timeout"] : n, p + ".timeout", os.str());
+  }
+  return a;
+}
+
+// Where the homing section's nodes are, for the checks made once the
+// backend's section is read.
+struct HomingNodes {
+  YAML::Node section;
+  std::array<YAML::Node, 3> axis;  // homing.axes.x|y|z (undefined: not given, absolute)
+};
+
+int actuator_of(const Reader& r, const YAML::Node& n, const std::string& path) {
+  if (n.IsScalar()) {
+    const std::string& a = n.Scalar();
+    for (int i = 0; i < 3; ++i)
+      if (a == kAxisNames[i] || a == std::to_string(i + 1)) return i;
+  }
+  r.fail(n, path, "expected an actuator: x, y, z or 1, 2, 3");
+}
+
+void parse_homing(const Reader& r, const YAML::Node& n, const DaemonConfig& c, HomingConfig& h, HomingNodes& where) {
+  where.section = n;
+  r.map(n, "homing", {"axes"}, {"order", "actuator_gains"});
+  const auto axes = r.map(n["axes"], "homing.axes", {}, {"x", "y", "z"});
+  for (int i = 0; i < 3; ++i) {
+    if (!axes[kAxisNames[i]]) continue;
+    where.axis[static_cast<std::size_t>(i)] = axes[kAxisNames[i]];
+    const std::string p = std::string("homing.axes.") + kAxisNames[i];
+    auto& a = h.axes[static_cast<std::size_t>(i)];
+    a = parse_axis_homing(r, axes[kAxisNames[i]], p);
+    if (a.method == HomingMethod::drive && c.backend != "canopen")
+      r.fail(axes[kAxisNames[i]]["method"], p + ".method",
+             "drive needs backend: canopen (the drive's own homing mode); the simulator homes with switch");
+    if (const ConstraintError e = homing_motion_error(a, c.jog, c.limits, i); !e.empty()) {
+      const std::string key = e.key.substr(e.key.rfind('.') + 1);
+      r.fail(axes[kAxisNames[i]][key] ? axes[kAxisNames[i]][key] : axes[kAxisNames[i]], e.key, e.why);
+    }
+  }
+  if (n["order"]) {
+    const YAML::Node o = n["order"];
+    if (!o.IsSequence() || o.size() < 1 || o.size() > 3)
+      r.fail(o, "homing.order", "expected a list of one to three actuators, e.g. [z, x, y]");
+    h.order_count = 0;
+    std::array<bool, 3> listed{};
+    for (std::size_t k = 0; k < o.size(); ++k) {
+      const std::string p = "homing.order[" + std::to_string(k) + "]";
+      const int i = actuator_of(r, o[k], p);
+      if (listed[static_cast<std::size_t>(i)]) r.fail(o[k], p, std::string("actuator ") + kAxisNames[i] + " is listed twice");
+      if (h.axes[static_cast<std::size_t>(i)].method == HomingMethod::absolute)
+        r.fail(o[k], p,
+               std::string("actuator ") + kAxisNames[i] + " is absolute (homing.axes." + kAxisNames[i] +
+                   "): nothing to home; leave it out");
+      listed[static_cast<std::size_t>(i)] = true;
+      h.order[static_cast<std::size_t>(h.order_count++)] = i;
+    }
+    for (int i = 0; i < 3; ++i)
+      if (!listed[static_cast<std::size_t>(i)] && h.axes[static_cast<std::size_t>(i)].method != HomingMethod::absolute)
+        r.fail(o, "homing.order",
+               std::string("actuator ") + kAxisNames[i] + " is homed (method " +
+                   homing_method_name(h.axes[static_cast<std::size_t>(i)].method) + ") but not listed");
+  } else {
+    // z first: away from the work.
+    h.order_count = 0;
+    for (int i : {2, 0, 1})
+      if (h.axes[static_cast<std::size_t>(i)].method != HomingMethod::absolute)
+        h.order[static_cast<std::size_t>(h.order_count++)] = i;
+  }
+  if (n["actuator_gains"]) {
+    const auto g = r.map(n["actuator_gains"], "homing.actuator_gains", {"kp", "kd"});
+    h.actuator_gains.kp = r.vec3(g["kp"], "homing.actuator_gains.kp", 0.0, 1e9, "N/m");
+    h.actuator_gains.kd = r.vec3(g["kd"], "homing.actuator_gains.kd", 0.0, 1e7, "N s/m");
+    for (int i = 0; i < 3; ++i)
+      if (!(h.actuator_gains.kp[i] > 0.0))
+        r.fail(g["kp"][i], "homing.actuator_gains.kp[" + std::to_string(i) + "]",
+               "must be > 0 N/m: it holds the actuator until every actuator is homed");
+  }
+}
+
+// What homing needs from the backend: switches and index marks where the
+// method uses them, known only once the backend's section is read.
+void check_homing_inputs(const Reader& r, const YAML::Node& root, const DaemonConfig& c, const HomingNodes& where) {
+  const bool sim = c.backend == "sim";
+  for (int i = 0; i < 3; ++i) {
+    const auto& a = c.homing.axes[static_cast<std::size_t>(i)];
+    const std::string p = std::string("homing.axes.") + kAxisNames[i];
+    const YAML::Node& n = where.axis[static_cast<std::size_t>(i)];
+    if (sim && a.method == HomingMethod::absolute && c.sim.encoder_zero[i] != 0.0) {
+      std::ostringstream os;
+      os << "is " << c.sim.encoder_zero[i] * 1e3 << " mm but actuator " << kAxisNames[i]
+         << " is absolute (no homing.axes." << kAxisNames[i] << "): the daemon would take its position "
+         << "wrong by that much; home it (method: switch) or set 0";
+      r.fail(root["sim"]["encoder_zero"][i], "sim.encoder_zero[" + std::to_string(i) + "]", os.str());
+    }
+    if (a.method != HomingMethod::switch_) continue;
+    const auto home = static_cast<hal::Line>(static_cast<int>(hal::Line::home_x) + i);
+    const auto index = static_cast<hal::Line>(static_cast<int>(hal::Line::index_x) + i);
+    if (sim && std::isnan(c.sim.home_switch[i]))
+      r.fail(n["method"], p + ".method",
+             "switch needs a home switch: sim.home_switch[" + std::to_string(i) + "] is none");
+    if (!sim && !c.canopen.gpio[home].present)
+      r.fail(n["method"], p + ".method",
+             std::string("switch needs a home switch line: canopen.gpio.") + hal::line_name(home) + " is not given");
+    if (a.use_index && sim && !(c.sim.index_pitch > 0.0))
+      r.fail(n["use_index"], p + ".use_index", "needs index marks: sim.index_pitch is 0 (none)");
+    if (a.use_index && !sim && !c.canopen.gpio[index].present)
+      r.fail(n["use_index"], p + ".use_index",
+             std::string("needs the index line: canopen.gpio.") + hal::line_name(index) + " is not given");
+  }
+}
+
 }  // namespace
+
+const char* homing_method_name(HomingMethod m) noexcept {
+  switch (m) {
+    case HomingMethod::absolute: return "absolute";
+    case HomingMethod::switch_: return "switch";
+    case HomingMethod::drive: return "drive";
+  }
+  return "invalid";
+}
+
+bool HomingConfig::all_absolute() const noexcept {
+  for (const auto& a : axes)
+    if (a.method != HomingMethod::absolute) return false;
+  return true;
+}
 
 namespace {
 DaemonConfig parse_config_checked(const std::string& text, const std::string& name,
@@ -260,7 +524,8 @@ DaemonConfig parse_config_checked(const std::string& text, const std::string& na
   const Reader r(name);
   DaemonConfig c;
   c.source = name;
-  r.map(root, "", {"model_file", "backend", "loop", "controller", "limits", "lcm"}, {"sim", "canopen", "security"});
+  r.map(root, "", {"model_file", "backend", "loop", "controller", "limits", "lcm"},
+        {"sim", "canopen", "security", "jog", "homing"});
 
   c.model_file = resolve(base_dir, r.text(root["model_file"], "model_file"));
   c.backend = r.text(root["backend"], "backend");
@@ -271,7 +536,7 @@ DaemonConfig parse_config_checked(const std::string& text, const std::string& na
 
   if (root["sim"]) {
     const auto s = r.map(root["sim"], "sim", {"truth_model_file", "initial_position"},
-                         {"substeps", "enable_delay", "encoder"});
+                         {"substeps", "enable_delay", "encoder", "encoder_zero", "home_switch", "index_pitch"});
     c.sim.truth_model_file = resolve(base_dir, r.text(s["truth_model_file"], "sim.truth_model_file"));
     c.sim.initial_position = r.vec3(s["initial_position"], "sim.initial_position", 0.0, 2.0, "m");
     if (s["substeps"]) c.sim.plant.substeps = static_cast<int>(r.integer(s["substeps"], "sim.substeps", 1, 1000));
@@ -287,6 +552,19 @@ DaemonConfig parse_config_checked(const std::string& text, const std::string& na
         enc.velocity_noise = r.number(e["velocity_noise"], "sim.encoder.velocity_noise", 0.0, 1.0, "m/s");
       if (e["seed"]) enc.seed = static_cast<std::uint64_t>(r.integer(e["seed"], "sim.encoder.seed", 0, 1L << 62));
     }
+    if (s["encoder_zero"]) c.sim.encoder_zero = r.vec3(s["encoder_zero"], "sim.encoder_zero", -10.0, 10.0, "m");
+    if (s["home_switch"]) {
+      const YAML::Node h = s["home_switch"];
+      r.three(h, "sim.home_switch", "m (null: no switch)");
+      for (int i = 0; i < 3; ++i)
+        c.sim.home_switch[i] = position_or_none(r, h[i], "sim.home_switch[" + std::to_string(i) + "]", -10.0, 10.0);
+    }
+    if (s["index_pitch"]) {
+      c.sim.index_pitch = r.number(s["index_pitch"], "sim.index_pitch", 0.0, 1.0, "m");
+      // Marks closer than this would run into one another (the simulator's mark is 10 um wide).
+      if (c.sim.index_pitch > 0.0 && c.sim.index_pitch < 1e-4)
+        r.fail(s["index_pitch"], "sim.index_pitch", "must be 0 (no index) or at least 0.1 mm, got " + s["index_pitch"].Scalar());
+    }
   }
 
   const auto l = r.map(root["loop"], "loop", {"rate_hz"},
@@ -300,7 +578,7 @@ DaemonConfig parse_config_checked(const std::string& text, const std::string& na
     c.loop.max_consecutive_overruns =
         static_cast<int>(r.integer(l["max_consecutive_overruns"], "loop.max_consecutive_overruns", 1, 100000));
 
-  const auto k = r.map(root["controller"], "controller", {"law"}, {"kp", "kd"});
+  const auto k = r.map(root["controller"], "controller", {"law"}, {"kp", "kd", "transfer_time"});
   const std::string law = r.text(k["law"], "controller.law");
   const auto lw = ctl::law_from_name(law);
   if (!lw) r.fail(k["law"], "controller.law", "must be pd, pd_gravity, pd_feedforward or computed_torque, got '" + law + "'");
@@ -309,9 +587,11 @@ DaemonConfig parse_config_checked(const std::string& text, const std::string& na
   if (k["kp"].IsDefined() != k["kd"].IsDefined())
     r.fail(k, "controller", "give both kp and kd, or neither (Table 3 gains)");
   if (k["kp"]) {
-    c.controller.gains.kp = r.vec3(k["kp"], "controller.kp", 0.0, 1e9, "(N/m, or 1/s^2 for computed_torque)");
-    c.controller.gains.kd = r.vec3(k["kd"], "controller.kd", 0.0, 1e7, "(N s/m, or 1/s for computed_torque)");
+    c.controller.gains.kp = r.param3(k["kp"], "controller.kp", "controller.kp", *lw);
+    c.controller.gains.kd = r.param3(k["kd"], "controller.kd", "controller.kd", *lw);
   }
+  if (k["transfer_time"])
+    c.controller.transfer_time = r.param(k["transfer_time"], "controller.transfer_time", "controller.transfer_time");
   try {
     c.controller.gains.validate();
   } catch (const Error& e) {
@@ -320,24 +600,46 @@ DaemonConfig parse_config_checked(const std::string& text, const std::string& na
 
   const auto m = r.map(root["limits"], "limits",
                        {"workspace_min", "workspace_max", "velocity", "acceleration", "force", "following_error"},
-                       {"overspeed", "stop_deceleration", "enable_timeout", "saturation_time"});
+                       {"overspeed", "stop_deceleration", "enable_timeout", "saturation_time", "allow_velocity_step"});
   auto& L = c.limits;
-  L.workspace_min = r.vec3(m["workspace_min"], "limits.workspace_min", 0.0, 2.0, "m");
-  L.workspace_max = r.vec3(m["workspace_max"], "limits.workspace_max", 0.0, 2.0, "m");
+  L.workspace_min = r.param3(m["workspace_min"], "limits.workspace_min", "limits.workspace_min");
+  L.workspace_max = r.param3(m["workspace_max"], "limits.workspace_max", "limits.workspace_max");
   for (int i = 0; i < 3; ++i)
-    if (!(L.workspace_min[i] < L.workspace_max[i]))
-      r.fail(m["workspace_max"], "limits.workspace_max[" + std::to_string(i) + "]",
-             "must be greater than limits.workspace_min[" + std::to_string(i) + "]");
-  L.velocity = r.positive(m["velocity"], "limits.velocity", 5.0, "m/s");
-  L.acceleration = r.positive(m["acceleration"], "limits.acceleration", 100.0, "m/s^2");
-  L.force = r.positive(m["force"], "limits.force", 10000.0, "N");
-  L.following_error = r.positive(m["following_error"], "limits.following_error", 0.1, "m");
-  L.overspeed = m["overspeed"] ? r.positive(m["overspeed"], "limits.overspeed", 10.0, "m/s") : 1.6 * L.velocity;
-  if (L.overspeed <= L.velocity) r.fail(m["overspeed"], "limits.overspeed", "must be greater than limits.velocity");
+    if (const ConstraintError e = workspace_error(L, i); !e.empty())
+      r.fail(m["workspace_max"][i], "limits.workspace_max[" + std::to_string(i) + "]", e.why);
+  L.velocity = r.param(m["velocity"], "limits.velocity", "limits.velocity");
+  L.acceleration = r.param(m["acceleration"], "limits.acceleration", "limits.acceleration");
+  L.force = r.param(m["force"], "limits.force", "limits.force");
+  L.following_error = r.param(m["following_error"], "limits.following_error", "limits.following_error");
+  L.overspeed = m["overspeed"] ? r.param(m["overspeed"], "limits.overspeed", "limits.overspeed") : 1.6 * L.velocity;
+  if (const ConstraintError e = overspeed_error(L); !e.empty()) r.fail(m["overspeed"], e.key, e.why);
   if (m["stop_deceleration"])
-    L.stop_deceleration = r.positive(m["stop_deceleration"], "limits.stop_deceleration", 100.0, "m/s^2");
-  if (m["enable_timeout"]) L.enable_timeout = r.positive(m["enable_timeout"], "limits.enable_timeout", 60.0, "s");
-  if (m["saturation_time"]) L.saturation_time = r.positive(m["saturation_time"], "limits.saturation_time", 60.0, "s");
+    L.stop_deceleration = r.param(m["stop_deceleration"], "limits.stop_deceleration", "limits.stop_deceleration");
+  if (m["enable_timeout"]) L.enable_timeout = r.param(m["enable_timeout"], "limits.enable_timeout", "limits.enable_timeout");
+  if (m["saturation_time"])
+    L.saturation_time = r.param(m["saturation_time"], "limits.saturation_time", "limits.saturation_time");
+  if (m["allow_velocity_step"]) L.allow_velocity_step = r.boolean(m["allow_velocity_step"], "limits.allow_velocity_step");
+
+  if (root["jog"]) {
+    const auto j = r.map(root["jog"], "jog", {}, {"max_velocity", "acceleration", "keepalive", "stop_distance"});
+    for (const char* key : {"max_velocity", "acceleration", "keepalive", "stop_distance"}) {
+      const std::string param = std::string("jog.") + key;
+      if (j[key]) find_param(param).field(c) = r.param(j[key], param, param.c_str());
+    }
+  }
+  if (const ConstraintError e = jog_error(c.jog, L); !e.empty()) {
+    // The key it is about if the file gives it; else the jog section, or the
+    // limit that the default jog breaks.
+    const std::string key = e.key.substr(4);
+    const YAML::Node at = root["jog"] && root["jog"][key] ? root["jog"][key] : root["jog"] ? root["jog"] : m["velocity"];
+    r.fail(at, e.key, e.why);
+  }
+
+  HomingNodes homing_nodes;
+  if (root["homing"])
+    parse_homing(r, root["homing"], c, c.homing, homing_nodes);
+  else
+    c.homing.order_count = 0;  // every actuator absolute: nothing to home
 
   const auto n = r.map(root["lcm"], "lcm", {"url"}, {"channels", "state_decimation", "session_timeout"});
   c.lcm.url = r.text(n["url"], "lcm.url");
@@ -351,14 +653,16 @@ DaemonConfig parse_config_checked(const std::string& text, const std::string& na
       r.fail(n["session_timeout"], "lcm.session_timeout", "must be at least 0.5 s (clients ping every 0.25 s)");
   }
   if (n["channels"]) {
-    const auto ch =
-        r.map(n["channels"], "lcm.channels", {}, {"state", "stats", "trajectory", "control", "ack", "security"});
+    const auto ch = r.map(n["channels"], "lcm.channels", {},
+                          {"state", "stats", "trajectory", "control", "ack", "security", "drives", "params"});
     if (ch["state"]) c.lcm.state_channel = r.text(ch["state"], "lcm.channels.state");
     if (ch["stats"]) c.lcm.stats_channel = r.text(ch["stats"], "lcm.channels.stats");
     if (ch["trajectory"]) c.lcm.trajectory_channel = r.text(ch["trajectory"], "lcm.channels.trajectory");
     if (ch["control"]) c.lcm.control_channel = r.text(ch["control"], "lcm.channels.control");
     if (ch["ack"]) c.lcm.ack_channel = r.text(ch["ack"], "lcm.channels.ack");
     if (ch["security"]) c.lcm.security_channel = r.text(ch["security"], "lcm.channels.security");
+    if (ch["drives"]) c.lcm.drives_channel = r.text(ch["drives"], "lcm.channels.drives");
+    if (ch["params"]) c.lcm.params_channel = r.text(ch["params"], "lcm.channels.params");
   }
   if (root["security"]) {
     const auto s = r.map(root["security"], "security", {},
@@ -372,7 +676,9 @@ DaemonConfig parse_config_checked(const std::string& text, const std::string& na
       c.security.refusal_acks_per_second =
           r.number(s["refusal_acks_per_second"], "security.refusal_acks_per_second", 0.0, 10000.0, "1/s");
   }
-  if (root["canopen"]) parse_canopen(r, root["canopen"], c.loop.rate_hz, c.loop.skip_late_slots, c.canopen);
+  if (root["canopen"])
+    parse_canopen(r, root["canopen"], c.loop.rate_hz, c.loop.skip_late_slots, c.homing, c.canopen);
+  check_homing_inputs(r, root, c, homing_nodes);
   return c;
 }
 }  // namespace

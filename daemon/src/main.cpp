@@ -137,6 +137,9 @@ int run(int argc, char** argv) {
     so.plant = cfg.sim.plant;
     so.initial_position = cfg.sim.initial_position;
     so.enable_delay = cfg.sim.enable_delay;
+    so.encoder_zero = cfg.sim.encoder_zero;
+    so.home_switch = cfg.sim.home_switch;
+    so.index_pitch = cfg.sim.index_pitch;
     backend = std::make_unique<SimBackend>(std::make_unique<ctl::Machine>(load_model(cfg.sim.truth_model_file)), so);
   } else {
     backend = std::make_unique<CanopenBackend>(cfg.canopen);

@@ -90,6 +90,9 @@ struct AxisHomingConfig {
 struct HomingConfig {
   std::array<AxisHomingConfig, 3> axes{};  // actuators 1, 2, 3
   std::array<int, 3> order = {2, 0, 1};    // the order CMD_HOME with axes 0 homes them in (z first: away from the work)
+  // As loaded, order[0 .. order_count) are exactly the actuators that are not
+  // absolute (none without a homing section); the defaults here are for
+  // configurations built in code.
   int order_count = 3;
   // The PD law each actuator is held by before every actuator is homed (N/m, N s/m).
   ctl::Gains actuator_gains{Vec3::Constant(12691.0), Vec3::Constant(436.0)};
@@ -136,8 +139,12 @@ struct SimConfig {
   // until homed the daemon does not know where the platform is. 0 = absolute.
   Vec3 encoder_zero = Vec3::Zero();
   // Home switches in the plant: actuator i's switch is actuated while
-  // d_i < home_switch[i] (m); NaN: none.
+  // d_i < home_switch[i] (m); NaN: none (YAML: null or .nan for that element).
   Vec3 home_switch = Vec3::Constant(std::numeric_limits<double>::quiet_NaN());
+  // Encoder index marks: one every index_pitch of the true d (at d = k pitch,
+  // k integer; m), the same on the three actuators; 0 = none. How the
+  // simulator reports them: SimBackendOptions::index_pitch.
+  double index_pitch = 0.0;
 };
 
 // The CANopen backend (docs/canopen-backend.md): three CiA 402 drives in
