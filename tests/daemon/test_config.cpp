@@ -121,7 +121,7 @@ TEST(Config, NewKeysHaveTheirDefaults) {
   EXPECT_EQ(c.jog.max_velocity, 0.05);
   EXPECT_EQ(c.jog.acceleration, 0.5);
   EXPECT_EQ(c.jog.keepalive, 0.2);
-  EXPECT_EQ(c.jog.stop_distance, 0.0125);  // exactly what the defaults need: accepted despite rounding
+  EXPECT_EQ(c.jog.stop_distance, 0.015);  // what the defaults need (12.5 mm) and a margin
   EXPECT_TRUE(c.homing.all_absolute());
   EXPECT_EQ(c.homing.order_count, 0);  // nothing to home
   EXPECT_TRUE(c.sim.encoder_zero.isZero());

@@ -129,31 +129,33 @@ TEST(Homed, BeforeHomingOnlyActuatorJogsAreTakenAndTheyMoveOneActuator) {
   EXPECT_EQ(h.state().faults, 0);
 }
 
-TEST(StartCheck, AVelocityStepIsRefusedByTheLoopUnlessGranted) {
-  LoopHarness h;
-  h.to_holding();
+Command circle_segment(const Vec3& start, const ctl::CircleSpec& spec, bool allow_step) {
   Command c;
   c.kind = CommandKind::segment;
   c.source = 2;
-  const ctl::CircleTrajectory circle{ctl::CircleSpec{}};  // 275 mm/s at t = 0
-  c.segment.start = h.queue_end();
+  const ctl::CircleTrajectory circle{spec};
+  c.segment.start = start;
   c.segment.end = circle.sample(circle.duration()).p;
   c.segment.traj = circle;
-  const Ack refused = h.command(c);
+  c.segment.allow_step = allow_step;
+  return c;
+}
+
+TEST(StartCheck, AVelocityStepIsRefusedByTheLoopUnlessGranted) {
+  LoopHarness h;
+  h.to_holding();
+  // Elkady's circle: 275 mm/s at t = 0, from rest.
+  const Ack refused = h.command(circle_segment(h.queue_end(), ctl::CircleSpec{}, false));
   EXPECT_FALSE(refused.accepted);
   EXPECT_EQ(refused.reason, ack_t::REASON_NOT_CONTINUOUS);
   EXPECT_EQ(h.mode(), Mode::holding);
-  c.segment.allow_step = true;
-  EXPECT_TRUE(h.command(c).accepted);
+  EXPECT_TRUE(h.command(circle_segment(h.queue_end(), ctl::CircleSpec{}, true)).accepted);
   // A ramped circle starts at rest: no grant needed.
   LoopHarness g;
   g.to_holding();
   ctl::CircleSpec ramped;
   ramped.ramp_time = 0.5;
-  c.segment.traj = ctl::CircleTrajectory{ramped};
-  c.segment.start = g.queue_end();
-  c.segment.allow_step = false;
-  EXPECT_TRUE(g.command(c).accepted);
+  EXPECT_TRUE(g.command(circle_segment(g.queue_end(), ramped, false)).accepted);
 }
 
 // The server's view: the paper's circle on the simulator with the flag,

@@ -122,10 +122,10 @@ TEST(Params, BrokenConstraintsAreRefusedAndLeaveTheConfigUnchanged) {
             std::string::npos);
   EXPECT_NE(refusal(c, "limits.workspace_max.y", 0.235).find("limits.workspace_max.y: must be greater"),
             std::string::npos);
-  // The jog (50 mm/s, 0.2 s, 500 mm/s^2, 12.5 mm) must stop within its distance.
+  // The jog (50 mm/s, 0.2 s, 500 mm/s^2: 12.5 mm) must stop within its distance (15 mm).
   const std::string fast = refusal(c, "jog.max_velocity", 0.06);
   EXPECT_NE(fast.find("jog.max_velocity 60 mm/s"), std::string::npos) << fast;
-  EXPECT_NE(fast.find("12 + 3.6 = 15.6 mm, more than jog.stop_distance 12.5 mm"), std::string::npos) << fast;
+  EXPECT_NE(fast.find("12 + 3.6 = 15.6 mm, more than jog.stop_distance 15 mm"), std::string::npos) << fast;
   EXPECT_NE(refusal(c, "jog.keepalive", 0.3).find("15 + 2.5 = 17.5 mm"), std::string::npos);
   EXPECT_NE(refusal(c, "jog.acceleration", 0.2).find("10 + 6.25 = 16.25 mm"), std::string::npos);
   EXPECT_NE(refusal(c, "jog.stop_distance", 0.01).find("12.5 mm, more than jog.stop_distance 10 mm"),
