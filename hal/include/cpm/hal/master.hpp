@@ -14,6 +14,13 @@
 // (DriveCommand::target) and sends zero torque unless the drive reports
 // operation enabled and the target is enabled. Faults it detects are latched
 // in Feedback until reset_faults().
+//
+// A drive configured with DriveHomingConfig::enabled also gets its homing
+// objects (0x6098, 0x607C, 0x6099, 0x609A) at start(), and the modes of
+// operation in RPDO1 and its display in TPDO1 (pdo.hpp): DriveCommand::homing
+// then runs it in homing mode (6) with zero torque, and start_homing makes
+// controlword bit 4 rise once the drive shows mode 6; DriveFeedback::homing
+// decodes its statusword.
 #pragma once
 
 #include <array>
@@ -214,6 +221,9 @@ class Master {
     std::int64_t last_heartbeat_ns = -1;
     std::uint64_t prev_cycle = 0;   // cycle of the previous position sample
     bool have_prev = false;
+    // Homing: the last RPDO had mode 6 and bit 4 low; the drive has seen
+    // bit 4 low in mode 6, so raising it is an edge.
+    bool sent_mode6_low = false, homing_armed = false;
     SdoClient sdo;
     Drive(const DriveConfig& c, std::int64_t sdo_timeout_ns);
   };
@@ -225,6 +235,8 @@ class Master {
   void write_pdo(Drive& d, const pdo::Layout& l, bool enabled);
   void check_u32(Drive& d, std::uint16_t index, std::uint8_t sub, std::uint32_t want, const char* what);
   void disable_unused_pdos(Drive& d);
+  // RPDO1 as this drive's mapping has it (with the mode for a homing drive).
+  static CanFrame rpdo1(const Drive& d, std::uint16_t cw, std::int16_t torque, std::int8_t mode) noexcept;
 
   CanBus& bus_;
   Clock& clock_;
