@@ -10,6 +10,7 @@
 #include <cmath>
 
 #include "canopen/rig.hpp"
+#include "cpm/sim/virtual_drives_control.hpp"
 #include "support/allocation_counter.hpp"
 
 namespace cpm::daemon::test {
@@ -41,9 +42,12 @@ struct Bench {
   Vec3 hold = Vec3::Zero();
   bool holding = false;
 
-  explicit Bench(const DaemonConfig& c, bool incremental = true)
+  explicit Bench(const DaemonConfig& c, bool incremental = true, double index_pitch = 0)
       : r(c, false, sim::DriveTiming::synchronous, ctl::MachineModel::elkady(), {},
-          [incremental](sim::VirtualMachineConfig& vc) { vc.incremental = incremental; }) {
+          [incremental, index_pitch](sim::VirtualMachineConfig& vc) {
+            vc.incremental = incremental;
+            vc.index_pitch = index_pitch;
+          }) {
     r.backend->start(1.0 / r.cfg.loop.rate_hz);
   }
   void step() {
@@ -148,6 +152,49 @@ TEST(CanopenHoming, ZHomesOnItsSwitchUnderGravityAndTheCountsBecomeTrue) {
   EXPECT_EQ(b.r.vm->drive(2).mode_display(), hal::cia402::kModeCyclicSyncTorque);
   EXPECT_NEAR(b.in.position[2] - b.true_d(2), shift, 2 * kCount);  // the redefinition stays
   EXPECT_NEAR(b.true_d(2), d, 20e-6);
+}
+
+// Method 5 on the machine's index (one every 4 mm of d): the home is the
+// first index above where the home switch releases (10 mm): 12 mm, exactly
+// (the drive captures the index where it is).
+TEST(CanopenHoming, IndexMethodHomesOnTheFirstIndexPastTheSwitch) {
+  Bench b(homing_config({2}, 5), true, 0.004);
+  b.enable();
+  ASSERT_GE(b.home(2), 0) << b.r.backend->fault_text();
+  ASSERT_EQ(b.in.drive_homing[2], DriveHoming::attained);
+  const double shift = b.in.position[2] - b.true_d(2);
+  EXPECT_NEAR(shift, 0.0125 - 0.012, 2 * kCount);
+  EXPECT_NEAR(b.true_d(2), 0.012, kZero * kPeriod + 2 * kCount);
+}
+
+// The control socket's words for it.
+TEST(CanopenHoming, HomeSwitchFaultFromTheControlProtocol) {
+  Bench b(homing_config({2}));
+  bool quit = false;
+  EXPECT_EQ(sim::execute_control(*b.r.vm, "home-switch z dead", 0, quit), "ok home-switch z dead");
+  EXPECT_TRUE(contains(sim::execute_control(*b.r.vm, "home-switch z maybe", 0, quit), "error: home-switch: expected dead or ok"));
+  EXPECT_TRUE(contains(sim::execute_control(*b.r.vm, "home-switch 4 dead", 0, quit), "error: axis must be"));
+  b.enable();
+  ASSERT_GE(b.home(2), 0);
+  EXPECT_EQ(b.in.drive_homing[2], DriveHoming::error);
+  // Mended, a new start (bit 4 dropped and raised) homes. The error stays
+  // (bit 4 falling does not clear it) until the drive starts again: the
+  // cycle that raises start_homing still reads it, the next reads running.
+  EXPECT_EQ(sim::execute_control(*b.r.vm, "home-switch 3 ok", 0, quit), "ok home-switch 3 ok");
+  b.out.start_homing[2] = false;
+  b.steps(3);
+  EXPECT_EQ(b.in.drive_homing[2], DriveHoming::error);
+  b.out.start_homing[2] = true;
+  b.step();
+  EXPECT_EQ(b.in.drive_homing[2], DriveHoming::error);
+  b.step();
+  EXPECT_EQ(b.in.drive_homing[2], DriveHoming::running);
+  ASSERT_GE(b.home(2), 0);
+  EXPECT_EQ(b.in.drive_homing[2], DriveHoming::attained) << b.r.backend->fault_text();
+  // From below the switch (inside it) straight up out of it: the first
+  // motion, at the speed for switch.
+  EXPECT_GE(b.true_d(2) - kHomeSwitch, -2 * kCount);
+  EXPECT_LE(b.true_d(2) - kHomeSwitch, kSearch * kPeriod + 2 * kCount);
 }
 
 // The home switch never actuates (virtual-drives: "home-switch z dead"):

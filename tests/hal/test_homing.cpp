@@ -418,10 +418,13 @@ TEST(Homing, BusLoadCountsTheModeBytes) {
   const BusLoad z = bus_load(c);
   EXPECT_EQ(z.frames_per_cycle, 7);
   EXPECT_EQ(z.bits_per_cycle, 685 + 20);
+  // (0.8 x 1e6 - 5200 bits/s of heartbeats) / 705 bits.
+  EXPECT_EQ(std::floor(z.max_rate_hz), 1127);
   for (auto& d : c.drives) d.homing = {true, 21, 0.02, 0.002, 0.2, 0};
   const BusLoad all = bus_load(c);
   EXPECT_EQ(all.bits_per_cycle, 55 + 3 * (105 + 125));  // 745
   EXPECT_NEAR(all.load, (745 + 5.2) / 1000, 1e-9);       // 75.0 %
+  EXPECT_EQ(std::floor(all.max_rate_hz), 1066);
   EXPECT_TRUE(all.fits);
   Rig r(c);
   EXPECT_EQ(r.master->load().bits_per_cycle, 745);

@@ -62,12 +62,12 @@ int run(int argc, char** argv) {
   app.add_option("--limit-margin", d.cfg.limit_margin,
                  "limit switches wired to the drives, actuated within M m of each stroke end (0: none)")
       ->type_name("M")
-      ->check(CLI::NonNegativeNumber.description(""))
+      ->check(program::finite() & CLI::Range(0.0, 0.1).description(""))
       ->default_str(CLI::detail::to_string(d.cfg.limit_margin));
   app.add_option("--index-pitch", d.cfg.index_pitch,
                  "an encoder index pulse at every whole multiple of P m of d (e.g. a screw's lead; 0: none)")
       ->type_name("P")
-      ->check(CLI::NonNegativeNumber.description(""))
+      ->check(program::finite() & CLI::Range(0.0, 1.0).description(""))
       ->default_str("0");
   app.add_option("--timing", timing,
                  "synchronous: a torque received before SYNC k acts from SYNC k, after the positions of SYNC k were "
