@@ -400,6 +400,10 @@ TEST(Homing, MappingAndObjectsOnlyOnHomingDrives) {
   r.cmd.drive[2].force_n = -100;
   r.cycles(2);
   EXPECT_EQ(z.applied_torque(), -250);
+  // stop() disables it with its own RPDO length too.
+  r.master->stop();
+  r.clock.wait(r.period_ns());
+  EXPECT_EQ(z.state(), State::switch_on_disabled);
   EXPECT_EQ(z.bad_pdos, 0u);
 }
 
