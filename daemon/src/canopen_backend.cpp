@@ -4,6 +4,8 @@
 #include <cstdarg>
 #include <cstdio>
 
+#include <cpm_msgs/drives_t.hpp>
+
 #include "cpm/hal/gpiod_io.hpp"
 #include "cpm/hal/socketcan.hpp"
 
@@ -13,7 +15,47 @@ using hal::cia402::State;
 
 CanopenBackend::CanopenBackend(const CanopenConfig& cfg) : cfg_(cfg) {
   feedback_wait_ns_ = static_cast<std::int64_t>(std::llround(cfg_.feedback_wait * 1e9));
+  // The plan of this mapping (homing drives carry two more bytes per cycle).
+  if (!cfg_.master.drives.empty()) cfg_.load = hal::bus_load(cfg_.master);
 }
+
+namespace {
+
+// What the loop needs of the drive's homing: "attained" only once the drive
+// is at rest at its home (completed); before that it is still running.
+DriveHoming loop_homing(hal::cia402::HomingStatus h) noexcept {
+  using H = hal::cia402::HomingStatus;
+  switch (h) {
+    case H::idle: return DriveHoming::idle;
+    case H::in_progress:
+    case H::interrupted:
+    case H::attained: return DriveHoming::running;
+    case H::completed: return DriveHoming::attained;
+    case H::error: return DriveHoming::error;
+  }
+  return DriveHoming::idle;
+}
+
+// drives_t's codes are CiA 301's NMT states and cia402::State's order.
+static_assert(cpm_msgs::drives_t::NMT_BOOT_UP == static_cast<int>(hal::canopen::NmtState::boot_up) &&
+              cpm_msgs::drives_t::NMT_STOPPED == static_cast<int>(hal::canopen::NmtState::stopped) &&
+              cpm_msgs::drives_t::NMT_OPERATIONAL == static_cast<int>(hal::canopen::NmtState::operational) &&
+              cpm_msgs::drives_t::NMT_PRE_OPERATIONAL == static_cast<int>(hal::canopen::NmtState::preoperational));
+static_assert(cpm_msgs::drives_t::CIA402_NOT_READY == static_cast<int>(State::not_ready_to_switch_on) &&
+              cpm_msgs::drives_t::CIA402_SWITCH_ON_DISABLED == static_cast<int>(State::switch_on_disabled) &&
+              cpm_msgs::drives_t::CIA402_READY == static_cast<int>(State::ready_to_switch_on) &&
+              cpm_msgs::drives_t::CIA402_SWITCHED_ON == static_cast<int>(State::switched_on) &&
+              cpm_msgs::drives_t::CIA402_OPERATION_ENABLED == static_cast<int>(State::operation_enabled) &&
+              cpm_msgs::drives_t::CIA402_QUICK_STOP == static_cast<int>(State::quick_stop_active) &&
+              cpm_msgs::drives_t::CIA402_FAULT_REACTION == static_cast<int>(State::fault_reaction_active) &&
+              cpm_msgs::drives_t::CIA402_FAULT == static_cast<int>(State::fault) &&
+              cpm_msgs::drives_t::CIA402_UNKNOWN == static_cast<int>(State::unknown));
+static_assert(cpm_msgs::drives_t::BUS_ERROR_ACTIVE == static_cast<int>(hal::BusState::error_active) &&
+              cpm_msgs::drives_t::BUS_ERROR_WARNING == static_cast<int>(hal::BusState::error_warning) &&
+              cpm_msgs::drives_t::BUS_ERROR_PASSIVE == static_cast<int>(hal::BusState::error_passive) &&
+              cpm_msgs::drives_t::BUS_OFF == static_cast<int>(hal::BusState::bus_off));
+
+}  // namespace
 
 CanopenBackend::CanopenBackend(const CanopenConfig& cfg, hal::CanBus& bus, hal::Clock& clock, hal::DigitalIo& io)
     : CanopenBackend(cfg) {
@@ -178,6 +220,14 @@ BackendResult CanopenBackend::read(std::int64_t, BackendInput& in) noexcept {
     was_enabled_[i] = enabled_asked_ && d.state == State::operation_enabled;
     in.drive_enabled[i] = !fault && d.state == State::operation_enabled && dout_.drive_enable &&
                           (i != 2 || dout_.brake_release_z);
+    // Homing: the drive's own (mode 6), and what it needs from the machine.
+    in.drive_homing[i] = loop_homing(d.homing);
+    if (d.homing == hal::cia402::HomingStatus::error)
+      note("drive %zu (%s, node %d): homing error (statusword 0x%04X)", i + 1, dc.name.c_str(), dc.node_id,
+           d.statusword);
+    in.position_lost[i] = d.position_lost;
+    in.home_switch[i] = din_.home[i];
+    in.index_pulse[i] = din_.index[i];
     // Limit switches: the cycle one trips (an operator may reset, enable and move off it).
     const bool lim = din_.limit_low[i] || din_.limit_high[i];
     in.limit_switch[i] = lim && !limit_before_[i];
@@ -213,6 +263,8 @@ BackendResult CanopenBackend::read(std::int64_t, BackendInput& in) noexcept {
   for (std::size_t i = 0; i < 3; ++i) {
     if (din_.limit_low[i]) bits |= 1u << (static_cast<unsigned>(hal::Line::limit_low_x) + i);
     if (din_.limit_high[i]) bits |= 1u << (static_cast<unsigned>(hal::Line::limit_high_x) + i);
+    if (din_.home[i]) bits |= 1u << (static_cast<unsigned>(hal::Line::home_x) + i);
+    if (din_.index[i]) bits |= 1u << (static_cast<unsigned>(hal::Line::index_x) + i);
   }
   in.digital_inputs = bits;
   return result;
@@ -228,6 +280,9 @@ BackendResult CanopenBackend::write(std::int64_t, const BackendOutput& out) noex
     c.target = enable ? hal::cia402::Target::enabled : hal::cia402::Target::disabled;
     c.force_n = enable ? out.force[i] : 0.0;
     c.reset_fault = !enable;
+    // The drive's own homing (the master ignores it for a drive without).
+    c.homing = enable && out.axis_drive[i] == AxisDrive::homing;
+    c.start_homing = c.homing && out.start_homing[i];
   }
   BackendResult result = BackendResult::ok;
   const hal::Status ws = master_->write(cmd_);
@@ -244,6 +299,45 @@ BackendResult CanopenBackend::write(std::int64_t, const BackendOutput& out) noex
     note("GPIO write failed");
   }
   return result;
+}
+
+bool CanopenBackend::drive_homing_supported(int axis) const noexcept {
+  return axis >= 0 && static_cast<std::size_t>(axis) < cfg_.master.drives.size() &&
+         cfg_.master.drives[static_cast<std::size_t>(axis)].homing.enabled;
+}
+
+void CanopenBackend::diagnostics(BackendDiagnostics& out) const noexcept {
+  out = BackendDiagnostics{};
+  out.backend = cpm_msgs::drives_t::BACKEND_CANOPEN;
+  for (std::size_t i = 0; i < 3 && i < cfg_.master.drives.size(); ++i) {
+    const hal::DriveFeedback& d = fb_.drive[i];
+    DriveDiagnostics& x = out.drive[i];
+    x.node_id = cfg_.master.drives[i].node_id;
+    x.nmt = d.nmt == hal::canopen::NmtState::unknown ? std::int8_t{-1} : static_cast<std::int8_t>(d.nmt);
+    x.cia402 = static_cast<std::int8_t>(d.state);
+    x.statusword = d.statusword;
+    x.controlword = d.controlword;
+    x.mode_display = d.mode_display;
+    x.heartbeat_age_ns = d.heartbeat_age_ns;
+    x.master_faults = d.faults;
+    x.emcy_count = d.emcy_count;
+    x.last_emcy_code = d.last_error_emcy.code;
+    x.last_emcy_register = d.last_error_emcy.error_register;
+  }
+  if (started_) out.bus_state = static_cast<std::int8_t>(fb_.bus_state);
+  out.error_frames = fb_.error_frames;
+  out.rx_dropped = fb_.rx_dropped;
+  out.tx_failures = fb_.tx_failures;
+  // The counters come with error frames only: none seen, none known.
+  if (fb_.error_frames > 0) {
+    out.tx_error_counter = fb_.last_error.tx_error_count;
+    out.rx_error_counter = fb_.last_error.rx_error_count;
+  }
+  out.bus_load = cfg_.load.load;
+  out.estop = din_.estop;
+  out.limit_low = din_.limit_low;
+  out.limit_high = din_.limit_high;
+  out.home_switch = din_.home;
 }
 
 }  // namespace cpm::daemon

@@ -3,8 +3,9 @@
 // heartbeat) on the fake bus, fed by a hostile master port. Oracle: nothing
 // throws out of poll(), the drive's statusword always decodes to a CiA 402
 // state, the torque it applies stays within its 0x6072 max torque and is
-// zero unless in operation enabled, and every answer it sends is a
-// well-formed frame (SDO answers 8 bytes on 0x580 + node).
+// zero unless in operation enabled (in cyclic torque or its own homing
+// mode), and every answer it sends is a well-formed frame (SDO answers 8
+// bytes on 0x580 + node).
 //
 // Script: can_common.hpp records; op bits 3-6 = time passing after the
 // frame, in 0.5 ms steps (heartbeats, consumer timeout, late answers).
@@ -30,6 +31,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   FakeCanPort& port = net.add_port("drive1");
   VirtualDriveConfig vc;
   vc.node_id = 1;
+  vc.tune_loops(10, 400, 1e6, 1e-3);  // homing mode (6) makes its own torque: within 0x6072 too
   VirtualDrive drive(port, vc);
   drive.on_sync = [](VirtualDrive& d) { d.set_actual(1000, -20, d.applied_torque()); };
   auto check = [&] {

@@ -125,6 +125,29 @@ Step apply(State s, Command c, bool quick_stop_stays) noexcept {
   return {s, -1};
 }
 
+HomingStatus decode_homing(std::uint16_t sw) noexcept {
+  // CiA 402-2, homing mode: bits 13 (homing error), 12 (homing attained) and
+  // 10 (target reached). With bit 13 set, 12 and 10 only say whether the
+  // axis still moves (1 1 x is reserved): every such word is an error.
+  if (sw & kSwHomingError) return HomingStatus::error;
+  const bool attained = (sw & kSwHomingAttained) != 0;
+  const bool reached = (sw & kSwTargetReached) != 0;
+  if (attained) return reached ? HomingStatus::completed : HomingStatus::attained;
+  return reached ? HomingStatus::interrupted : HomingStatus::in_progress;
+}
+
+const char* homing_status_name(HomingStatus h) noexcept {
+  switch (h) {
+    case HomingStatus::idle: return "idle";
+    case HomingStatus::in_progress: return "in progress";
+    case HomingStatus::interrupted: return "interrupted or not started";
+    case HomingStatus::attained: return "attained, target not reached";
+    case HomingStatus::completed: return "completed";
+    case HomingStatus::error: return "error";
+  }
+  return "invalid";
+}
+
 const char* target_name(Target t) noexcept {
   switch (t) {
     case Target::disabled: return "disabled";

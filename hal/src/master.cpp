@@ -43,6 +43,61 @@ bool interpolation_period(double rate_hz, std::uint8_t& value, std::int8_t& expo
   return false;
 }
 
+// The drive's homing objects in its units (DriveHomingConfig is in SI).
+struct HomingObjects {
+  std::int8_t method = 0;
+  std::int32_t offset = 0;          // 0x607C, counts
+  std::uint32_t speed_search = 0;   // 0x6099:1, velocity units
+  std::uint32_t speed_zero = 0;     // 0x6099:2
+  std::uint32_t acceleration = 0;   // 0x609A, velocity units per s
+};
+
+double velocity_units_per_mps(const DriveConfig& d) {
+  return d.velocity_units_per_mps > 0 ? d.velocity_units_per_mps : d.counts_per_m;
+}
+
+// The home offset is the position the drive reports at home: the counts
+// that the master's scaling turns into offset_m.
+double home_offset_counts(const DriveConfig& d) {
+  return d.direction * (d.homing.offset_m - d.position_offset_m) * d.counts_per_m;
+}
+
+HomingObjects homing_objects(const DriveConfig& d) {
+  const double v = velocity_units_per_mps(d);
+  HomingObjects o;
+  o.method = static_cast<std::int8_t>(d.homing.method);
+  o.offset = static_cast<std::int32_t>(std::llround(home_offset_counts(d)));
+  o.speed_search = static_cast<std::uint32_t>(std::llround(d.homing.speed_search_mps * v));
+  o.speed_zero = static_cast<std::uint32_t>(std::llround(d.homing.speed_zero_mps * v));
+  o.acceleration = static_cast<std::uint32_t>(std::llround(d.homing.acceleration_mps2 * v));
+  return o;
+}
+
+void validate_homing(const DriveConfig& d, const std::string& k) {
+  const DriveHomingConfig& h = d.homing;
+  // CiA 402-2: 1..14, 17..30, 33, 34, 35 and 37 are the standard's methods,
+  // -128..-1 the manufacturer's; which of them a drive has is its business
+  // (it refuses the others, and start() names the object).
+  if (h.method < -128 || h.method > 127 || h.method == 0)
+    bad(k + "method", "must be a CiA 402 homing method (0x6098: -128..-1 or 1..127, not 0), got " + std::to_string(h.method));
+  const double v = velocity_units_per_mps(d);
+  auto speed = [&](const char* key, double mps, const char* what) {
+    if (!std::isfinite(mps) || mps <= 0) bad(k + key, std::string("must be finite and > 0 (") + what + "), got " + std::to_string(mps));
+    const double units = mps * v;
+    if (units < 1 || units > 4294967295.0)
+      bad(k + key, std::string(what) + " " + std::to_string(mps) + " is " + std::to_string(units) +
+                       " drive units: outside 1..4294967295 of the 32-bit object");
+  };
+  speed("speed_search_mps", h.speed_search_mps, "m/s, 0x6099:1");
+  speed("speed_zero_mps", h.speed_zero_mps, "m/s, 0x6099:2");
+  speed("acceleration_mps2", h.acceleration_mps2, "m/s^2, 0x609A");
+  if (!std::isfinite(h.offset_m)) bad(k + "offset_m", "must be finite");
+  const double counts = home_offset_counts(d);
+  if (std::abs(counts) > 2147483647.0)
+    bad(k + "offset_m", std::to_string(h.offset_m) + " m is " + std::to_string(counts) +
+                            " counts: outside the 32-bit 0x607C");
+}
+
 }  // namespace
 
 void validate(const MasterConfig& c) {
@@ -93,6 +148,7 @@ void validate(const MasterConfig& c) {
       bad(k + "max_torque_permille", "must be 1..32767, got " + std::to_string(d.max_torque_permille));
     if (d.direction != 1 && d.direction != -1) bad(k + "direction", "must be 1 or -1, got " + std::to_string(d.direction));
     if (!std::isfinite(d.position_offset_m)) bad(k + "position_offset_m", "must be finite");
+    if (d.homing.enabled) validate_homing(d, k + "homing.");
   }
 }
 
@@ -103,8 +159,9 @@ BusLoad bus_load(const MasterConfig& c) {
   in.max_load = c.max_bus_load;
   in.cyclic_frames.push_back(0);  // SYNC
   for (std::size_t i = 0; i < c.drives.size(); ++i) {
-    in.cyclic_frames.push_back(pdo::kRpdo1.bytes());
-    in.cyclic_frames.push_back(pdo::kTpdo1.bytes());
+    const bool homing = c.drives[i].homing.enabled;
+    in.cyclic_frames.push_back((homing ? pdo::kRpdo1Homing : pdo::kRpdo1).bytes());
+    in.cyclic_frames.push_back((homing ? pdo::kTpdo1Homing : pdo::kTpdo1).bytes());
     if (c.velocity_from_drive) in.cyclic_frames.push_back(pdo::kTpdo2.bytes());
     in.periodic.push_back({1, c.drive_heartbeat_ms * 1e-3});
   }
@@ -219,10 +276,12 @@ void Master::dispatch(const CanFrame& f, std::int64_t now) noexcept {
       if (!started_) return;
       std::uint16_t sw;
       std::int32_t pos;
-      if (!pdo::unpack_tpdo1(f, sw, pos)) {
+      std::int8_t mode = 0;
+      if (d->cfg.homing.enabled ? !pdo::unpack_tpdo1_homing(f, sw, pos, mode) : !pdo::unpack_tpdo1(f, sw, pos)) {
         fb.faults |= kFaultBadPdo;
         return;
       }
+      fb.mode_display = mode;
       fb.statusword = sw;
       fb.position_counts = pos;
       fb.state = cia402::decode_statusword(sw);
@@ -251,6 +310,9 @@ void Master::dispatch(const CanFrame& f, std::int64_t now) noexcept {
       fb.nmt = s;
       d->last_heartbeat_ns = now;
       if (started_ && s != NmtState::operational) fb.faults |= kFaultNmtState;
+      // A boot-up while running: the drive restarted and its counts with it
+      // (an incremental encoder's zero, a homing's redefinition are gone).
+      if (started_ && s == NmtState::boot_up) fb.position_lost = true;
       return;
     }
     default:
@@ -392,9 +454,23 @@ void Master::configure_drive(Drive& d) {
   sdo_write_u8(d.node, cia402::kModesOfOperation, 0, static_cast<std::uint8_t>(cia402::kModeCyclicSyncTorque));
   check_u32(d, cia402::kModesDisplay, 0, static_cast<std::uint8_t>(cia402::kModeCyclicSyncTorque),
             "modes of operation display (cyclic synchronous torque = 10)");
+  if (d.cfg.homing.enabled) {
+    // The drive's own homing (mode 6): its parameters in its units.
+    const HomingObjects h = homing_objects(d.cfg);
+    sdo_write_u8(d.node, cia402::kHomingMethod, 0, static_cast<std::uint8_t>(h.method));
+    check_u32(d, cia402::kHomingMethod, 0, static_cast<std::uint8_t>(h.method), "homing method");
+    sdo_write_u32(d.node, cia402::kHomeOffset, 0, static_cast<std::uint32_t>(h.offset));
+    check_u32(d, cia402::kHomeOffset, 0, static_cast<std::uint32_t>(h.offset), "home offset");
+    sdo_write_u32(d.node, cia402::kHomingSpeeds, 1, h.speed_search);
+    check_u32(d, cia402::kHomingSpeeds, 1, h.speed_search, "homing speed during search for switch");
+    sdo_write_u32(d.node, cia402::kHomingSpeeds, 2, h.speed_zero);
+    check_u32(d, cia402::kHomingSpeeds, 2, h.speed_zero, "homing speed during search for zero");
+    sdo_write_u32(d.node, cia402::kHomingAcceleration, 0, h.acceleration);
+    check_u32(d, cia402::kHomingAcceleration, 0, h.acceleration, "homing acceleration");
+  }
   disable_unused_pdos(d);
-  write_pdo(d, pdo::kRpdo1, true);
-  write_pdo(d, pdo::kTpdo1, true);
+  write_pdo(d, d.cfg.homing.enabled ? pdo::kRpdo1Homing : pdo::kRpdo1, true);
+  write_pdo(d, d.cfg.homing.enabled ? pdo::kTpdo1Homing : pdo::kTpdo1, true);
   write_pdo(d, pdo::kTpdo2, cfg_.velocity_from_drive);
 }
 
@@ -436,8 +512,10 @@ void Master::start() {
   for (auto& d : drives_) {
     d.fb.faults = kFaultNone;
     d.fb.missed_cycles = 0;
+    d.fb.position_lost = false;
     d.got_tpdo1 = d.got_tpdo2 = false;
     d.have_prev = false;
+    d.homing_armed = d.sent_mode6_low = false;
   }
   bus_off_seen_ = false;
   bus_state_ = BusState::error_active;
@@ -449,7 +527,8 @@ void Master::start() {
 void Master::stop() noexcept {
   if (!started_) return;
   try {
-    for (auto& d : drives_) (void)bus_.send(pdo::pack_rpdo1(d.node, cia402::controlword(cia402::Command::disable_voltage), 0));
+    for (auto& d : drives_)
+      (void)bus_.send(rpdo1(d, cia402::controlword(cia402::Command::disable_voltage), 0, cia402::kModeCyclicSyncTorque));
     (void)bus_.send(make_sync());
     clock_.wait(2 * period_ns_);
     service();
@@ -503,7 +582,12 @@ Status Master::read(Feedback& out) noexcept {
       fb.position_m = p;
     }
     if (cfg_.velocity_from_drive && d.got_tpdo2) fb.velocity_mps = pdo::velocity_mps(fb.velocity_units, d.scaling);
+    // The homing bits mean something only while the drive runs mode 6.
+    fb.homing = (fb.mode_display == cia402::kModeHoming && fb.state == State::operation_enabled)
+                    ? cia402::decode_homing(fb.statusword)
+                    : cia402::HomingStatus::idle;
     out.drive[i] = fb;
+    fb.position_lost = false;  // reported once
   }
   out.cycle = cycle_;
   out.bus_state = bus_state_;
@@ -532,18 +616,31 @@ Status Master::write(const Commands& in) noexcept {
     cia402::Command cmd = cia402::next_command(d.fb.state, c.target, c.reset_fault);
     // Fault reset acts on the rising edge of bit 7: drop it for a cycle first.
     if (cmd == cia402::Command::fault_reset && (d.fb.controlword & 0x80)) cmd = cia402::Command::disable_voltage;
-    const std::uint16_t cw = cia402::controlword(cmd);
+    std::uint16_t cw = cia402::controlword(cmd);
+    const bool driving = d.fb.state == State::operation_enabled && c.target == cia402::Target::enabled &&
+                         cmd == cia402::Command::enable_operation;
+    const bool homing = d.cfg.homing.enabled && c.homing;
     std::int16_t torque = 0;
     Code code = Code::ok;
-    if (d.fb.state == State::operation_enabled && c.target == cia402::Target::enabled &&
-        cmd == cia402::Command::enable_operation) {
-      torque = pdo::torque_permille(c.force_n, d.scaling, code);
-      if (code != Code::ok && torque_status.ok()) torque_status = Status{code, static_cast<std::int8_t>(i), torque};
+    if (homing) {
+      // Bit 4 starts homing on its rising edge, in mode 6: hold it low until
+      // the drive displays mode 6 after an RPDO that had it low, so the
+      // drive has seen it low in that mode (the TPDO of a SYNC shows the
+      // RPDO applied at it).
+      if (d.got_tpdo1) d.homing_armed = d.fb.mode_display == cia402::kModeHoming && (d.homing_armed || d.sent_mode6_low);
+      if (driving && c.start_homing && d.homing_armed) cw |= cia402::kCwHomingStart;
+      d.sent_mode6_low = !(cw & cia402::kCwHomingStart);
+    } else {
+      d.homing_armed = d.sent_mode6_low = false;
+      if (driving) {
+        torque = pdo::torque_permille(c.force_n, d.scaling, code);
+        if (code != Code::ok && torque_status.ok()) torque_status = Status{code, static_cast<std::int8_t>(i), torque};
+      }
     }
     d.fb.controlword = cw;
     d.fb.torque_permille = torque;
     d.fb.torque_code = code;
-    note(bus_.send(pdo::pack_rpdo1(d.node, cw, torque)), i);
+    note(bus_.send(rpdo1(d, cw, torque, homing ? cia402::kModeHoming : cia402::kModeCyclicSyncTorque)), i);
   }
   // SYNC after the RPDOs: the drives apply them at this SYNC and answer with
   // TPDOs sampled at it, read by the next cycle's read().
@@ -558,6 +655,10 @@ Status Master::write(const Commands& in) noexcept {
   }
   if (result.code == Code::bus_off) bus_off_seen_ = true;
   return result.ok() ? torque_status : result;
+}
+
+CanFrame Master::rpdo1(const Drive& d, std::uint16_t cw, std::int16_t torque, std::int8_t mode) noexcept {
+  return d.cfg.homing.enabled ? pdo::pack_rpdo1_homing(d.node, cw, torque, mode) : pdo::pack_rpdo1(d.node, cw, torque);
 }
 
 void Master::reset_faults() noexcept {

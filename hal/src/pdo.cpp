@@ -50,6 +50,22 @@ CanFrame pack_rpdo1(std::uint8_t node, std::uint16_t controlword, std::int16_t t
   return f;
 }
 
+CanFrame pack_rpdo1_homing(std::uint8_t node, std::uint16_t controlword, std::int16_t torque, std::int8_t mode) noexcept {
+  CanFrame f = pack_rpdo1(node, controlword, torque);
+  f.len = static_cast<std::uint8_t>(kRpdo1Homing.bytes());
+  f.data[4] = static_cast<std::uint8_t>(mode);
+  return f;
+}
+
+bool unpack_tpdo1_homing(const CanFrame& f, std::uint16_t& statusword, std::int32_t& position,
+                         std::int8_t& mode_display) noexcept {
+  if (f.len != kTpdo1Homing.bytes()) return false;
+  statusword = get_u16(&f.data[0]);
+  position = static_cast<std::int32_t>(get_u32(&f.data[2]));
+  mode_display = static_cast<std::int8_t>(f.data[6]);
+  return true;
+}
+
 bool unpack_tpdo1(const CanFrame& f, std::uint16_t& statusword, std::int32_t& position) noexcept {
   if (f.len != kTpdo1.bytes()) return false;
   statusword = get_u16(&f.data[0]);

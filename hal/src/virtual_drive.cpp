@@ -1,7 +1,9 @@
 #include "cpm/hal/virtual_drive.hpp"
 
 #include <algorithm>
+#include <cmath>
 #include <cstring>
+#include <iterator>
 
 #include "cpm/hal/common.hpp"
 
@@ -19,6 +21,11 @@ bool is_rpdo_comm(std::uint16_t i) { return i >= 0x1400 && i <= 0x1403; }
 bool is_tpdo_comm(std::uint16_t i) { return i >= 0x1800 && i <= 0x1803; }
 bool is_rpdo_map(std::uint16_t i) { return i >= 0x1600 && i <= 0x1603; }
 bool is_tpdo_map(std::uint16_t i) { return i >= 0x1A00 && i <= 0x1A03; }
+// The modes the drive takes: 0 (none), CSP and CSV (accepted, no motion
+// here), homing and cyclic synchronous torque.
+bool mode_supported(std::int8_t m) {
+  return m == 0 || m == 8 || m == 9 || m == cia402::kModeHoming || m == cia402::kModeCyclicSyncTorque;
+}
 }  // namespace
 
 VirtualDrive::VirtualDrive(CanBus& bus, VirtualDriveConfig cfg) : bus_(bus), cfg_(std::move(cfg)) {
@@ -79,6 +86,20 @@ void VirtualDrive::build_dictionary() {
   add(cia402::kInterpolationPeriod, 0, 1, false, 2);
   add(cia402::kInterpolationPeriod, 1, 1, true, 1);
   add(cia402::kInterpolationPeriod, 2, 1, true, 0xFD);  // 10^-3 s
+  // Homing mode. CiA 402-2 lets 0x607C, 0x6098, 0x6099 and 0x609A be mapped
+  // (optional); 0x6098 starts at 0, "no method", which a start turns into a
+  // homing error.
+  add(cia402::kHomeOffset, 0, 4, true, 0, true);
+  add(cia402::kHomingMethod, 0, 1, true, 0, true);
+  add(cia402::kHomingSpeeds, 0, 1, false, 2);
+  add(cia402::kHomingSpeeds, 1, 4, true, 0, true);
+  add(cia402::kHomingSpeeds, 2, 4, true, 0, true);
+  add(cia402::kHomingAcceleration, 0, 4, true, 0, true);
+  // 0x60E3 supported homing methods (ro).
+  static constexpr std::int8_t kMethods[] = {1, 2, 3, 4, 5, 6, 17, 18, 19, 20, 21, 22, 33, 34, 35, 37};
+  add(0x60E3, 0, 1, false, std::size(kMethods));
+  for (std::uint8_t i = 0; i < std::size(kMethods); ++i)
+    add(0x60E3, static_cast<std::uint8_t>(i + 1), 1, false, static_cast<std::uint8_t>(kMethods[i]));
   std::sort(od_.begin(), od_.end(), [](const Entry& a, const Entry& b) {
     return a.index != b.index ? a.index < b.index : a.sub < b.sub;
   });
@@ -119,7 +140,20 @@ std::uint16_t VirtualDrive::statusword() const {
   if (state_ == State::ready_to_switch_on || state_ == State::switched_on ||
       state_ == State::operation_enabled || state_ == State::quick_stop_active)
     sw |= cia402::kSwVoltageEnabled;
-  if (state_ == State::operation_enabled) {
+  if (state_ == State::operation_enabled && mode_display() == cia402::kModeHoming) {
+    // CiA 402-2 homing: bits 13, 12, 10.
+    switch (phase_) {
+      case Phase::idle:
+      case Phase::interrupted: sw |= cia402::kSwTargetReached; break;
+      case Phase::search:
+      case Phase::approach:
+      case Phase::index: break;
+      case Phase::to_home: sw |= cia402::kSwHomingAttained; break;
+      case Phase::done: sw |= cia402::kSwHomingAttained | cia402::kSwTargetReached; break;
+      case Phase::error: sw |= cia402::kSwHomingError | (at_rest_ ? cia402::kSwTargetReached : 0); break;
+    }
+    if (saturated_) sw |= cia402::kSwInternalLimit;
+  } else if (state_ == State::operation_enabled) {
     sw |= cia402::kSwFollowsCommand;
     const auto target = static_cast<std::int16_t>(find(cia402::kTargetTorque, 0)->value);
     const auto max = static_cast<int>(find(cia402::kMaxTorque, 0)->value);
@@ -134,16 +168,26 @@ std::int8_t VirtualDrive::mode_display() const {
 
 std::int16_t VirtualDrive::applied_torque() const {
   if (state_ != State::operation_enabled) return 0;
-  if (static_cast<std::int8_t>(find(cia402::kModesDisplay, 0)->value) != cia402::kModeCyclicSyncTorque) return 0;
+  const std::int8_t mode = mode_display();
+  if (mode == cia402::kModeHoming) return loop_active_ ? homing_torque_ : 0;
+  if (mode != cia402::kModeCyclicSyncTorque) return 0;
   const int target = static_cast<std::int16_t>(find(cia402::kTargetTorque, 0)->value);
   const int max = static_cast<int>(find(cia402::kMaxTorque, 0)->value);
   return static_cast<std::int16_t>(std::clamp(target, -max, max));
 }
 
 void VirtualDrive::set_actual(std::int32_t position, std::int32_t velocity, std::int16_t torque) {
-  find(cia402::kPositionActual, 0)->value = static_cast<std::uint32_t>(position);
+  raw_position_ = position;
+  raw_velocity_ = velocity;
+  set_position_actual();
   find(cia402::kVelocityActual, 0)->value = static_cast<std::uint32_t>(velocity);
   find(cia402::kTorqueActual, 0)->value = static_cast<std::uint16_t>(torque);
+}
+
+void VirtualDrive::set_position_actual() {
+  // 32-bit position values wrap, as a drive's counter does.
+  const auto p = static_cast<std::uint64_t>(std::int64_t{raw_position_} + shift_);
+  find(cia402::kPositionActual, 0)->value = static_cast<std::uint32_t>(p);
 }
 
 void VirtualDrive::send(const CanFrame& f) {
@@ -179,6 +223,11 @@ void VirtualDrive::reset(bool application) {
     state_ = State::not_ready_to_switch_on;
     last_controlword_ = 0;
     fault_persistent_ = false;
+    // The application restarts: a homing's redefinition of the counts is gone.
+    shift_ = 0;
+    phase_ = Phase::idle;
+    loop_active_ = start_pending_ = interrupt_pending_ = false;
+    homing_torque_ = 0;
   }
   sdo_ = SdoTransfer{};
   rpdo_pending_.fill(false);
@@ -347,22 +396,34 @@ void VirtualDrive::on_rpdo(int n, const CanFrame& f) {
   rpdo_pending_[static_cast<std::size_t>(n)] = true;
   if (type > 240) {  // event-driven: takes effect at once
     rpdo_pending_[static_cast<std::size_t>(n)] = false;
-    std::size_t off = 0;
-    for (std::uint8_t s = 1; s <= count; ++s) {
-      const std::uint32_t m = find(map, s)->value;
-      const std::size_t nb = (m & 0xFF) / 8;
-      std::uint32_t v = 0;
-      for (std::size_t b = 0; b < nb; ++b) v |= std::uint32_t{f.data[off + b]} << (8 * b);
-      off += nb;
-      find(static_cast<std::uint16_t>(m >> 16), static_cast<std::uint8_t>(m >> 8))->value = v;
-      if ((m >> 16) == cia402::kControlword) {
-        const auto cw = static_cast<std::uint16_t>(v);
-        const bool edge = (cw & 0x80) && !(last_controlword_ & 0x80);
-        last_controlword_ = cw;
-        if (!(cw & 0x80) || edge) apply_command(cia402::decode_controlword(cw));
-      }
-    }
+    apply_rpdo(static_cast<std::size_t>(n), f);
   }
+}
+
+void VirtualDrive::apply_rpdo(std::size_t n, const CanFrame& f) {
+  const std::int16_t torque_before = applied_torque();
+  const std::uint16_t map = static_cast<std::uint16_t>(0x1600 + n);
+  const std::uint32_t count = find(map, 0)->value;
+  std::size_t off = 0;
+  bool controlword = false, mode = false;
+  std::uint32_t mode_value = 0;
+  for (std::uint8_t s = 1; s <= count; ++s) {
+    const std::uint32_t m = find(map, s)->value;
+    const std::size_t nb = (m & 0xFF) / 8;
+    std::uint32_t v = 0;
+    for (std::size_t b = 0; b < nb; ++b) v |= std::uint32_t{f.data[off + b]} << (8 * b);
+    off += nb;
+    const auto index = static_cast<std::uint16_t>(m >> 16);
+    if (index == cia402::kModesOfOperation) {
+      mode = true;
+      mode_value = v;
+      continue;
+    }
+    find(index, static_cast<std::uint8_t>(m >> 8))->value = v;
+    controlword = controlword || index == cia402::kControlword;
+  }
+  if (mode) set_mode(static_cast<std::int8_t>(mode_value), torque_before);
+  if (controlword) on_controlword(static_cast<std::uint16_t>(find(cia402::kControlword, 0)->value));
 }
 
 void VirtualDrive::handle_sync(std::int64_t) {
@@ -375,23 +436,7 @@ void VirtualDrive::handle_sync(std::int64_t) {
   for (std::size_t n = 0; n < 4; ++n) {
     if (!rpdo_pending_[n]) continue;
     rpdo_pending_[n] = false;
-    const std::uint16_t map = static_cast<std::uint16_t>(0x1600 + n);
-    const std::uint32_t count = find(map, 0)->value;
-    std::size_t off = 0;
-    for (std::uint8_t s = 1; s <= count; ++s) {
-      const std::uint32_t m = find(map, s)->value;
-      const std::size_t nb = (m & 0xFF) / 8;
-      std::uint32_t v = 0;
-      for (std::size_t b = 0; b < nb; ++b) v |= std::uint32_t{rpdo_buf_[n].data[off + b]} << (8 * b);
-      off += nb;
-      find(static_cast<std::uint16_t>(m >> 16), static_cast<std::uint8_t>(m >> 8))->value = v;
-      if ((m >> 16) == cia402::kControlword) {
-        const auto cw = static_cast<std::uint16_t>(v);
-        const bool edge = (cw & 0x80) && !(last_controlword_ & 0x80);
-        last_controlword_ = cw;
-        if (!(cw & 0x80) || edge) apply_command(cia402::decode_controlword(cw));
-      }
-    }
+    apply_rpdo(n, rpdo_buf_[n]);
   }
   if (state_ == State::quick_stop_active && quick_stop_left_ > 0 && --quick_stop_left_ == 0 &&
       cfg_.quick_stop_option >= 1 && cfg_.quick_stop_option <= 4) {
@@ -403,6 +448,7 @@ void VirtualDrive::handle_sync(std::int64_t) {
 }
 
 void VirtualDrive::transmit_sync_pdos() {
+  homing_step();
   find(cia402::kStatusword, 0)->value = statusword();
   for (std::uint16_t n = 0; n < 4 && find(static_cast<std::uint16_t>(0x1800 + n), 1); ++n) {
     const std::uint32_t cob = find(static_cast<std::uint16_t>(0x1800 + n), 1)->value;
@@ -475,24 +521,23 @@ std::uint32_t VirtualDrive::write_entry(std::uint16_t index, std::uint8_t sub, c
   if (is_rpdo_comm(index) || is_tpdo_comm(index) || is_rpdo_map(index) || is_tpdo_map(index)) {
     if (const std::uint32_t a = check_pdo_write(index, sub, v)) return a;
   }
-  if (index == cia402::kModesOfOperation) {
-    const auto m = static_cast<std::int8_t>(v);
-    if (m != 0 && m != 8 && m != 9 && m != cia402::kModeCyclicSyncTorque) return kAbortInvalidValue;
+  if (index == cia402::kModesOfOperation && !mode_supported(static_cast<std::int8_t>(v))) return kAbortInvalidValue;
+  if (index == cia402::kHomingMethod) {
+    Plan p;
+    if (!plan_for(static_cast<std::int8_t>(v), p)) return kAbortInvalidValue;
   }
   if (index == cia402::kMaxTorque && v > 32767) return kAbortValueTooHigh;
   if (index == cia402::kAbortConnectionOption && static_cast<std::int16_t>(v) > 3) return kAbortValueTooHigh;
+  if (index == cia402::kModesOfOperation) {
+    set_mode(static_cast<std::int8_t>(v), applied_torque());
+    return 0;
+  }
   e->value = v;
-  if (index == cia402::kModesOfOperation) find(cia402::kModesDisplay, 0)->value = v;
   if (index == 0x1016) {
     master_last_hb_ns_ = -1;  // monitoring starts at the next heartbeat heard
     master_timed_out_ = false;
   }
-  if (index == cia402::kControlword) {
-    const auto cw = static_cast<std::uint16_t>(v);
-    const bool edge = (cw & 0x80) && !(last_controlword_ & 0x80);
-    last_controlword_ = cw;
-    if (!(cw & 0x80) || edge) apply_command(cia402::decode_controlword(cw));
-  }
+  if (index == cia402::kControlword) on_controlword(static_cast<std::uint16_t>(v));
   return 0;
 }
 
@@ -582,6 +627,239 @@ void VirtualDrive::on_sdo(const CanFrame& f, std::int64_t now_ns) {
     default:
       return abort(index, sub, kAbortCommand);
   }
+}
+
+// ---------------------------------------------------------------- homing mode
+
+void VirtualDriveConfig::tune_loops(double mass_kg, double rated_force_n, double velocity_units_per_mps,
+                                    double period_s) {
+  if (!(mass_kg > 0) || !(rated_force_n > 0) || !(velocity_units_per_mps > 0) || !(period_s > 0))
+    throw Error("virtual drive: tune_loops needs a mass, a rated force, a velocity unit and a period > 0");
+  const double bandwidth_hz = std::min(20.0, 0.05 / period_s);
+  const double w = 2 * 3.141592653589793 * bandwidth_hz;
+  const double per_mille_per_newton = 1000.0 / rated_force_n;
+  velocity_kp = mass_kg * w * per_mille_per_newton / velocity_units_per_mps;  // N/(m/s) -> per mille per unit
+  velocity_ki = velocity_kp * w / 5;
+  position_kp = w / 5;
+}
+
+double VirtualDrive::period_s() const {
+  const double value = find(cia402::kInterpolationPeriod, 1)->value;
+  const auto exponent = static_cast<std::int8_t>(find(cia402::kInterpolationPeriod, 2)->value);
+  const double t = value * std::pow(10.0, exponent);
+  return t > 0 ? t : 1e-3;
+}
+
+void VirtualDrive::set_mode(std::int8_t mode, std::int16_t torque_before) {
+  if (!mode_supported(mode)) return;  // from a PDO, which cannot be refused: the mode stays
+  const bool entering = mode == cia402::kModeHoming && mode_display() != cia402::kModeHoming;
+  find(cia402::kModesOfOperation, 0)->value = static_cast<std::uint8_t>(mode);
+  find(cia402::kModesDisplay, 0)->value = static_cast<std::uint8_t>(mode);
+  // From cyclic synchronous torque straight into homing mode: the drive's
+  // loops take over the torque it was applying, so a held load stays held.
+  if (entering && state_ == State::operation_enabled) activate_loops(torque_before);
+}
+
+void VirtualDrive::activate_loops(std::int16_t torque) {
+  loop_active_ = true;
+  integral_ = torque;
+  homing_torque_ = torque;
+  v_profile_ = raw_velocity_;
+  hold_raw_ = raw_position_;
+  holding_ = true;
+  phase_ = Phase::idle;
+}
+
+void VirtualDrive::on_controlword(std::uint16_t cw) {
+  const std::uint16_t before = last_controlword_;
+  last_controlword_ = cw;
+  // Fault reset acts on the rising edge of bit 7 only.
+  const bool reset_edge = (cw & 0x80) && !(before & 0x80);
+  if (!(cw & 0x80) || reset_edge) apply_command(cia402::decode_controlword(cw));
+  // Homing operation start, bit 4 in mode 6: the rising edge starts, the
+  // falling edge interrupts. Outside operation enabled it means nothing.
+  if (state_ == State::operation_enabled && mode_display() == cia402::kModeHoming) {
+    const bool now = (cw & cia402::kCwHomingStart) != 0, was = (before & cia402::kCwHomingStart) != 0;
+    if (now && !was) {
+      start_pending_ = true;
+      interrupt_pending_ = false;
+    } else if (!now && was) {
+      interrupt_pending_ = true;
+      start_pending_ = false;
+    }
+  }
+}
+
+bool VirtualDrive::plan_for(int method, Plan& p) noexcept {
+  // CiA 402-2 homing methods. The switch of 3-6 and 19-22 is a home switch
+  // actuated on one side of its edge: "positive" (3, 4, 19, 20) on the side
+  // of higher counts, "negative" (5, 6, 21, 22) on the lower. The index
+  // methods are the switch methods (16 more) followed by the first index
+  // pulse in the final direction.
+  p = Plan{};
+  const int base = method >= 17 && method <= 22 ? method - 16 : method;
+  switch (base) {
+    case 1: p = {2, +1, true, false, false}; break;   // negative limit: home where it releases, moving up
+    case 2: p = {3, -1, true, false, false}; break;   // positive limit: where it releases, moving down
+    case 3: p = {1, -1, true, false, false}; break;   // positive home switch: where it releases, moving down
+    case 4: p = {1, +1, false, false, false}; break;  // positive home switch: where it actuates, moving up
+    case 5: p = {1, +1, true, false, false}; break;   // negative home switch: where it releases, moving up
+    case 6: p = {1, -1, false, false, false}; break;  // negative home switch: where it actuates, moving down
+    case 33: p = {0, -1, false, true, false}; return true;
+    case 34: p = {0, +1, false, true, false}; return true;
+    case 35:
+    case 37: p.here = true; return true;
+    default: return false;  // 0: no method; 7-14, 23-30 (home switch between limit switches): not here
+  }
+  p.index = method <= 6;
+  return true;
+}
+
+bool VirtualDrive::homing_signal() const {
+  switch (plan_.signal) {
+    case 1: return inputs_.home_switch;
+    case 2: return inputs_.negative_limit;
+    case 3: return inputs_.positive_limit;
+    default: return false;
+  }
+}
+
+bool VirtualDrive::moving_into_foreign_limit(double direction) const {
+  return (direction < 0 && inputs_.negative_limit && plan_.signal != 2) ||
+         (direction > 0 && inputs_.positive_limit && plan_.signal != 3);
+}
+
+void VirtualDrive::start_homing() {
+  reversed_ = false;
+  holding_ = false;
+  if (!plan_for(static_cast<std::int8_t>(find(cia402::kHomingMethod, 0)->value), plan_)) {
+    phase_ = Phase::error;  // no method (0x6098 = 0)
+    return;
+  }
+  if (plan_.here) home_event(raw_position_);
+  else if (plan_.signal == 0) phase_ = Phase::index;
+  else phase_ = homing_signal() == plan_.before ? Phase::approach : Phase::search;
+}
+
+void VirtualDrive::home_event(std::int32_t raw_home) {
+  // CiA 402-2: after homing the position actual value at the home position
+  // is the home offset.
+  home_raw_ = raw_home;
+  shift_ = std::int64_t{static_cast<std::int32_t>(find(cia402::kHomeOffset, 0)->value)} - raw_home;
+  set_position_actual();
+  phase_ = Phase::to_home;
+}
+
+void VirtualDrive::homing_step() {
+  const bool active = state_ == State::operation_enabled && mode_display() == cia402::kModeHoming;
+  if (!active) {
+    // Leaving operation enabled or the mode aborts a running procedure.
+    loop_active_ = start_pending_ = interrupt_pending_ = saturated_ = false;
+    homing_torque_ = 0;
+    phase_ = Phase::idle;
+    return;
+  }
+  if (!loop_active_) activate_loops(0);  // enabled in mode 6: nothing was applied before
+  speed_search_ = find(cia402::kHomingSpeeds, 1)->value;
+  speed_zero_ = find(cia402::kHomingSpeeds, 2)->value;
+  acceleration_ = find(cia402::kHomingAcceleration, 0)->value;
+  const double T = period_s();
+  const double v_rest = std::max(1.0, 0.05 * speed_zero_);
+  const double window = std::max(1.0, speed_zero_ * T / cfg_.velocity_per_count);  // counts
+
+  if (interrupt_pending_) {
+    interrupt_pending_ = false;
+    if (phase_ == Phase::search || phase_ == Phase::approach || phase_ == Phase::index || phase_ == Phase::to_home) {
+      phase_ = Phase::interrupted;
+      holding_ = false;
+    }
+  }
+  if (start_pending_) {
+    start_pending_ = false;
+    start_homing();
+  }
+  // What this sample says.
+  const double dir = plan_.direction;
+  switch (phase_) {
+    case Phase::search:
+      if (homing_signal() == plan_.before) {
+        phase_ = Phase::approach;
+        reversed_ = true;
+      }
+      break;
+    case Phase::approach:
+      if (v_profile_ * dir > 0 && homing_signal() != plan_.before) {
+        if (plan_.index) phase_ = Phase::index;
+        else home_event(raw_position_);
+      }
+      break;
+    case Phase::index:
+      if (v_profile_ * dir > 0 && inputs_.index_pulse) home_event(inputs_.index_position);
+      break;
+    case Phase::to_home:
+      if (std::abs(static_cast<double>(home_raw_ - raw_position_)) <= window && std::abs(raw_velocity_) <= v_rest) {
+        phase_ = Phase::done;
+        hold_raw_ = home_raw_;
+        holding_ = true;
+      }
+      break;
+    default:
+      break;
+  }
+  // A limit switch ahead that is not the method's: the switch sought was
+  // not found.
+  const double heading = phase_ == Phase::search ? -dir : dir;
+  if ((phase_ == Phase::search || phase_ == Phase::approach || phase_ == Phase::index) &&
+      moving_into_foreign_limit(heading)) {
+    phase_ = Phase::error;
+    holding_ = false;
+  }
+  // The motion for the next period.
+  switch (phase_) {
+    case Phase::search: run_loops(-dir * speed_search_, false, 0); break;
+    case Phase::approach: run_loops(dir * (reversed_ ? speed_zero_ : speed_search_), false, 0); break;
+    case Phase::index: run_loops(dir * speed_zero_, false, 0); break;
+    case Phase::to_home: run_loops(0, true, home_raw_); break;
+    case Phase::idle:
+    case Phase::done:
+    case Phase::error:
+    case Phase::interrupted:
+      if (!holding_ && v_profile_ == 0) {  // stopped: hold here
+        hold_raw_ = raw_position_;
+        holding_ = true;
+      }
+      if (holding_) run_loops(0, true, hold_raw_);
+      else run_loops(0, false, 0);
+      break;
+  }
+  at_rest_ = std::abs(raw_velocity_) <= v_rest && std::abs(v_profile_) <= v_rest;
+}
+
+void VirtualDrive::run_loops(double v_target, bool position_target, std::int64_t target_raw) {
+  const double T = period_s();
+  const double a = acceleration_;
+  double v_des = v_target;
+  if (position_target) {
+    // The slower of the position loop and the braking curve, within the
+    // speed for zero.
+    const double e = static_cast<double>(target_raw - raw_position_) * cfg_.velocity_per_count;  // units x s
+    double mag = cfg_.position_kp * std::abs(e);
+    if (a > 0) mag = std::min(mag, std::sqrt(2 * a * std::abs(e)));
+    if (speed_zero_ > 0) mag = std::min(mag, speed_zero_);
+    v_des = e >= 0 ? mag : -mag;
+  }
+  // Acceleration-limited speed profile (0x609A).
+  if (a > 0) v_profile_ += std::clamp(v_des - v_profile_, -a * T, a * T);
+  else v_profile_ = v_des;
+  // PI velocity loop, integrating only while the torque is within 0x6072
+  // (no wind-up at the limit).
+  const double max = find(cia402::kMaxTorque, 0)->value;
+  const double err = v_profile_ - raw_velocity_;
+  const double integral = integral_ + cfg_.velocity_ki * err * T;
+  const double torque = cfg_.velocity_kp * err + integral;
+  saturated_ = std::abs(torque) > max;
+  if (!saturated_) integral_ = integral;
+  homing_torque_ = static_cast<std::int16_t>(std::lround(std::clamp(cfg_.velocity_kp * err + integral_, -max, max)));
 }
 
 }  // namespace cpm::hal

@@ -61,14 +61,17 @@ struct Rig {
   // after the one whose positions it was computed from, as real CiA 402
   // drives; lockstep: at once, as the in-process loop). `believed`: the
   // model cpmd controls with (the truth is always the nominal machine of docs/model.md).
+  // `machine`: changes to the virtual machine's configuration (homing sensors, incremental encoders).
   explicit Rig(const DaemonConfig& c = canopen_config(), bool start = true,
                sim::DriveTiming timing = sim::DriveTiming::synchronous,
                const ctl::MachineModel& believed = ctl::MachineModel::elkady(),
-               const sim::EncoderModel& encoder = {})
+               const sim::EncoderModel& encoder = {},
+               const std::function<void(sim::VirtualMachineConfig&)>& machine = {})
       : cfg(c), model(believed) {
     sim::VirtualMachineConfig vc = sim::VirtualMachineConfig::defaults();
     vc.timing = timing;
     vc.plant.encoder = encoder;
+    if (machine) machine(vc);
     for (std::size_t i = 0; i < 3; ++i) {
       const auto& d = cfg.canopen.master.drives[i];
       vc.axes[i].node_id = d.node_id;

@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <set>
+#include <string>
 #include <tuple>
 
 #include "cpm/hal/cia402.hpp"
@@ -130,4 +131,53 @@ TEST(Cia402, MasterPathReachesEveryTargetFromEveryState) {
   // A fault is never left without an explicit reset.
   EXPECT_EQ(next_command(State::fault, Target::enabled, false), Command::disable_voltage);
   EXPECT_EQ(next_command(State::operation_enabled, Target::quick_stop, false), Command::quick_stop);
+}
+
+// CiA 402-2, homing mode: the statusword's bits 13 (homing error), 12
+// (homing attained) and 10 (target reached), every row of the standard's
+// table, with every other bit given both values (the state bits, warning,
+// remote, internal limit and the manufacturer's bits mean nothing here).
+TEST(Cia402, HomingStatusTableOfBits13_12_10) {
+  struct Row {
+    int b13, b12, b10;
+    HomingStatus h;
+  };
+  const Row rows[] = {
+      {0, 0, 0, HomingStatus::in_progress},  // homing procedure in progress
+      {0, 0, 1, HomingStatus::interrupted},  // interrupted or not started
+      {0, 1, 0, HomingStatus::attained},     // attained, target not reached
+      {0, 1, 1, HomingStatus::completed},    // completed successfully
+      {1, 0, 0, HomingStatus::error},        // error, velocity not 0
+      {1, 0, 1, HomingStatus::error},        // error, velocity 0
+      {1, 1, 0, HomingStatus::error},        // reserved: still bit 13
+      {1, 1, 1, HomingStatus::error},
+  };
+  const std::uint16_t table_bits = (1u << 13) | (1u << 12) | (1u << 10);
+  for (const auto& r : rows) {
+    const auto bits = static_cast<std::uint16_t>((r.b13 << 13) | (r.b12 << 12) | (r.b10 << 10));
+    // Every combination of the other 13 bits.
+    for (std::uint32_t other = 0; other < 0x10000; ++other) {
+      if (other & table_bits) continue;
+      ASSERT_EQ(decode_homing(static_cast<std::uint16_t>(bits | other)), r.h)
+          << r.b13 << r.b12 << r.b10 << " with 0x" << std::hex << other;
+    }
+  }
+  // A drive in operation enabled that completed homing (bits 12 and 10).
+  EXPECT_EQ(decode_homing(0x1637), HomingStatus::completed);
+  // The example of docs/canopen-backend.md: error, at rest.
+  EXPECT_EQ(decode_homing(0x2637), HomingStatus::error);
+  EXPECT_EQ(kCwHomingStart, 0x10);
+  EXPECT_EQ(kSwHomingAttained, 0x1000);
+  EXPECT_EQ(kSwHomingError, 0x2000);
+}
+
+TEST(Cia402, HomingStatusNamesAreDistinct) {
+  std::set<std::string> names;
+  for (auto h : {HomingStatus::idle, HomingStatus::in_progress, HomingStatus::interrupted, HomingStatus::attained,
+                 HomingStatus::completed, HomingStatus::error}) {
+    const std::string n = homing_status_name(h);
+    EXPECT_NE(n, "invalid");
+    EXPECT_TRUE(names.insert(n).second) << n;
+  }
+  EXPECT_STREQ(homing_status_name(static_cast<HomingStatus>(99)), "invalid");
 }

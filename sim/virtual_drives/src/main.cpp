@@ -46,6 +46,29 @@ int run(int argc, char** argv) {
       ->check(program::finite())
       ->default_str("0.600,0.425,0.300");
   app.add_option("--substeps", d.cfg.plant.substeps, "RK4 steps of the plant per period")->type_name("N");
+  // Homing (docs/sil.md): what the drives' own inputs see, and how the encoders count.
+  app.add_flag("--incremental", d.cfg.incremental,
+               "incremental encoders: each drive counts from 0 where its carriage stands at power-on (and at each "
+               "reappear), so the daemon must home before it knows where the platform is");
+  std::vector<double> home_switch;
+  app.add_option("--home-switch", home_switch,
+                 "home switches: actuator i's is actuated while its displacement d_i is below D_i, in m (a value "
+                 "at or below the stroke's low end: no switch)")
+      ->type_name("D1,D2,D3")
+      ->delimiter(',')
+      ->expected(3)
+      ->check(program::finite())
+      ->default_str("0.010,0.010,0.010");
+  app.add_option("--limit-margin", d.cfg.limit_margin,
+                 "limit switches wired to the drives, actuated within M m of each stroke end (0: none)")
+      ->type_name("M")
+      ->check(program::finite() & CLI::Range(0.0, 0.1).description(""))
+      ->default_str(CLI::detail::to_string(d.cfg.limit_margin));
+  app.add_option("--index-pitch", d.cfg.index_pitch,
+                 "an encoder index pulse at every whole multiple of P m of d (e.g. a screw's lead; 0: none)")
+      ->type_name("P")
+      ->check(program::finite() & CLI::Range(0.0, 1.0).description(""))
+      ->default_str("0");
   app.add_option("--timing", timing,
                  "synchronous: a torque received before SYNC k acts from SYNC k, after the positions of SYNC k were "
                  "sampled (CiA 402 CST: one period of dead time); lockstep: it acts at once, as the in-process loop")
@@ -58,14 +81,17 @@ int run(int argc, char** argv) {
   app.add_option("--ready-file", ready_file, "written (with the process id) once the drives have powered on")
       ->type_name("PATH");
   app.footer("Commands: heartbeat AXIS off|on, emcy AXIS CODE [REG], fault AXIS CODE [persistent], clear AXIS,\n"
-             "refuse AXIS CMD on|off, late AXIS MS, silent AXIS on|off, disappear, reappear, status, quit\n"
-             "(docs/canopen-backend.md).");
+             "refuse AXIS CMD on|off, late AXIS MS, silent AXIS on|off, home-switch AXIS dead|ok, disappear,\n"
+             "reappear, status, quit (docs/canopen-backend.md).\n"
+             "Homing: the drives run CiA 402 homing mode (methods 1-6, 17-22, 33, 34, 35, 37) on these home\n"
+             "switches, limit switches and index pulses (docs/sil.md).");
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
     return program::parse_exit(app, e, "virtual-drives");
   }
   if (initial.size() == 3) d.cfg.initial_position = Vec3(initial[0], initial[1], initial[2]);
+  if (home_switch.size() == 3) d.cfg.home_switch = Vec3(home_switch[0], home_switch[1], home_switch[2]);
   d.cfg.timing = *sim::timing_from_name(timing);
   std::multimap<std::uint64_t, std::string> scheduled;
   for (const std::string& f : faults) {
@@ -91,9 +117,9 @@ int run(int argc, char** argv) {
 
   vm.power_on(clock.now_ns());
   if (!ready_file.empty()) std::ofstream(ready_file) << getpid() << "\n";
-  std::fprintf(stderr, "virtual-drives: nodes %d %d %d on %s, %.0f Hz per SYNC, %s timing, model %s\n",
+  std::fprintf(stderr, "virtual-drives: nodes %d %d %d on %s, %.0f Hz per SYNC, %s timing, model %s, %s encoders\n",
                cfg.axes[0].node_id, cfg.axes[1].node_id, cfg.axes[2].node_id, d.interface.c_str(), d.rate,
-               sim::timing_name(cfg.timing), d.model.c_str());
+               sim::timing_name(cfg.timing), d.model.c_str(), cfg.incremental ? "incremental" : "absolute");
 
   std::string stdin_buf;
   bool quit = false;

@@ -75,6 +75,10 @@ std::string execute_control(VirtualMachine& vm, const std::string& line, std::in
     } else if (c == "silent") {
       need(3, 3);
       vm.drive(axis_of(w[1])).go_silent(on_off(w[2]));
+    } else if (c == "home-switch") {
+      need(3, 3);
+      if (w[2] != "dead" && w[2] != "ok") throw Error("home-switch: expected dead or ok, got '" + w[2] + "'");
+      vm.break_home_switch(axis_of(w[1]), w[2] == "dead");
     } else if (c == "disappear") {
       need(1, 1);
       vm.disappear(true, now_ns);
@@ -94,7 +98,8 @@ std::string execute_control(VirtualMachine& vm, const std::string& line, std::in
       need(1, 1);
       quit = true;
     } else {
-      throw Error("unknown command '" + c + "' (heartbeat, emcy, fault, clear, refuse, late, silent, disappear, reappear, status, quit)");
+      throw Error("unknown command '" + c +
+                  "' (heartbeat, emcy, fault, clear, refuse, late, silent, home-switch, disappear, reappear, status, quit)");
     }
   } catch (const std::exception& e) {
     return std::string("error: ") + e.what();

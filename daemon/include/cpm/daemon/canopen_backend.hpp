@@ -27,6 +27,18 @@
 //          until the operator's reset.
 //   fault_text  the first problem of the cycle, e.g.
 //          "drive 2 (y, node 2): heartbeat lost (no heartbeat for 160 ms)".
+//
+// Homing with the drive's own homing mode (drive_homing_supported(i): the
+// drive's DriveHomingConfig::enabled): BackendOutput::axis_drive homing runs
+// the drive in mode 6 (the force is ignored), start_homing held true makes
+// the start (the master makes the rising edge of controlword bit 4).
+// BackendInput::drive_homing: running while in progress, interrupted or
+// attained but still moving; attained only once completed at rest at home;
+// error on a homing error (with a line in fault_text, "drive 3 (z, node 3):
+// homing error (statusword 0x2637)"); idle outside mode 6. position_lost:
+// the drive booted again (its counts restarted). home_switch and
+// index_pulse: the GPIO lines home_x..z, index_x..z. diagnostics(): the
+// master's feedback, the bus and the GPIO inputs as of the last read().
 #pragma once
 
 #include <array>
@@ -55,6 +67,8 @@ class CanopenBackend final : public Backend {
   BackendResult read(std::int64_t cycle, BackendInput& in) noexcept override;
   BackendResult write(std::int64_t cycle, const BackendOutput& out) noexcept override;
   [[nodiscard]] const char* fault_text() const noexcept override { return text_; }
+  void diagnostics(BackendDiagnostics& out) const noexcept override;
+  [[nodiscard]] bool drive_homing_supported(int axis) const noexcept override;
 
   // For tests and diagnostics (loop thread only).
   [[nodiscard]] const hal::Feedback& feedback() const noexcept { return fb_; }

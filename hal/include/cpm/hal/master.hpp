@@ -14,6 +14,13 @@
 // (DriveCommand::target) and sends zero torque unless the drive reports
 // operation enabled and the target is enabled. Faults it detects are latched
 // in Feedback until reset_faults().
+//
+// A drive configured with DriveHomingConfig::enabled also gets its homing
+// objects (0x6098, 0x607C, 0x6099, 0x609A) at start(), and the modes of
+// operation in RPDO1 and its display in TPDO1 (pdo.hpp): DriveCommand::homing
+// then runs it in homing mode (6) with zero torque, and start_homing makes
+// controlword bit 4 rise once the drive shows mode 6; DriveFeedback::homing
+// decodes its statusword.
 #pragma once
 
 #include <array>
@@ -40,11 +47,13 @@ inline constexpr std::size_t kMaxDrives = 8;
 // between homing and cyclic synchronous torque.
 struct DriveHomingConfig {
   bool enabled = false;
-  int method = 0;                   // 0x6098 (CiA 402 homing method, e.g. 19)
+  int method = 0;                   // 0x6098 (CiA 402 homing method, e.g. 19), in the drive's
+                                    // directions (its counts: reversed by direction -1)
   double speed_search_mps = 0;      // 0x6099:1 speed during search for the switch (m/s, > 0)
   double speed_zero_mps = 0;        // 0x6099:2 speed during search for zero (m/s, > 0)
   double acceleration_mps2 = 0;     // 0x609A homing acceleration (m/s^2, > 0)
   double offset_m = 0;              // 0x607C home offset (m): the position the drive reports at its home
+                                    // (written in counts: direction * (offset_m - position_offset_m) * counts_per_m)
 };
 
 struct DriveConfig {
@@ -123,7 +132,8 @@ struct DriveFeedback {
   Code torque_code = Code::ok;       // saturated / not_finite for the last write
   std::int8_t mode_display = 0;      // 0x6061 (when mapped; 0 otherwise)
   // The homing status the statusword reports while the drive is in homing
-  // mode (bits 10, 12, 13); idle in any other mode.
+  // mode (bits 10, 12, 13), when it displays mode 6 in operation enabled
+  // (the bits mean nothing in another state); idle otherwise.
   cia402::HomingStatus homing = cia402::HomingStatus::idle;
   bool position_lost = false;        // the drive booted again since the last read() (its counts restart)
 };
@@ -151,9 +161,11 @@ struct DriveCommand {
   double force_n = 0;                // applied only in operation enabled with target enabled
   bool reset_fault = false;          // send fault reset (edge made by the master) while in fault
   // Homing (only for drives configured with DriveHomingConfig::enabled):
-  // the modes of operation 6 instead of 10, and controlword bit 4 (homing
-  // operation start) while start_homing; the master keeps bit 4 low for one
-  // cycle after entering the mode so the drive sees a rising edge.
+  // the modes of operation 6 instead of 10 (with zero torque), and
+  // controlword bit 4 (homing operation start) while start_homing in
+  // operation enabled; the master keeps bit 4 low until the drive displays
+  // mode 6 after an RPDO with bit 4 low, so the drive sees a rising edge.
+  // Dropping start_homing drops bit 4: the drive interrupts the homing.
   bool homing = false;
   bool start_homing = false;
 };
@@ -214,6 +226,9 @@ class Master {
     std::int64_t last_heartbeat_ns = -1;
     std::uint64_t prev_cycle = 0;   // cycle of the previous position sample
     bool have_prev = false;
+    // Homing: the last RPDO had mode 6 and bit 4 low; the drive has seen
+    // bit 4 low in mode 6, so raising it is an edge.
+    bool sent_mode6_low = false, homing_armed = false;
     SdoClient sdo;
     Drive(const DriveConfig& c, std::int64_t sdo_timeout_ns);
   };
@@ -225,6 +240,8 @@ class Master {
   void write_pdo(Drive& d, const pdo::Layout& l, bool enabled);
   void check_u32(Drive& d, std::uint16_t index, std::uint8_t sub, std::uint32_t want, const char* what);
   void disable_unused_pdos(Drive& d);
+  // RPDO1 as this drive's mapping has it (with the mode for a homing drive).
+  static CanFrame rpdo1(const Drive& d, std::uint16_t cw, std::int16_t torque, std::int8_t mode) noexcept;
 
   CanBus& bus_;
   Clock& clock_;

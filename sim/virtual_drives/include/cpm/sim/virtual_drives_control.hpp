@@ -13,6 +13,7 @@
 //   late AXIS MS                   answer SDO requests MS milliseconds late (0: on time)
 //   silent AXIS on|off             the drive neither receives nor sends
 //   disappear | reappear           every drive vanishes / powers up again (boot-up)
+//   home-switch AXIS dead|ok       the axis's home switch never actuates (broken) / works
 //   status                         one line: syncs, plant steps, position (m), drive states
 //   quit                           leave the process (the drives vanish from the bus)
 //

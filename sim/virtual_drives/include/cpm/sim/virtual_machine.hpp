@@ -28,6 +28,17 @@
 //
 // Frames are fed one at a time (pump() or on_frame()), so three drives that
 // share one socket see the same frame order as on a real bus.
+//
+// Homing: each drive reads the sensors wired to it (hal::DriveInputs), set
+// from the true actuator displacement d_i at every SYNC: a home switch
+// actuated while d_i < home_switch[i] (near the low stroke end), limit
+// switches within limit_margin of both stroke ends of the true machine, and
+// an encoder index at every whole multiple of index_pitch (captured where it
+// is). With `incremental`, the encoders count from 0 wherever each carriage
+// stands when the drives power on (and again at each reappearance), as
+// incremental encoders do: the master reads an unknown offset until it homes.
+// The drives' own loops (homing mode) are tuned to the effective mass of
+// each actuator at the initial position.
 #pragma once
 
 #include <array>
@@ -64,6 +75,11 @@ struct VirtualMachineConfig {
   Vec3 initial_position = Vec3(0.600, 0.425, 0.300);     // platform centre at power-on (m)
   PlantOptions plant;
   int quick_stop_option = 2;                             // each drive's 0x605A default
+  // Homing sensors and encoders (see the header comment).
+  bool incremental = false;                              // counts start at 0 at power-on
+  Vec3 home_switch = Vec3::Constant(0.010);              // d_i below which actuator i's home switch is actuated (m)
+  double limit_margin = 0.003;                           // limit switches this far inside each stroke end (m); 0: none
+  double index_pitch = 0.0;                              // an index every this much d (m); 0: none
   // The default: node ids 1, 2, 3; 1e7 counts/m (0.1 um), velocity in
   // counts/s, rated force 40 N, clamp 3000 per mille (120 N, docs/model.md).
   static VirtualMachineConfig defaults();
@@ -91,6 +107,12 @@ class VirtualMachine {
   // pulled) or comes back (boots again, pre-operational).
   void disappear(bool gone, std::int64_t now_ns);
   [[nodiscard]] bool gone() const noexcept { return gone_; }
+  // Fault injection: actuator i's home switch never actuates (broken, or
+  // its wire cut), or works again.
+  void break_home_switch(int i, bool broken);
+  // The counts of actuator i's encoder where its drive counts from 0 (the
+  // plant's units at the last power-on with `incremental`, else 0).
+  [[nodiscard]] std::int64_t encoder_zero(int i) const noexcept { return zero_.at(static_cast<std::size_t>(i)); }
 
   [[nodiscard]] hal::VirtualDrive& drive(int i) { return *drives_.at(static_cast<std::size_t>(i)); }
   [[nodiscard]] const Plant& plant() const noexcept { return plant_->plant(); }
@@ -112,6 +134,13 @@ class VirtualMachine {
   std::array<std::uint64_t, 3> sync_seen_{};  // each drive's SYNC count before the frame
   std::uint64_t syncs_ = 0;
   bool gone_ = false;
+  // Homing sensors.
+  [[nodiscard]] std::int32_t encoder_counts(int i) const noexcept;  // what drive i counts now
+  void set_sensors();
+  kin::Strokes strokes_;
+  std::array<std::int64_t, 3> zero_{};
+  std::array<bool, 3> home_broken_{};
+  Vec3 d_before_ = Vec3::Zero();  // d at the last SYNC (index crossings)
 };
 
 }  // namespace cpm::sim
