@@ -1020,7 +1020,11 @@ void ControlLoop::latch_motion_faults(std::int64_t k, double error) noexcept {
   }
   int axis = -1;
   double v = 0, lim = 0;
-  if (!inside(est_.p, cfg_.limits.workspace_min, cfg_.limits.workspace_max, axis, v, lim))
+  // The reference never passes the soft limits (validation, the jog's box);
+  // the platform follows it within its tracking error, so it may pass one it
+  // stops at by that much.
+  const Vec3 slack = Vec3::Constant(kSoftLimitSlack);
+  if (!inside(est_.p, cfg_.limits.workspace_min - slack, cfg_.limits.workspace_max + slack, axis, v, lim))
     latch(kFaultSoftLimit, axis, v, lim, k);
   // The machine's own workspace (strokes, limb reach, elbow singularity):
   // the reference one cycle ahead is checked first, so that a path running

@@ -189,6 +189,10 @@ class ControlLoop {
   // commands cannot lengthen a cycle (the rest wait in the queue, and the
   // server answers REASON_BUSY when it is full).
   static constexpr int kCommandsPerCycle = 4;
+  // How far the measured platform may pass a soft limit its reference stops
+  // at (m): its tracking error when it brakes there (a few um for a jog
+  // braking at jog.acceleration; the following error bounds the rest).
+  static constexpr double kSoftLimitSlack = 50e-6;
 
   // Keeps references to `backend` and `machine`; the controller refers to
   // `machine`. Throws Error when the model's actuation delay needs more
