@@ -352,13 +352,14 @@ DaemonConfig parse_config_checked(const std::string& text, const std::string& na
   }
   if (n["channels"]) {
     const auto ch =
-        r.map(n["channels"], "lcm.channels", {}, {"state", "stats", "trajectory", "control", "ack", "security"});
+        r.map(n["channels"], "lcm.channels", {}, {"state", "stats", "trajectory", "control", "ack", "security", "path"});
     if (ch["state"]) c.lcm.state_channel = r.text(ch["state"], "lcm.channels.state");
     if (ch["stats"]) c.lcm.stats_channel = r.text(ch["stats"], "lcm.channels.stats");
     if (ch["trajectory"]) c.lcm.trajectory_channel = r.text(ch["trajectory"], "lcm.channels.trajectory");
     if (ch["control"]) c.lcm.control_channel = r.text(ch["control"], "lcm.channels.control");
     if (ch["ack"]) c.lcm.ack_channel = r.text(ch["ack"], "lcm.channels.ack");
     if (ch["security"]) c.lcm.security_channel = r.text(ch["security"], "lcm.channels.security");
+    if (ch["path"]) c.lcm.path_channel = r.text(ch["path"], "lcm.channels.path");
   }
   if (root["security"]) {
     const auto s = r.map(root["security"], "security", {},
