@@ -6,8 +6,10 @@
 
 #include <sstream>
 
+#include "cpm/daemon/path_message.hpp"
 #include "cpm/path/gcode.hpp"
 #include "cpm/path/planner.hpp"
+#include "cpm/path/program.hpp"
 #include "cpm/path/test_paths.hpp"
 
 namespace {
@@ -38,8 +40,9 @@ void plan(benchmark::State& state, path::PlanMode mode) {
 BENCHMARK_CAPTURE(plan, actuator_aware, path::PlanMode::actuator_aware)->Arg(10000)->Arg(1000)->Unit(benchmark::kMillisecond);
 BENCHMARK_CAPTURE(plan, cartesian_only, path::PlanMode::cartesian_only)->Arg(10000)->Unit(benchmark::kMillisecond);
 
-// What `cpm run FILE.ngc` will do before anything moves: read the
-// program, check it against the workspace, and plan it.
+// What `cpm run FILE.ngc` does before anything moves (path::prepare_program):
+// read the program, check it against the workspace, plan it, and check the
+// plan at every knot.
 void read_check_plan_gcode(benchmark::State& state) {
   const path::PathQueue q = program(10000);
   const path::ProgramFrame frame;
@@ -54,14 +57,37 @@ void read_check_plan_gcode(benchmark::State& state) {
     text << "G1 X" << e.x() << " Y" << e.y() << "\n";
   }
   const std::string gcode = text.str();
+  path::ProgramOptions o;
+  o.planner = path::planner_options(path::MachineLimits{}, machine());
   for (auto _ : state) {
-    const path::Program prog = path::read_program(gcode);
-    path::check_workspace(prog, machine(), frame);
-    const path::Plan p = path::plan_path(path::to_queue(prog, frame, 0.0), machine(), path::PlannerOptions{});
-    benchmark::DoNotOptimize(p.duration());
+    const path::PreparedProgram p = path::prepare_program(gcode, machine(), o);
+    benchmark::DoNotOptimize(p.plan->duration());
   }
 }
 BENCHMARK(read_check_plan_gcode)->Unit(benchmark::kMillisecond);
+
+// What cpmd does with a program sent to its path queue, in its worker
+// thread: the chunks assembled (path_command_t, 100 segments each), the
+// whole program planned with the daemon's limits, the plan checked at every
+// knot against the workspace and the soft limits.
+void cpmd_path_queue(benchmark::State& state) {
+  const path::PathQueue q = program(static_cast<int>(state.range(0)));
+  const auto chunks = daemon::path_chunks(q, 1);
+  const path::PlannerOptions o = path::planner_options(path::MachineLimits{}, machine());
+  double motion = 0.0;
+  for (auto _ : state) {
+    daemon::PathAssembly a;
+    for (const auto& c : chunks) benchmark::DoNotOptimize(a.add(c).size());
+    const path::Plan p = path::plan_path(a.take(), machine(), o);
+    benchmark::DoNotOptimize(path::check_plan(p, machine(), path::SoftLimits{}).has_value());
+    motion = p.duration();
+  }
+  state.counters["segments"] = static_cast<double>(state.range(0));
+  state.counters["chunks"] = static_cast<double>(chunks.size());
+  state.counters["motion_s"] = motion;
+}
+BENCHMARK(cpmd_path_queue)->Arg(10000)->Unit(benchmark::kMillisecond);
+BENCHMARK(cpmd_path_queue)->Arg(100000)->Iterations(1)->Unit(benchmark::kMillisecond);
 
 // One sample of a prepared plan, as the control cycle takes it.
 void sample(benchmark::State& state) {

@@ -256,14 +256,22 @@ cpm_msgs::ack_t Client::control(std::int8_t command, double timeout_s) {
   return control(c, timeout_s);
 }
 
-std::int64_t Client::send_trajectory(cpm_msgs::trajectory_command_t cmd) {
+template <class M>
+std::int64_t Client::send_motion(const std::string& channel, M& cmd) {
   need_key(0);
   if (session_ == 0) acquire();
   if (cmd.id == 0) cmd.id = next_id();
   stamp(cmd);
-  lcm_->publish(cfg_.trajectory_channel, &cmd);
+  lcm_->publish(channel, &cmd);
   return cmd.id;
 }
+
+std::int64_t Client::send_trajectory(cpm_msgs::trajectory_command_t cmd) {
+  return send_motion(cfg_.trajectory_channel, cmd);
+}
+
+std::int64_t Client::send_path(cpm_msgs::path_command_t cmd) { return send_motion(cfg_.path_channel, cmd); }
+
 
 cpm_msgs::ack_t Client::trajectory(cpm_msgs::trajectory_command_t cmd, double timeout_s) {
   cpm_msgs::ack_t a = wait_ack(send_trajectory(cmd), timeout_s);

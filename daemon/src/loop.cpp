@@ -10,6 +10,7 @@
 #include <cpm_msgs/ack_t.hpp>
 
 #include "cpm/kinematics/workspace.hpp"
+#include "cpm/path/program.hpp"
 
 namespace cpm::daemon {
 
@@ -20,6 +21,7 @@ const ctl::Trajectory* Segment::get() const noexcept {
   if (auto* c = std::get_if<ctl::CircleTrajectory>(&traj)) return c;
   if (auto* p = std::get_if<ctl::PointToPoint>(&traj)) return p;
   if (auto* s = std::get_if<StreamTrajectory>(&traj)) return s;
+  if (auto* p = std::get_if<const path::Plan*>(&traj)) return *p;
   return nullptr;
 }
 
@@ -164,8 +166,14 @@ void ControlLoop::latch(std::uint32_t bit, int axis, double value, double limit,
   }
 }
 
+void ControlLoop::clear_slot(Segment& s) noexcept {
+  // The ring holds twice the queue: a push cannot fail while the server drains it.
+  if (auto* p = std::get_if<const path::Plan*>(&s.traj)) (void)retired_plans_.push(*p);
+  s.traj = std::monostate{};
+}
+
 void ControlLoop::flush_queue() noexcept {
-  for (int i = 0; i < q_count_; ++i) (*queue_)[(q_head_ + i) % kQueueCapacity].traj = std::monostate{};
+  for (int i = 0; i < q_count_; ++i) clear_slot((*queue_)[(q_head_ + i) % kQueueCapacity]);
   q_head_ = 0;
   q_count_ = 0;
   playing_ = false;
@@ -178,7 +186,7 @@ void ControlLoop::finish_segment() noexcept {
   last_seg_n_ = seg_n_;
   last_seg_rmse_ = seg_n_ > 0 ? std::sqrt(seg_sum_e2_ / seg_n_) : 0.0;
   last_seg_max_ = seg_max_e_;
-  (*queue_)[q_head_].traj = std::monostate{};
+  clear_slot((*queue_)[q_head_]);
   q_head_ = (q_head_ + 1) % kQueueCapacity;
   q_count_--;
   playing_ = false;
@@ -590,7 +598,15 @@ ctl::TrajectorySample ControlLoop::reference(std::int64_t k) noexcept {
         const ctl::Trajectory* tr = s.get();
         const double t = static_cast<double>(k - segment_start_cycle_) * dt_;
         // [0, duration): the end sample itself is the hold that follows.
-        if (t < tr->duration() - 1e-9) return tr->sample(t);
+        if (t < tr->duration() - 1e-9) {
+          if (auto* p = std::get_if<const path::Plan*>(&s.traj)) {
+            // A program: where on it, for the state's program line.
+            const path::PathSample ps = (*p)->sample_path(t);
+            program_line_ = path::line_of(**p, ps.segment);
+            return ps.ref;
+          }
+          return tr->sample(t);
+        }
         // Finished: the next segment starts now, at its own t = 0.
         hold_ = s.end;
         const bool starved = q_count_ == 1 && std::holds_alternative<StreamTrajectory>(s.traj) &&
@@ -1170,7 +1186,9 @@ void ControlLoop::fill_state(std::int64_t k) noexcept {
     s.segment_id = seg.id;
     s.segment_elapsed = static_cast<double>(k - segment_start_cycle_) * dt_;
     s.segment_duration = seg.get()->duration();
+    s.program_line = std::holds_alternative<const path::Plan*>(seg.traj) ? program_line_ : 0;
   } else {
+    s.program_line = 0;
     s.segment_id = -1;
     s.segment_elapsed = 0;
     s.segment_duration = 0;

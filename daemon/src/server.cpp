@@ -18,6 +18,8 @@
 
 #include "cpm/daemon/fault_report.hpp"
 #include "cpm/daemon/log.hpp"
+#include "cpm/daemon/path_message.hpp"
+#include "path_service.hpp"
 
 namespace cpm::daemon {
 
@@ -205,6 +207,14 @@ std::string bad_number(const control_command_t& c) {
   return {};
 }
 
+std::string bad_number(const cpm_msgs::path_command_t& c) {
+  if (bad(c.tolerance)) return "tolerance";
+  for (const std::string& b : {bad_in(c.start, "start"), bad_in(c.end, "end"), bad_in(c.centre, "centre"),
+                               bad_in(c.normal, "normal"), bad_in(c.feed, "feed"), bad_in(c.dwell, "dwell")})
+    if (!b.empty()) return b;
+  return {};
+}
+
 Server::Server(const DaemonConfig& cfg, ControlLoop& loop, ModelStore& models)
     : cfg_(cfg), loop_(loop), models_(models), law_(cfg.controller.law), gains_(cfg.controller.gains),
       scratch_(std::make_unique<Command>()) {
@@ -224,6 +234,8 @@ Server::Server(const DaemonConfig& cfg, ControlLoop& loop, ModelStore& models)
   // std::length_error out of the LCM callback and ends the daemon).
   lcm_->subscribe(cfg_.lcm.control_channel, &Server::on_raw, this);
   lcm_->subscribe(cfg_.lcm.trajectory_channel, &Server::on_raw, this);
+  lcm_->subscribe(cfg_.lcm.path_channel, &Server::on_raw, this);
+  paths_ = std::make_unique<PathService>(cfg_.limits);
 }
 
 void Server::on_raw(const lcm::ReceiveBuffer* rbuf, const std::string& channel) {
@@ -285,6 +297,11 @@ std::size_t trajectory_size() {
   return n;
 }
 
+std::size_t path_size() {
+  static const std::size_t n = static_cast<std::size_t>(cpm_msgs::path_command_t{}.getEncodedSize());
+  return n;
+}
+
 }  // namespace
 
 bool Server::receive(const std::string& channel, const void* data, std::size_t size) {
@@ -304,6 +321,13 @@ bool Server::receive(const std::string& channel, const void* data, std::size_t s
       auto m = std::make_unique<trajectory_command_t>();
       if (m->decode(data, 0, n) != n) return ++undecodable_, false;
       on_trajectory(raw, size, m.get());
+      return true;
+    }
+    if (channel == cfg_.lcm.path_channel) {
+      if (size != path_size()) return ++undecodable_, false;
+      auto m = std::make_unique<cpm_msgs::path_command_t>();
+      if (m->decode(data, 0, n) != n) return ++undecodable_, false;
+      on_path(raw, size, m.get());
       return true;
     }
   } catch (const std::exception& e) {
@@ -677,17 +701,8 @@ void Server::on_trajectory(const std::uint8_t* raw, std::size_t size, const traj
                                                "first (cpm home), jog the actuators meanwhile");
   }
   // Where and how the queue will end when this segment arrives.
-  Vec3 start, end_v;
-  if (inflight_segments_ > 0) {
-    start = planned_end_;
-    end_v = planned_end_v_;
-  } else if (ack_newer_than_state_ || !have_state_) {
-    start = ack_end_;
-    end_v = ack_end_v_;
-  } else {
-    start = Vec3(latest_.queue_end[0], latest_.queue_end[1], latest_.queue_end[2]);
-    end_v = Vec3(latest_.queue_end_velocity[0], latest_.queue_end_velocity[1], latest_.queue_end_velocity[2]);
-  }
+  const QueueEnd end = queue_end_now();
+  const Vec3 start = end.position, end_v = end.velocity;
   const double dt = 1.0 / cfg_.loop.rate_hz;
   Validation v = validate_segment(*m, start, models_.current(), cfg_.limits, dt);
   if (!v.ok) return refuse(v.reason, v.message);
@@ -754,12 +769,21 @@ void Server::publish_security(double now) {
   lcm_->publish(cfg_.lcm.security_channel, &s);
 }
 
+Server::QueueEnd Server::queue_end_now() const {
+  if (inflight_segments_ > 0) return {planned_end_, planned_end_v_};
+  if (ack_newer_than_state_ || !have_state_) return {ack_end_, ack_end_v_};
+  return {Vec3(latest_.queue_end[0], latest_.queue_end[1], latest_.queue_end[2]),
+          Vec3(latest_.queue_end_velocity[0], latest_.queue_end_velocity[1], latest_.queue_end_velocity[2])};
+}
+
 int Server::drain() {
   int n = 0;
+  drain_paths();
   Ack a;
   while (loop_.acks().pop(a)) {
     ++n;
-    if (a.source == 2) inflight_segments_ = std::max(0, inflight_segments_ - 1);
+    if (a.source == 2 || a.source == kPathAckSource) inflight_segments_ = std::max(0, inflight_segments_ - 1);
+    if (a.source == kPathAckSource) paths_->answered(a.id, a.accepted);
     ack_newer_than_state_ = true;
     ack_end_ = a.queue_end;
     ack_end_v_ = a.queue_end_velocity;

@@ -20,6 +20,7 @@
 #include "cpm/path/contour.hpp"
 #include "cpm/path/gcode.hpp"
 #include "cpm/path/planner.hpp"
+#include "cpm/path/program.hpp"
 #include "cpm/path/test_paths.hpp"
 #include "cpm/sim/closed_loop.hpp"
 #include "svg.hpp"
@@ -253,11 +254,12 @@ int main(int argc, char** argv) {
     const std::string name = o.program.empty() ? "square-diamond-circle, side " + std::to_string(o.side) + " mm, F" +
                                                      std::to_string(o.feed) + " mm/min"
                                                : o.program;
-    ReaderOptions ro;
-    ro.name = o.program.empty() ? "contour" : o.program;
-    const Program prog = read_program(o.program.empty() ? square_diamond_circle(o.side, o.feed) : read_text(o.program), ro);
-    check_workspace(prog, model, ProgramFrame{}, SoftLimits{}, ro.name);
-    const PathQueue q = to_queue(prog, ProgramFrame{}, o.tolerance * 1e-3);
+    ProgramOptions po;
+    po.name = o.program.empty() ? "contour" : o.program;
+    po.tolerance = o.tolerance * 1e-3;
+    const PathQueue q =
+        read_checked_program(o.program.empty() ? square_diamond_circle(o.side, o.feed) : read_text(o.program), model, po)
+            .queue;
     std::vector<Run> rs = runs(o, model);
     for (Run& r : rs) run(r, q, model, truth);
     write(o, name, rs, q);

@@ -76,6 +76,7 @@ void PathQueue::arc(const Vec3& end, const Vec3& centre, const Vec3& normal, int
   const double r1 = (q - q.dot(normal) * normal).norm();
   if (r0 < 1e-9 || r1 < 1e-9) throw Error("path: an arc of zero radius");
   s.sweep = arc_sweep(end_, end, s.centre, normal, turns);
+  s.turns = turns;
   s.feed = feed;
   s.line = line;
   segments_.push_back(s);

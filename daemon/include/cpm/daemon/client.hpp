@@ -12,6 +12,7 @@
 #include <cpm_msgs/ack_t.hpp>
 #include <cpm_msgs/control_command_t.hpp>
 #include <cpm_msgs/loop_stats_t.hpp>
+#include <cpm_msgs/path_command_t.hpp>
 #include <cpm_msgs/security_t.hpp>
 #include <cpm_msgs/state_t.hpp>
 #include <cpm_msgs/trajectory_command_t.hpp>
@@ -59,6 +60,11 @@ class Client {
   // Send without waiting; the ack is collected later with wait_ack().
   std::int64_t send_trajectory(cpm_msgs::trajectory_command_t cmd);
   cpm_msgs::ack_t wait_ack(std::int64_t id, double timeout_s);
+  // A program's chunk for the path queue (path_command_t, docs/path.md),
+  // stamped, signed and sent without waiting; its id is returned (a fresh
+  // one unless set). The last chunk's ack comes once cpmd has planned the
+  // program.
+  std::int64_t send_path(cpm_msgs::path_command_t cmd);
 
   // The next state message (nullopt on timeout).
   std::optional<cpm_msgs::state_t> state(double timeout_s = 2.0);
@@ -81,6 +87,10 @@ class Client {
   template <class M>
   void stamp(M& m);
   void need_key(std::int8_t command) const;  // throws Error without credentials
+  // A motion command (trajectory, path chunk) on `channel`: a session
+  // acquired first if none is held, stamped, signed; returns its id.
+  template <class M>
+  std::int64_t send_motion(const std::string& channel, M& cmd);
   // The next message into `slot` (reset first), keeping the session alive meanwhile.
   template <class M>
   std::optional<M> next(std::optional<M>& slot, double timeout_s, int poll_ms);

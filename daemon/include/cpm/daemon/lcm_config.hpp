@@ -12,6 +12,7 @@ struct LcmConfig {
   std::string state_channel = "CPMD_STATE";
   std::string stats_channel = "CPMD_STATS";
   std::string trajectory_channel = "CPMD_TRAJ";
+  std::string path_channel = "CPMD_PATH";          // path_command_t: programs for the path queue
   std::string control_channel = "CPMD_CONTROL";
   std::string ack_channel = "CPMD_ACK";
   std::string security_channel = "CPMD_SECURITY";  // security_t, 1 Hz

@@ -86,12 +86,18 @@
 #include "cpm/daemon/spsc.hpp"
 #include "cpm/daemon/stream_trajectory.hpp"
 
+namespace cpm::path {
+class Plan;
+}  // namespace cpm::path
+
 namespace cpm::daemon {
 
-// A queued trajectory segment: one of the trajectory kinds, by value.
+// A queued trajectory segment: one of the trajectory kinds, by value, or a
+// planned program (path_command_t) by pointer: the server owns the plan and
+// frees it only after the loop hands it back (retired_plans()).
 struct Segment {
   std::int64_t id = -1;
-  std::variant<std::monostate, ctl::CircleTrajectory, ctl::PointToPoint, StreamTrajectory> traj;
+  std::variant<std::monostate, ctl::CircleTrajectory, ctl::PointToPoint, StreamTrajectory, const path::Plan*> traj;
   Vec3 start = Vec3::Zero(), end = Vec3::Zero();
   // Accept a start whose velocity or acceleration steps from the queue's end
   // (granted by the server: the simulator, or limits.allow_velocity_step).
@@ -216,6 +222,9 @@ class ControlLoop {
   SpscRing<cpm_msgs::state_t, 4096>& snapshots() noexcept { return snapshots_; }
   SpscRing<cpm_msgs::loop_stats_t, 4>& stats() noexcept { return stats_out_; }
   SpscRing<cpm_msgs::drives_t, 8>& drives() noexcept { return drives_out_; }
+  // Plans the loop no longer holds (played, flushed by a stop or a fault),
+  // for the server to free. Larger than the queue: it never fills.
+  SpscRing<const path::Plan*, 2 * kQueueCapacity>& retired_plans() noexcept { return retired_plans_; }
   // Cycles completed (the watchdog is fed only while this advances).
   [[nodiscard]] std::int64_t cycles_done() const noexcept { return cycles_done_.load(std::memory_order_acquire); }
   // Latest mode (any thread).
@@ -291,6 +300,7 @@ class ControlLoop {
   void start_underrun_stop(const Segment& s, std::int64_t k, double late) noexcept;
   bool start_next_segment(std::int64_t k) noexcept;
   void finish_segment() noexcept;
+  void clear_slot(Segment& s) noexcept;  // empty it; a plan goes to retired_plans()
   ctl::TrajectorySample reference(std::int64_t k) noexcept;
   ctl::TrajectorySample reference_ahead(std::int64_t k, double ahead) const noexcept;
   void fill_state(std::int64_t k) noexcept;
@@ -308,6 +318,7 @@ class ControlLoop {
   SpscRing<cpm_msgs::state_t, 4096> snapshots_;
   SpscRing<cpm_msgs::loop_stats_t, 4> stats_out_;
   SpscRing<cpm_msgs::drives_t, 8> drives_out_;
+  SpscRing<const path::Plan*, 2 * kQueueCapacity> retired_plans_;
 
   // State machine.
   Mode mode_ = Mode::init;
@@ -338,6 +349,7 @@ class ControlLoop {
   Vec3 hold_ = Vec3::Zero();      // hold point = end of the queue when idle
   Vec3 queue_end_ = Vec3::Zero();
   Vec3 queue_end_v_ = Vec3::Zero(), queue_end_a_ = Vec3::Zero();  // the motion the queue ends with
+  std::int32_t program_line_ = 0;  // of the playing plan (state_t.program_line)
   // Stop profile.
   Vec3 stop_p0_ = Vec3::Zero(), stop_dir_ = Vec3::Zero();
   double stop_v0_ = 0, stop_T_ = 0;

@@ -17,6 +17,7 @@
 
 #include <cpm_msgs/ack_t.hpp>
 #include <cpm_msgs/control_command_t.hpp>
+#include <cpm_msgs/path_command_t.hpp>
 #include <cpm_msgs/security_t.hpp>
 #include <cpm_msgs/trajectory_command_t.hpp>
 
@@ -30,6 +31,8 @@ class ReceiveBuffer;
 }  // namespace lcm
 
 namespace cpm::daemon {
+
+class PathService;
 
 // Owns the prepared machine models; the loop holds a pointer to the current one.
 class ModelStore {
@@ -75,6 +78,7 @@ Validation validate_segment(const cpm_msgs::trajectory_command_t& cmd, const Vec
 // zero or normal. Unused fields count too: a clean sender leaves them 0.
 std::string bad_number(const cpm_msgs::trajectory_command_t& cmd);
 std::string bad_number(const cpm_msgs::control_command_t& cmd);
+std::string bad_number(const cpm_msgs::path_command_t& cmd);
 
 // Whether a law and gains can hold the machine as cpmd runs it (the loop's
 // rate, the velocity its backend gives, limits.following_error for a law
@@ -107,6 +111,10 @@ class Server {
   // The session held now (0: none, or the holder went silent for
   // lcm.session_timeout s).
   [[nodiscard]] std::int64_t session() const;
+  // Plans held by the path queue's store (tests: freed once retired).
+  [[nodiscard]] std::size_t plans_held() const;
+  // A program is being planned (tests wait for it).
+  [[nodiscard]] bool planning() const;
 
   // The operators who may command (docs/security.md). Any thread: the
   // housekeeping thread hands a freshly loaded table over whole; the LCM
@@ -124,6 +132,18 @@ class Server {
   // `raw`: the bytes as received (the MAC is over them).
   void on_control(const std::uint8_t* raw, std::size_t size, const cpm_msgs::control_command_t* msg);
   void on_trajectory(const std::uint8_t* raw, std::size_t size, const cpm_msgs::trajectory_command_t* msg);
+  // The path queue (path_server.cpp): a program's chunk; planned programs to
+  // the loop and plans the loop retired back to the store.
+  void on_path(const std::uint8_t* raw, std::size_t size, const cpm_msgs::path_command_t* msg);
+  void drain_paths();
+  // Where a new segment must start and how fast it must be moving there:
+  // the end of what was sent, else of what the latest ack or state says is
+  // queued (m, m/s).
+  struct QueueEnd {
+    Vec3 position = Vec3::Zero();
+    Vec3 velocity = Vec3::Zero();
+  };
+  [[nodiscard]] QueueEnd queue_end_now() const;
   void publish_ack(std::int64_t id, std::int8_t source, std::int8_t code, bool ok, std::int16_t reason,
                    const std::string& message, Mode mode, std::int16_t depth, std::int64_t session = 0);
   // A refusal of a command not (yet) proven to come from an operator, or a
@@ -163,6 +183,7 @@ class Server {
   ctl::ControlLaw law_;
   ctl::Gains gains_;
   std::unique_ptr<Command> scratch_;
+  std::unique_ptr<PathService> paths_;
   std::int64_t undecodable_ = 0;
   std::function<double()> now_;
   std::function<double()> wall_now_;

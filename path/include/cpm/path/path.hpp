@@ -29,6 +29,7 @@ struct Segment {
   // along the normal (a helix).
   Vec3 centre = Vec3::Zero(), normal = Vec3::UnitZ();
   double sweep = 0.0;
+  int turns = 0;       // arcs: as given to PathQueue::arc (the sweep is made from it)
   double feed = 0.0;   // programmed speed along the path (m/s); 0: rapid, the planner's ceiling
   double dwell = 0.0;  // s, dwells only
   int line = 0;        // where it came from (a program's line number; 0: none)
