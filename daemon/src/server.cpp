@@ -18,6 +18,7 @@
 
 #include "cpm/daemon/fault_report.hpp"
 #include "cpm/daemon/log.hpp"
+#include "cpm/daemon/params.hpp"
 #include "cpm/daemon/path_message.hpp"
 #include "path_service.hpp"
 
@@ -592,6 +593,42 @@ void Server::on_control(const std::uint8_t* raw, std::size_t size, const control
       c.kind = CommandKind::home;
       c.home_axes = static_cast<std::uint8_t>(m->home_axes);
       break;
+    case control_command_t::CMD_SET_PARAM: {
+      // The name: NUL-padded printable ASCII, as the operator's name is.
+      std::string name;
+      for (const std::uint8_t b : m->param_name) {
+        if (b == 0) break;
+        if (b < 0x21 || b > 0x7e) return refuse(ack_t::REASON_INVALID, "param_name is not printable ASCII");
+        name.push_back(static_cast<char>(b));
+      }
+      const Param* param = nullptr;
+      DaemonConfig next = cfg_;
+      try {
+        param = &find_param(name);
+        set_param(next, name, m->param_value);
+      } catch (const Error& e) {
+        return refuse(param ? ack_t::REASON_LIMIT : ack_t::REASON_INVALID, std::string("set ") + e.what());
+      }
+      if (next.controller.gains.kp != cfg_.controller.gains.kp || next.controller.gains.kd != cfg_.controller.gains.kd) {
+        // New gains are a new controller: checked as a selection is, taken
+        // as one (when disabled, or bumpless while holding).
+        const ctl::GainVerdict verdict = check_gains_for(models_.current(), next.controller.law, next.controller.gains);
+        if (!verdict.ok) return refuse(ack_t::REASON_LIMIT, "set " + name + ": " + verdict.reason);
+        c.kind = CommandKind::select_controller;
+        c.controller.emplace(models_.current(), next.controller.law, next.controller.gains);
+        if (loop_.commands().size() < loop_.commands().capacity())
+          pending_laws_[c.id] = {next.controller.law, next.controller.gains};
+        break;
+      }
+      c.kind = CommandKind::set_params;
+      c.settings.limits = next.limits;
+      c.settings.jog = next.jog;
+      c.settings.transfer_time = next.controller.transfer_time;
+      c.while_moving = param->while_moving;
+      c.param = param->name;
+      if (loop_.commands().size() < loop_.commands().capacity()) pending_settings_[c.id] = c.settings;
+      break;
+    }
     case control_command_t::CMD_JOG:
       if (m->jog_frame != control_command_t::JOG_ACTUATOR && m->jog_frame != control_command_t::JOG_MACHINE)
         return refuse(ack_t::REASON_INVALID, "jog_frame must be 0 (actuators) or 1 (machine frame)");
@@ -760,6 +797,17 @@ void Server::log_security(double now) {
   last_security_log_ = now;
 }
 
+void Server::publish_params(double now) {
+  // Once a second, and at once after a change.
+  if (!params_changed_ && now - last_params_publish_ < 1.0) return;
+  params_changed_ = false;
+  last_params_publish_ = now;
+  cpm_msgs::params_t m = params_message(cfg_);
+  m.utime = std::chrono::duration_cast<std::chrono::microseconds>(
+                std::chrono::system_clock::now().time_since_epoch()).count();
+  lcm_->publish(cfg_.lcm.params_channel, &m);
+}
+
 void Server::publish_security(double now) {
   if (now - last_security_publish_ < 1.0) return;
   last_security_publish_ = now;
@@ -792,13 +840,26 @@ int Server::drain() {
       if (a.accepted && it != pending_models_.end()) models_.make_current(it->second);
       if (it != pending_models_.end()) pending_models_.erase(it);
     }
-    if (a.source == 1 && a.code == control_command_t::CMD_SELECT_CONTROLLER) {
+    if (a.source == 1 && !pending_laws_.empty()) {  // a selection, or gains set
       const auto it = pending_laws_.find(a.id);
       if (a.accepted && it != pending_laws_.end()) {
         law_ = it->second.first;
         gains_ = it->second.second;
+        cfg_.controller.law = law_;
+        cfg_.controller.gains = gains_;
+        params_changed_ = true;
       }
       if (it != pending_laws_.end()) pending_laws_.erase(it);
+    }
+    if (a.source == 1 && !pending_settings_.empty()) {
+      const auto it = pending_settings_.find(a.id);
+      if (a.accepted && it != pending_settings_.end()) {
+        cfg_.limits = it->second.limits;
+        cfg_.jog = it->second.jog;
+        cfg_.controller.transfer_time = it->second.transfer_time;
+        params_changed_ = true;
+      }
+      if (it != pending_settings_.end()) pending_settings_.erase(it);
     }
     // A model the loop no longer uses (the old one after a load, or the new
     // one of a refused load) is freed here, outside the loop.
@@ -836,6 +897,7 @@ int Server::drain() {
   }
   const double now = now_();
   publish_security(now);
+  publish_params(now);
   log_security(now);
   return n;
 }

@@ -166,6 +166,7 @@ class Server {
   // A newly latched fault goes to the journal once, in fault_report's words.
   void journal_fault(const cpm_msgs::state_t& st);
   void publish_security(double now);
+  void publish_params(double now);
 
   DaemonConfig cfg_;
   ControlLoop& loop_;
@@ -205,6 +206,9 @@ class Server {
   double last_security_publish_ = -1e300, last_security_log_ = -1e300;
   std::string last_stranger_;          // the last refused operator name (journal)
   std::map<std::int64_t, const ctl::Machine*> pending_models_;
+  std::map<std::int64_t, Settings> pending_settings_;  // CMD_SET_PARAM of a limit or the jog, until the loop's ack
+  bool params_changed_ = true;                          // publish params_t at once
+  double last_params_publish_ = -1e300;
   std::map<std::int64_t, std::pair<ctl::ControlLaw, ctl::Gains>> pending_laws_;  // a Command is large: build it off the stack
 };
 
