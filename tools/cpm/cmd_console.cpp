@@ -8,7 +8,7 @@
 #include <chrono>
 #include <cstdio>
 
-#include "cmd_client_common.hpp"
+#include "cmd_console_common.hpp"
 #include "console.hpp"
 #include "console_screen.hpp"
 
@@ -68,9 +68,7 @@ int watch_plain(daemon::Client& c, const WatchOptions& o, const std::string& url
       c.handle(0.05);
       if (first && c.latest_state() && c.latest_stats() && c.latest_drives()) break;
     }
-    if (o.once && !c.latest_state())
-      throw Error("no state from cpmd within 1.5 s (is it running? LCM " + url + ", channel " +
-                  c.config().state_channel + ")");
+    if (o.once) received(c.latest_state(), "state", 1.5, c.config(), c.config().state_channel);
     for (const auto& l : console::render(c.latest_state(), c.latest_stats(), c.latest_drives(), 80, 100,
                                          fresh.note(c.latest_state())))
       std::printf("%s\n", l.c_str());
@@ -109,16 +107,13 @@ struct DrivesOptions {
 int drives(const DrivesOptions& o) {
   const auto l = lcm_options(o.connection);
   daemon::Client c(l);
-  const auto d = c.drives(2.0);
-  if (!d)
-    throw Error("no drives message from cpmd within 2 s (is it running? LCM " + l.url + ", channel " +
-                l.drives_channel + ")");
+  const auto d = received(c.drives(2.0), "drives message", 2.0, l, l.drives_channel);
   if (o.json) {
-    std::printf("%s\n", json_text(console::drives_json(*d), -1).c_str());
+    std::printf("%s\n", json_text(console::drives_json(d), -1).c_str());
     return 0;
   }
   const int w = output_width();
-  for (const auto& part : {console::drive_table(&*d, w), console::bus_lines(&*d, w), console::input_lines(&*d, w, false)})
+  for (const auto& part : {console::drive_table(&d, w), console::bus_lines(&d, w), console::input_lines(&d, w, false)})
     for (const auto& line : part)
       if (!line.empty()) std::printf("%s\n", line.c_str());
   return 0;

@@ -3,7 +3,7 @@
 // CMD_SET_PARAM; cpmd checks the range and the mode and says why it refuses).
 #include <cstdio>
 
-#include "cmd_client_common.hpp"
+#include "cmd_console_common.hpp"
 #include "console.hpp"
 
 namespace cpm::cli::client {
@@ -18,15 +18,13 @@ struct GetOptions {
 int get(const GetOptions& o) {
   const auto l = lcm_options(o.connection);
   daemon::Client c(l);
-  const auto p = c.params(3.0);
-  if (!p)
-    throw Error("no parameters from cpmd within 3 s (is it running? LCM " + l.url + ", channel " + l.params_channel + ")");
-  const auto which = console::select_params(*p, o.names);
+  const auto p = received(c.params(3.0), "parameters", 3.0, l, l.params_channel);
+  const auto which = console::select_params(p, o.names);
   if (o.json) {
-    std::printf("%s\n", json_text(console::params_json(*p, which), -1).c_str());
+    std::printf("%s\n", json_text(console::params_json(p, which), -1).c_str());
     return 0;
   }
-  for (const auto& line : console::params_table(*p, which, !o.names.empty())) std::printf("%s\n", line.c_str());
+  for (const auto& line : console::params_table(p, which, !o.names.empty())) std::printf("%s\n", line.c_str());
   return 0;
 }
 
