@@ -663,7 +663,6 @@ std::string JogPad::press(Key k, double now) {
   } else {
     axis_ = axis;
     sign_ = sign;
-    pressed_at_ = now;
     repeating_ = false;
   }
   last_key_ = now;

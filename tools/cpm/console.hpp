@@ -154,7 +154,7 @@ class JogPad {
   double max_speed_ = 0;  // 0: unknown (no cap but the steps')
   int axis_ = -1;         // the held key's axis, its sign
   double sign_ = 0;
-  double pressed_at_ = -1e9, last_key_ = -1e9;
+  double last_key_ = -1e9;  // when the held key last came
   bool repeating_ = false, stop_pending_ = false, quit_ = false;
 };
 
