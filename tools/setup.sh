@@ -12,6 +12,8 @@ packages=(
   nlohmann-json3-dev       # every JSON read and written
   help2man                 # man pages generated from --help
   bash-completion          # completion for cpm (pkg-config gives its install folder)
+  libncurses-dev           # cpm watch and cpm jog: the full-screen terminal
+  tmux                     # tests/tools: cpm watch in an 80 x 24 pane, captured
   libssl-dev               # SHA-256 of data files (libcrypto), model file provenance
   liblcm-dev liblcm-bin    # LCM transport and lcm-gen
   libgpiod-dev             # GPIO (v1 API, libgpiod 1.6)

@@ -5,6 +5,7 @@
 #include <chrono>
 #include <lcm/lcm-cpp.hpp>
 #include <algorithm>
+#include <cerrno>
 #include <cstring>
 #include <random>
 
@@ -15,7 +16,7 @@ namespace cpm::daemon {
 using Clock = std::chrono::steady_clock;
 
 const char* mode_text(std::int8_t mode) noexcept {
-  if (mode < 0 || mode > static_cast<std::int8_t>(Mode::fault)) return "unknown";
+  if (mode < 0 || mode > static_cast<std::int8_t>(Mode::jogging)) return "unknown";
   return mode_name(static_cast<Mode>(mode));
 }
 
@@ -68,6 +69,8 @@ Client::Client(const LcmConfig& cfg, std::optional<Credentials> operator_key)
   lcm_->subscribe(cfg_.state_channel, &Client::on_state_msg, this)->setQueueCapacity(kQueuedMessages);
   lcm_->subscribe(cfg_.stats_channel, &Client::on_stats_msg, this)->setQueueCapacity(kQueuedMessages);
   lcm_->subscribe(cfg_.security_channel, &Client::on_security_msg, this)->setQueueCapacity(100);
+  lcm_->subscribe(cfg_.drives_channel, &Client::on_drives_msg, this)->setQueueCapacity(100);
+  lcm_->subscribe(cfg_.params_channel, &Client::on_params, this)->setQueueCapacity(100);
   std::random_device rd;
   next_id_ = (static_cast<std::int64_t>(rd() & 0x7fffffu) << 32) ^ (static_cast<std::int64_t>(::getpid()) << 8);
   nonce_ = static_cast<std::int64_t>(((std::uint64_t{rd()} << 32) ^ rd()) & 0x7FFFFFFFFFFFFFFFull) | 1;
@@ -170,6 +173,14 @@ void Client::on_ack(const lcm::ReceiveBuffer* rbuf, const std::string&) {
     if (lost_session(*m)) session_ = 0;
     return;
   }
+  if (m->source == 1 && m->command == cpm_msgs::control_command_t::CMD_JOG && m->id != 0 &&
+      std::find(jog_ids_.begin(), jog_ids_.end(), m->id) != jog_ids_.end()) {
+    // One of this client's jogs: kept as the latest, never queued (a held key
+    // sends 20 a second and nobody waits for most of them).
+    if (lost_session(*m)) session_ = 0;
+    if (!last_jog_ack_ || m->id >= last_jog_ack_->id) last_jog_ack_ = *m;
+    return;
+  }
   acks_[m->id] = *m;
 }
 void Client::on_state_msg(const lcm::ReceiveBuffer*, const std::string&, const cpm_msgs::state_t* m) {
@@ -181,6 +192,22 @@ void Client::on_stats_msg(const lcm::ReceiveBuffer*, const std::string&, const c
 }
 void Client::on_security_msg(const lcm::ReceiveBuffer*, const std::string&, const cpm_msgs::security_t* m) {
   last_security_ = *m;
+}
+void Client::on_drives_msg(const lcm::ReceiveBuffer*, const std::string&, const cpm_msgs::drives_t* m) {
+  last_drives_ = *m;
+}
+void Client::on_params(const lcm::ReceiveBuffer* rbuf, const std::string&) {
+  // lcm-gen's decoding takes the counts and string lengths as sent: a
+  // negative one throws (std::length_error) instead of returning an error.
+  cpm_msgs::params_t p;
+  try {
+    if (rbuf->data_size > (1u << 20) ||
+        p.decode(rbuf->data, 0, static_cast<int>(rbuf->data_size)) != static_cast<int>(rbuf->data_size))
+      return;
+  } catch (const std::exception&) {
+    return;
+  }
+  last_params_ = std::move(p);
 }
 
 template <class M>
@@ -204,6 +231,7 @@ int Client::handle(double timeout_s) {
     if (left <= 0) break;
     keep_alive();
     const int rc = lcm_->handleTimeout(static_cast<int>(std::min<long>(left, 100)));
+    if (rc < 0 && errno == EINTR) break;  // a signal (Ctrl-C): the caller looks at why
     if (rc < 0) throw Error("lcm: receive failed");
     if (rc == 0) continue;
     ++n;
@@ -214,6 +242,7 @@ int Client::handle(double timeout_s) {
 cpm_msgs::ack_t Client::wait_ack(std::int64_t id, double timeout_s) {
   const auto end = Clock::now() + std::chrono::duration<double>(timeout_s);
   while (Clock::now() < end) {
+    if (last_jog_ack_ && last_jog_ack_->id == id) return *last_jog_ack_;
     if (auto it = acks_.find(id); it != acks_.end()) {
       cpm_msgs::ack_t a = it->second;
       acks_.erase(it);
@@ -222,6 +251,7 @@ cpm_msgs::ack_t Client::wait_ack(std::int64_t id, double timeout_s) {
     keep_alive();
     lcm_->handleTimeout(20);
   }
+  if (last_jog_ack_ && last_jog_ack_->id == id) return *last_jog_ack_;
   if (auto it = acks_.find(id); it != acks_.end()) return it->second;
   throw Error("no answer from cpmd within " + std::to_string(timeout_s) + " s (is it running? LCM URL " +
               cfg_.url + ", channel " + cfg_.control_channel + ")");
@@ -256,6 +286,40 @@ cpm_msgs::ack_t Client::control(std::int8_t command, double timeout_s) {
   return control(c, timeout_s);
 }
 
+cpm_msgs::ack_t Client::home(std::uint8_t axes, double timeout_s) {
+  if (axes > 7) throw Error("home: actuators are bits 0-2 (1, 2, 4), not " + std::to_string(axes));
+  cpm_msgs::control_command_t c{};
+  c.command = cpm_msgs::control_command_t::CMD_HOME;
+  c.home_axes = static_cast<std::int8_t>(axes);
+  return control(c, timeout_s);
+}
+
+std::int64_t Client::jog(std::int8_t frame, const double v[3]) {
+  using C = cpm_msgs::control_command_t;
+  need_key(C::CMD_JOG);
+  if (session_ == 0) acquire();
+  C c{};
+  c.command = C::CMD_JOG;
+  c.jog_frame = frame;
+  for (int i = 0; i < 3; ++i) c.jog_velocity[i] = v[i];
+  c.id = next_id();
+  jog_ids_[jog_next_++ % jog_ids_.size()] = c.id;
+  stamp(c);
+  lcm_->publish(cfg_.control_channel, &c);
+  return c.id;
+}
+
+cpm_msgs::ack_t Client::set_param(const std::string& name, double value, double timeout_s) {
+  cpm_msgs::control_command_t c{};
+  if (name.empty() || name.size() >= sizeof c.param_name)
+    throw Error("set: a parameter's name has 1 to " + std::to_string(sizeof c.param_name - 1) + " characters, '" + name +
+                "' has " + std::to_string(name.size()));
+  c.command = cpm_msgs::control_command_t::CMD_SET_PARAM;
+  std::memcpy(c.param_name, name.data(), name.size());
+  c.param_value = value;
+  return control(c, timeout_s);
+}
+
 template <class M>
 std::int64_t Client::send_motion(const std::string& channel, M& cmd) {
   need_key(0);
@@ -283,5 +347,9 @@ cpm_msgs::ack_t Client::trajectory(cpm_msgs::trajectory_command_t cmd, double ti
 std::optional<cpm_msgs::state_t> Client::state(double timeout_s) { return next(last_state_, timeout_s, 20); }
 
 std::optional<cpm_msgs::loop_stats_t> Client::stats(double timeout_s) { return next(last_stats_, timeout_s, 50); }
+
+std::optional<cpm_msgs::drives_t> Client::drives(double timeout_s) { return next(last_drives_, timeout_s, 20); }
+
+std::optional<cpm_msgs::params_t> Client::params(double timeout_s) { return next(last_params_, timeout_s, 50); }
 
 }  // namespace cpm::daemon

@@ -6,6 +6,7 @@
 #include <thread>
 
 #include "cmd_client_common.hpp"
+#include "console.hpp"
 #include "cpm/daemon/fault_report.hpp"
 #include "cpm/daemon/loop.hpp"
 
@@ -177,15 +178,7 @@ int stats(const StateOptions& o) {
   static const char* names[daemon::kSeries] = {"wake-up latency", "read backend", "estimate", "trajectory",
                                                "inverse kinematics", "controller", "safety", "write backend",
                                                "publish", "whole cycle"};
-  auto pct = [&](int k, double q) {
-    const double target = q * static_cast<double>(s->count[k]);
-    double acc = 0;
-    for (int b = 0; b < daemon::kBins; ++b) {
-      acc += s->histogram[k][b];
-      if (acc >= target) return daemon::histogram_bin_floor(b + 1 < daemon::kBins ? b + 1 : b) * 1e-3;
-    }
-    return s->max_ns[k] * 1e-3;
-  };
+  auto pct = [&](int k, double q) { return console::percentile_us(*s, k, q); };
   if (json) {
     // Microseconds, rounded as on screen: 1 ns for the mean and maximum, the
     // histogram's 1 us bins for the percentiles.

@@ -1,6 +1,6 @@
-// Client subcommands that look at the state stream: watch (live view),
-// record (state -> motion CSV of docs/data-formats.md), lcm-log-to-csv (the same
-// from an lcm-logger file).
+// Client subcommands that record the state stream: record (state -> motion
+// CSV of docs/data-formats.md), lcm-log-to-csv (the same from an lcm-logger
+// file). The live view, cpm watch, is the console's (cmd_console.cpp).
 #include <signal.h>
 
 #include <atomic>
@@ -28,37 +28,6 @@ struct Options {
   Connection connection;
   std::string out, channel = "CPMD_STATE", log;
 };
-
-int watch(const Options& o) {
-  const double duration = o.duration;
-  const auto l = lcm_options(o.connection);
-  daemon::Client c(l);
-  signal(SIGINT, on_sigint);
-  const auto start = std::chrono::steady_clock::now();
-  while (!g_interrupted.load()) {
-    if (duration >= 0 && std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count() > duration) break;
-    auto s = c.state(1.0);
-    if (!s) {
-      std::printf("\r(no state from cpmd)%60s", "");
-      std::fflush(stdout);
-      continue;
-    }
-    std::string bar;
-    if (s->segment_id >= 0 && s->segment_duration > 0) {
-      const double f = std::min(1.0, s->segment_elapsed / s->segment_duration);
-      const int w = 20, fill = static_cast<int>(f * w);
-      char b[64];
-      std::snprintf(b, sizeof b, " seg %lld [%s%s] %3.0f%% +%d", static_cast<long long>(s->segment_id),
-                    std::string(fill, '#').c_str(), std::string(w - fill, '.').c_str(), 100 * f, s->queue_depth);
-      bar = b;
-    }
-    std::printf("\r%s%s   ", state_line(*s).c_str(), bar.c_str());
-    std::fflush(stdout);
-    c.handle(0.1);
-  }
-  std::printf("\n");
-  return 0;
-}
 
 int record(const Options& o) {
   const std::string& out = o.out;
@@ -120,12 +89,6 @@ int log_to_csv(const Options& o) {
   return 0;
 }
 
-const Command r1{"watch", "live text view of a running cpmd's state, with trajectory progress", [](CLI::App& app) -> Run {
-                   auto o = std::make_shared<Options>();
-                   add_number(app, "--duration", o->duration, "S", "stop after S seconds; < 0: until Ctrl-C");
-                   add_connection(app, o->connection);
-                   return [o] { return watch(*o); };
-                 }};
 const Command r2{"record", "record cpmd's state to a motion CSV (data-formats.md, kind = motion)", [](CLI::App& app) -> Run {
                    auto o = std::make_shared<Options>();
                    app.add_option("--out", o->out, "the motion log to write")->type_name("FILE.csv")->required();

@@ -2,6 +2,7 @@
 // and by the end-to-end tests. Not real-time.
 #pragma once
 
+#include <array>
 #include <functional>
 #include <map>
 #include <memory>
@@ -11,7 +12,9 @@
 
 #include <cpm_msgs/ack_t.hpp>
 #include <cpm_msgs/control_command_t.hpp>
+#include <cpm_msgs/drives_t.hpp>
 #include <cpm_msgs/loop_stats_t.hpp>
+#include <cpm_msgs/params_t.hpp>
 #include <cpm_msgs/path_command_t.hpp>
 #include <cpm_msgs/security_t.hpp>
 #include <cpm_msgs/state_t.hpp>
@@ -66,13 +69,48 @@ class Client {
   // program.
   std::int64_t send_path(cpm_msgs::path_command_t cmd);
 
+  // Homing (CMD_HOME), send and wait for the ack: `axes` bit i = actuator
+  // i + 1; 0 = every actuator in the configured order. The ack says whether
+  // it started; state_t.homing_axis/homing_phase/homed tell how it goes.
+  cpm_msgs::ack_t home(std::uint8_t axes, double timeout_s = 2.0);
+  // Jog (CMD_JOG): `frame` control_command_t::JOG_ACTUATOR (v per actuator,
+  // m/s of d1, d2, d3) or JOG_MACHINE (the platform's velocity in the machine
+  // frame, m/s; z down); all zeros stops jogging. One signed command, sent
+  // without waiting: a jog holds for jog.keepalive s, so a held key repeats
+  // it (20 Hz or faster) and cpmd's deadman stops the platform when it stops
+  // coming. Returns the command's id. The acks of jogs are not queued: the
+  // latest is last_jog_ack(), and wait_ack(id) waits for the latest jog's.
+  // A jog refused because the session was lost drops it: the next jog
+  // acquires again.
+  std::int64_t jog(std::int8_t frame, const double v[3]);
+  [[nodiscard]] const std::optional<cpm_msgs::ack_t>& last_jog_ack() const noexcept { return last_jog_ack_; }
+  // Change a parameter of params_t (CMD_SET_PARAM; `value` in the SI unit
+  // params_t gives it) and wait for the ack: refused with cpmd's sentence
+  // when out of range, unknown, or not changeable while the platform moves.
+  // Throws Error for a name longer than control_command_t.param_name holds.
+  cpm_msgs::ack_t set_param(const std::string& name, double value, double timeout_s = 2.0);
+
   // The next state message (nullopt on timeout).
   std::optional<cpm_msgs::state_t> state(double timeout_s = 2.0);
   std::optional<cpm_msgs::loop_stats_t> stats(double timeout_s = 3.0);
   std::optional<cpm_msgs::security_t> security(double timeout_s = 3.0);
+  // The next drives message (10 Hz) and parameter table (1 Hz and after
+  // every change); nullopt on timeout (also from a cpmd that publishes none).
+  std::optional<cpm_msgs::drives_t> drives(double timeout_s = 1.0);
+  std::optional<cpm_msgs::params_t> params(double timeout_s = 3.0);
+  // The latest of each message handled so far (by handle(), state(), ...),
+  // without waiting: a view redrawn at its own rate reads these. Empty until
+  // the first arrives; state(), stats(), ... empty theirs when they start
+  // waiting for the next.
+  [[nodiscard]] const std::optional<cpm_msgs::state_t>& latest_state() const noexcept { return last_state_; }
+  [[nodiscard]] const std::optional<cpm_msgs::loop_stats_t>& latest_stats() const noexcept { return last_stats_; }
+  [[nodiscard]] const std::optional<cpm_msgs::drives_t>& latest_drives() const noexcept { return last_drives_; }
+  [[nodiscard]] const std::optional<cpm_msgs::params_t>& latest_params() const noexcept { return last_params_; }
   // Called for every state message while handle() runs.
   void on_state(std::function<void(const cpm_msgs::state_t&)> f) { state_cb_ = std::move(f); }
-  // Process incoming messages for up to `timeout_s`; returns the number handled.
+  // Process incoming messages for up to `timeout_s`, less when a signal
+  // interrupts the wait (Ctrl-C: the caller looks at its flag); returns the
+  // number handled.
   int handle(double timeout_s);
   [[nodiscard]] const LcmConfig& config() const noexcept { return cfg_; }
 
@@ -83,6 +121,9 @@ class Client {
   void on_state_msg(const lcm::ReceiveBuffer*, const std::string&, const cpm_msgs::state_t* m);
   void on_stats_msg(const lcm::ReceiveBuffer*, const std::string&, const cpm_msgs::loop_stats_t* m);
   void on_security_msg(const lcm::ReceiveBuffer*, const std::string&, const cpm_msgs::security_t* m);
+  void on_drives_msg(const lcm::ReceiveBuffer*, const std::string&, const cpm_msgs::drives_t* m);
+  // Raw: params_t's counts and strings are the sender's word (see on_ack).
+  void on_params(const lcm::ReceiveBuffer* rbuf, const std::string&);
   // Session, seq and time; then the operator's MAC over all of it.
   template <class M>
   void stamp(M& m);
@@ -107,10 +148,17 @@ class Client {
   std::int64_t last_acquire_seq_ = 0;  // an acquire's seq is the wall clock (us), rising
   double last_sent_ = 0.0;    // steady clock (s) of the last stamped command
   std::set<std::int64_t> pings_;  // keep-alive ids whose acks nobody waits for
+  // The ids of this client's latest jogs (a ring: their acks come within
+  // milliseconds, jogs 50 ms apart), to tell its jog acks from others'.
+  std::array<std::int64_t, 16> jog_ids_{};
+  std::size_t jog_next_ = 0;
   std::map<std::int64_t, cpm_msgs::ack_t> acks_;
   std::optional<cpm_msgs::state_t> last_state_;
   std::optional<cpm_msgs::loop_stats_t> last_stats_;
   std::optional<cpm_msgs::security_t> last_security_;
+  std::optional<cpm_msgs::drives_t> last_drives_;
+  std::optional<cpm_msgs::params_t> last_params_;
+  std::optional<cpm_msgs::ack_t> last_jog_ack_;
   std::function<void(const cpm_msgs::state_t&)> state_cb_;
 };
 
