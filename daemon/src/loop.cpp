@@ -1040,8 +1040,11 @@ void ControlLoop::latch_motion_faults(std::int64_t k, double error) noexcept {
   // the platform follows it within its tracking error, so it may pass one it
   // stops at by that much.
   const Vec3 slack = Vec3::Constant(kSoftLimitSlack);
-  if (!inside(est_.p, cfg_.limits.workspace_min - slack, cfg_.limits.workspace_max + slack, axis, v, lim))
+  if (!inside(est_.p, cfg_.limits.workspace_min - slack, cfg_.limits.workspace_max + slack, axis, v, lim)) {
+    // Reported against the limit as configured.
+    lim = v < cfg_.limits.workspace_min[axis] ? cfg_.limits.workspace_min[axis] : cfg_.limits.workspace_max[axis];
     latch(kFaultSoftLimit, axis, v, lim, k);
+  }
   // The machine's own workspace (strokes, limb reach, elbow singularity):
   // the reference one cycle ahead is checked first, so that a path running
   // towards a stroke end or a singularity stops before the platform (which

@@ -19,6 +19,7 @@
 
 #include "cpm/daemon/canopen_backend.hpp"
 #include "cpm/daemon/log.hpp"
+#include "cpm/daemon/preflight.hpp"
 #include "cpm/daemon/rt.hpp"
 #include "cpm/daemon/server.hpp"
 #include "cpm/daemon/sim_backend.hpp"
@@ -133,18 +134,14 @@ int run(int argc, char** argv) {
   const ctl::Controller controller(models->current(), cfg.controller.law, cfg.controller.gains);
   std::unique_ptr<Backend> backend;
   if (cfg.backend == "sim") {
-    SimBackendOptions so;
-    so.plant = cfg.sim.plant;
-    so.initial_position = cfg.sim.initial_position;
-    so.enable_delay = cfg.sim.enable_delay;
-    so.encoder_zero = cfg.sim.encoder_zero;
-    so.home_switch = cfg.sim.home_switch;
-    so.index_pitch = cfg.sim.index_pitch;
-    backend = std::make_unique<SimBackend>(std::make_unique<ctl::Machine>(load_model(cfg.sim.truth_model_file)), so);
+    backend = std::make_unique<SimBackend>(std::make_unique<ctl::Machine>(load_model(cfg.sim.truth_model_file)),
+                                           sim_backend_options(cfg.sim));
   } else {
     backend = std::make_unique<CanopenBackend>(cfg.canopen);
     log::info("CAN %s: %s", cfg.canopen.interface.c_str(), cfg.canopen.load.describe().c_str());
   }
+  // The configuration, the model and the backend fit together (gains, homing).
+  preflight(cfg, models->current(), *backend);
   if (check) {
     try {
       const auto t = load_operators(cfg.security.operators_dir);

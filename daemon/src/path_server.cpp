@@ -27,6 +27,7 @@ void Server::on_path(const std::uint8_t* raw, std::size_t size, const cpm_msgs::
   if (!admit(m->id, kPathAckSource, 0, m->session, m->seq, *op)) return;
   if (const std::string b = bad_number(*m); !b.empty())
     return refuse(ack_t::REASON_INVALID, b + " is not a finite number, zero or normal");
+  if (const std::string why = not_homed(); !why.empty()) return refuse(ack_t::REASON_NOT_HOMED, why);
   if (const auto a = paths_->add(*m, models_.current().model(), queue_end_now().position))
     publish_ack(m->id, kPathAckSource, 0, a->ok, a->reason, a->message, loop_.mode(), latest_.queue_depth);
 }

@@ -729,14 +729,7 @@ void Server::on_trajectory(const std::uint8_t* raw, std::size_t size, const traj
   auto refuse = [&](std::int16_t reason, const std::string& why) {
     publish_ack(m->id, 2, m->kind, false, reason, why, loop_.mode(), latest_.queue_depth);
   };
-  if (have_state_ && !(latest_.homed[0] && latest_.homed[1] && latest_.homed[2])) {
-    std::string which;
-    for (int i = 0; i < 3; ++i)
-      if (!latest_.homed[i]) which += (which.empty() ? "" : ", ") + std::to_string(i + 1) + " (" + "xyz"[i] + ")";
-    return refuse(ack_t::REASON_NOT_HOMED, "actuator " + which +
-                                               " not homed: the platform's position is not known; home the machine "
-                                               "first (cpm home), jog the actuators meanwhile");
-  }
+  if (const std::string why = not_homed(); !why.empty()) return refuse(ack_t::REASON_NOT_HOMED, why);
   // Where and how the queue will end when this segment arrives.
   const QueueEnd end = queue_end_now();
   const Vec3 start = end.position, end_v = end.velocity;
@@ -815,6 +808,16 @@ void Server::publish_security(double now) {
   s.utime = std::chrono::duration_cast<std::chrono::microseconds>(
                 std::chrono::system_clock::now().time_since_epoch()).count();
   lcm_->publish(cfg_.lcm.security_channel, &s);
+}
+
+std::string Server::not_homed() const {
+  if (!have_state_ || (latest_.homed[0] && latest_.homed[1] && latest_.homed[2])) return {};
+  std::string which;
+  for (int i = 0; i < 3; ++i)
+    if (!latest_.homed[i]) which += (which.empty() ? "" : ", ") + std::to_string(i + 1) + " (" + "xyz"[i] + ")";
+  return "actuator " + which +
+         " not homed: the platform's position is not known; home the machine first (cpm home), jog the actuators "
+         "meanwhile";
 }
 
 Server::QueueEnd Server::queue_end_now() const {

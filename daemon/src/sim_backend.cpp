@@ -1,5 +1,7 @@
 #include "cpm/daemon/sim_backend.hpp"
 
+#include "cpm/daemon/config.hpp"
+
 #include <cmath>
 
 #include <cpm_msgs/drives_t.hpp>
@@ -31,6 +33,17 @@ std::int8_t cia402_code(std::uint16_t statusword) noexcept {
 double nearest_mark(double d, double pitch) noexcept { return std::round(d / pitch) * pitch; }
 
 }  // namespace
+
+SimBackendOptions sim_backend_options(const SimConfig& sim) {
+  SimBackendOptions so;
+  so.plant = sim.plant;
+  so.initial_position = sim.initial_position;
+  so.enable_delay = sim.enable_delay;
+  so.encoder_zero = sim.encoder_zero;
+  so.home_switch = sim.home_switch;
+  so.index_pitch = sim.index_pitch;
+  return so;
+}
 
 SimBackend::SimBackend(std::unique_ptr<ctl::Machine> truth, const SimBackendOptions& options)
     : truth_(std::move(truth)), opt_(options) {

@@ -33,9 +33,16 @@ struct LoopHarness {
   explicit LoopHarness(const DaemonConfig& c = test_config(), double enable_delay = 0.005,
                        const ctl::MachineModel& truth = ctl::MachineModel::elkady(),
                        const ctl::MachineModel& believed = ctl::MachineModel::elkady())
+      : LoopHarness(c, [&] {
+          SimBackendOptions so;
+          so.enable_delay = enable_delay;
+          return so;
+        }(), truth, believed) {}
+  // The simulator as `so` says (incremental encoders, home switches, ...).
+  LoopHarness(const DaemonConfig& c, const SimBackendOptions& so,
+              const ctl::MachineModel& truth = ctl::MachineModel::elkady(),
+              const ctl::MachineModel& believed = ctl::MachineModel::elkady())
       : cfg(c), machine(believed) {
-    SimBackendOptions so;
-    so.enable_delay = enable_delay;
     auto b = std::make_unique<SimBackend>(std::make_unique<ctl::Machine>(truth), so);
     sim = b.get();
     backend = std::move(b);

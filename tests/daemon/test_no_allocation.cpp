@@ -73,3 +73,60 @@ TEST(NoAllocation, EveryModeOfTheCycle) {
 
 }  // namespace
 }  // namespace cpm::daemon::test
+
+namespace cpm::daemon::test {
+namespace {
+
+TEST(NoAllocation, HomingJoggingAndTheActuatorSpace) {
+  // The simulator with incremental encoders, home switches and index marks:
+  // cycles before homing, every homing phase, the switch to the task space,
+  // and jogs in both frames with their deadman stops.
+  const DaemonConfig cfg = [] {
+    DaemonConfig c = load_config(std::string(CPM_SOURCE_DIR) + "/config/sim-homing.yaml");
+    c.model_file = "builtin:elkady";
+    return c;
+  }();
+  LoopHarness h(cfg, sim_backend_options(cfg.sim));
+  auto push = [&](Command c) {
+    c.id = h.next_id++;
+    ASSERT_TRUE(h.loop->commands().push(c));
+  };
+  push([] { Command c; c.kind = CommandKind::enable; return c; }());
+  EXPECT_EQ(counted(h, 30), 0) << "enabling in the actuator space";
+  ASSERT_EQ(h.mode(), Mode::holding);
+  push([] {
+    Command c;
+    c.kind = CommandKind::jog;
+    c.jog_frame = 0;
+    c.jog_velocity = Vec3(0, 0, 0.01);
+    return c;
+  }());
+  EXPECT_EQ(counted(h, 600), 0) << "an actuator jog before homing, and its deadman stop";
+  ASSERT_EQ(h.mode(), Mode::holding);
+  push([] { Command c; c.kind = CommandKind::home; return c; }());
+  long homing = counted(h, 1);  // the command taken
+  ASSERT_EQ(h.mode(), Mode::homing);
+  int n = 0;
+  while (h.mode() == Mode::homing && n < 120000) {
+    homing += counted(h, 1);
+    ++n;
+  }
+  EXPECT_EQ(homing, 0) << "homing";
+  ASSERT_EQ(h.mode(), Mode::holding);
+  EXPECT_EQ(counted(h, 100), 0) << "into the task space";
+  push([] {
+    Command c;
+    c.kind = CommandKind::jog;
+    c.jog_frame = 1;
+    c.jog_velocity = Vec3(0.02, 0.01, 0);
+    return c;
+  }());
+  EXPECT_EQ(counted(h, 800), 0) << "a jog in the machine frame and its deadman stop";
+  EXPECT_EQ(h.mode(), Mode::holding);
+  EXPECT_EQ(h.state().faults, 0);
+  Ack a;
+  while (h.loop->acks().pop(a)) EXPECT_TRUE(a.accepted) << a.id << ": " << a.message;
+}
+
+}  // namespace
+}  // namespace cpm::daemon::test

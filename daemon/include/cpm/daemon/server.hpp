@@ -144,6 +144,9 @@ class Server {
     Vec3 velocity = Vec3::Zero();
   };
   [[nodiscard]] QueueEnd queue_end_now() const;
+  // Why a motion that needs the platform's position is refused now ("":
+  // every actuator homed, as the latest state says).
+  [[nodiscard]] std::string not_homed() const;
   void publish_ack(std::int64_t id, std::int8_t source, std::int8_t code, bool ok, std::int16_t reason,
                    const std::string& message, Mode mode, std::int16_t depth, std::int64_t session = 0);
   // A refusal of a command not (yet) proven to come from an operator, or a

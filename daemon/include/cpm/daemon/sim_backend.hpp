@@ -45,6 +45,10 @@ struct SimBackendOptions {
   static constexpr double kIndexHalfWidth = 5e-6;  // m: a mark 10 um wide, as an encoder's index of a few counts
 };
 
+struct SimConfig;
+// The options of cpmd's `sim:` section.
+SimBackendOptions sim_backend_options(const SimConfig& sim);
+
 class SimBackend final : public Backend {
  public:
   // Takes ownership of the true machine.
