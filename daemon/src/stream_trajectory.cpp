@@ -28,7 +28,9 @@ StreamTrajectory::StreamTrajectory(int n, const double* t, const double (*p)[3],
 ctl::TrajectorySample StreamTrajectory::sample(double t) const noexcept {
   ctl::TrajectorySample s;
   if (n_ == 0) return s;
-  if (!(t > 0.0)) {
+  // At t = 0 the chunk's first point with its own velocity (a stream goes
+  // on through its chunks' boundaries); before it, the start at rest.
+  if (!(t >= 0.0)) {
     s.p = p_[0];
     return s;
   }

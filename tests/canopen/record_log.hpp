@@ -91,6 +91,10 @@ inline io::MotionData record_canopen_motion_log(double seconds, std::uint64_t se
     while (queued < seconds + chunk && r.state().queue_depth < 3) {
       Command c = log_path_chunk(path, queued, kStep);
       c.segment.start = r.queue_end();  // equal to the chunk's start within rounding
+      // The Lissajous starts at speed from the centre at rest: a bench's grant
+      // (the loop refuses a velocity step otherwise); the chunks after join
+      // with the velocity they end with.
+      c.segment.allow_step = queued == 0.0;
       if (!r.command(c).accepted) break;
       queued += chunk;
     }

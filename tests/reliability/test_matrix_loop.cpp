@@ -168,7 +168,8 @@ TEST(FaultMatrix, BriefSaturationIsNoFault) {
 }
 
 // Row: workspace (soft limits). The measured position leaves
-// limits.workspace_min/max; latency 0 cycles.
+// limits.workspace_min/max by more than the platform's tracking error where
+// its reference stops at one (ControlLoop::kSoftLimitSlack); latency 0 cycles.
 TEST(FaultMatrix, SoftLimitSim) {
   DaemonConfig c = test_config();
   c.limits.workspace_max.x() = 0.610;
@@ -178,7 +179,8 @@ TEST(FaultMatrix, SoftLimitSim) {
   // model error or a drifting encoder would.
   ASSERT_TRUE(r.command(r.move_to(Vec3(0.62, 0.425, 0.300), 0.05)).accepted);
   ASSERT_GE(r.run_until([&] { return r.mode() == Mode::fault; }, 2000), 0);
-  const std::int64_t k_out = r.first_cycle([&](const auto& s) { return s.position[0] > c.limits.workspace_max.x(); });
+  const std::int64_t k_out = r.first_cycle(
+      [&](const auto& s) { return s.position[0] > c.limits.workspace_max.x() + ControlLoop::kSoftLimitSlack; });
   ASSERT_GE(k_out, 0);
   EXPECT_EQ(r.state().fault_cycle, k_out);
   expect_report(r.state(), kFaultSoftLimit, 0);
@@ -309,6 +311,10 @@ Command stream_chunk(const Vec3& from, double speed, int n, bool starts_at_rest,
   c.segment.start = from;
   c.segment.end = Vec3(p[n - 1][0], p[n - 1][1], p[n - 1][2]);
   c.segment.traj.emplace<StreamTrajectory>(n, t, p, v);
+  // From rest to speed in one 10 ms step (20 m/s^2): more than the start
+  // check allows; the rig grants it, as a bench would (these rows test the
+  // underrun, not the start).
+  c.segment.allow_step = true;
   return c;
 }
 

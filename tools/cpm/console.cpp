@@ -13,6 +13,7 @@
 #include "cpm/control/controller.hpp"
 #include "cpm/daemon/client.hpp"
 #include "cpm/daemon/fault_report.hpp"
+#include "cpm/daemon/text.hpp"
 #include "cpm/daemon/loop.hpp"
 
 namespace cpm::cli::console {
@@ -24,15 +25,6 @@ using cpm_msgs::state_t;
 
 namespace {
 
-std::string fmt(const char* f, ...) __attribute__((format(printf, 1, 2)));
-std::string fmt(const char* f, ...) {
-  char b[512];
-  va_list ap;
-  va_start(ap, f);
-  std::vsnprintf(b, sizeof b, f, ap);
-  va_end(ap);
-  return b;
-}
 
 // `s` left-aligned in `w` columns (cut when longer).
 std::string left(const std::string& s, int w) {
@@ -51,11 +43,11 @@ std::string right(const std::string& s, int w) {
 std::string fixed(double v, int w, int prec) {
   if (!std::isfinite(v)) return right(std::isnan(v) ? "nan" : (v > 0 ? "inf" : "-inf"), w);
   for (int p = prec; p >= 0; --p) {
-    std::string s = fmt("%.*f", p, v);
+    std::string s = daemon::printf_text("%.*f", p, v);
     if (static_cast<int>(s.size()) <= w) return right(s, w);
   }
   for (int p = 2; p >= 0; --p) {
-    std::string s = fmt("%.*e", p, v);
+    std::string s = daemon::printf_text("%.*e", p, v);
     if (static_cast<int>(s.size()) <= w) return right(s, w);
   }
   return std::string(static_cast<std::size_t>(w), '#');
@@ -64,17 +56,17 @@ std::string fixed(double v, int w, int prec) {
 // A count in at most 6 columns, 3 significant digits past 99999: 12345,
 // 123k, 1.23M, 12.3G.
 std::string count(double n) {
-  if (std::fabs(n) < 1e5) return fmt("%.0f", n);
+  if (std::fabs(n) < 1e5) return daemon::printf_text("%.0f", n);
   static const char units[] = {'k', 'M', 'G', 'T', 'P', 'E'};
   double m = n / 1e3;
   std::size_t u = 0;
   while (std::fabs(m) >= 999.5 && u + 1 < sizeof units) m /= 1e3, ++u;
   const int decimals = std::fabs(m) < 9.995 ? 2 : std::fabs(m) < 99.95 ? 1 : 0;
-  return fmt("%.*f%c", decimals, m, units[u]);
+  return daemon::printf_text("%.*f%c", decimals, m, units[u]);
 }
 
 // A time in us in at most 7 columns.
-std::string micros(double us) { return us < 1e5 ? fmt("%.1f", us) : fmt("%.0fms", us / 1e3); }
+std::string micros(double us) { return us < 1e5 ? daemon::printf_text("%.1f", us) : daemon::printf_text("%.0fms", us / 1e3); }
 
 std::string upper(std::string s) {
   for (auto& c : s) c = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
@@ -158,7 +150,7 @@ const char* law_text(std::int8_t law) {
 }
 
 std::string homed_text(const std::int8_t* homed) {
-  return fmt("homed 1:%s 2:%s 3:%s", homed[0] ? "yes" : "no ", homed[1] ? "yes" : "no ", homed[2] ? "yes" : "no ");
+  return daemon::printf_text("homed 1:%s 2:%s 3:%s", homed[0] ? "yes" : "no ", homed[1] ? "yes" : "no ", homed[2] ? "yes" : "no ");
 }
 
 std::string title(const std::optional<state_t>& s, int width) {
@@ -166,7 +158,7 @@ std::string title(const std::optional<state_t>& s, int width) {
   std::string t = "mode " + left(upper(daemon::mode_text(s->mode)), 8) + "  space " +
                   left(s->control_space == state_t::SPACE_TASK ? "task" : "actuator", 8) + "  law " +
                   left(law_text(s->controller), 15) + "  " + homed_text(s->homed);
-  if (wide(width)) t += fmt("  t %.3f s  cycle %lld", s->t, static_cast<long long>(s->cycle));
+  if (wide(width)) t += daemon::printf_text("  t %.3f s  cycle %lld", s->t, static_cast<long long>(s->cycle));
   return t;
 }
 
@@ -214,7 +206,7 @@ Lines trajectory(const std::optional<state_t>& s, int width) {
   l1 += "  queue " + (s ? std::to_string(s->queue_depth) : std::string("-"));
   const double f = playing && s->segment_duration > 0 ? s->segment_elapsed / s->segment_duration : 0.0;
   const int bw = std::clamp(width - 58, 10, 60);
-  std::string l2 = "  " + bar(f, bw) + (playing ? fmt(" %3.0f%%", 100 * std::clamp(f, 0.0, 1.0)) : std::string("    "));
+  std::string l2 = "  " + bar(f, bw) + (playing ? daemon::printf_text(" %3.0f%%", 100 * std::clamp(f, 0.0, 1.0)) : std::string("    "));
   const bool last = s && s->last_segment_id >= 0;
   l2 += "   last segment  RMS " + (last ? fixed(s->last_segment_rmse * 1e6, 8, 1) : right("-", 8)) + " um  max " +
         (last ? fixed(s->last_segment_max * 1e6, 8, 1) : right("-", 8)) + " um";
@@ -235,10 +227,10 @@ std::string jog_row(const std::optional<state_t>& s) {
   std::string r = "jog         frame ";
   r += left(on ? (s->jog_frame == control_command_t::JOG_MACHINE ? "machine" : "actuator") : "-", 8);
   r += "  v ";
-  r += on ? fmt("%.1f, %.1f, %.1f", s->jog_velocity[0] * 1e3, s->jog_velocity[1] * 1e3, s->jog_velocity[2] * 1e3)
+  r += on ? daemon::printf_text("%.1f, %.1f, %.1f", s->jog_velocity[0] * 1e3, s->jog_velocity[1] * 1e3, s->jog_velocity[2] * 1e3)
           : std::string("-");
   r += " mm/s  deadman ";
-  r += on ? fmt("%.3f s left", s->jog_keepalive_left) : std::string("-");
+  r += on ? daemon::printf_text("%.3f s left", s->jog_keepalive_left) : std::string("-");
   return r;
 }
 
@@ -455,7 +447,7 @@ Lines drive_table(const drives_t* d, int width) {
   out.push_back(line(head));
   for (int i = 0; i < 3; ++i) {
     if (!d) {
-      out.push_back(fmt("%-3d %s", i + 1, "(no drives message)"));
+      out.push_back(daemon::printf_text("%-3d %s", i + 1, "(no drives message)"));
       continue;
     }
     const bool emcy = d->last_emcy_code[i] != 0;
@@ -470,13 +462,13 @@ Lines drive_table(const drives_t* d, int width) {
         d->enabled[i] ? "yes" : "no",
         d->fault[i] ? "FAULT" : "no",
         hb < 0 ? std::string("-") : hb > 99999 ? std::string(">99k") : std::to_string(hb),
-        emcy ? fmt("0x%04X", static_cast<unsigned>(d->last_emcy_code[i]) & 0xFFFFu) : std::string("-"),
-        emcy ? fmt("0x%02X", static_cast<unsigned>(d->last_emcy_register[i]) & 0xFFu) : std::string("-"),
+        emcy ? daemon::printf_text("0x%04X", static_cast<unsigned>(d->last_emcy_code[i]) & 0xFFFFu) : std::string("-"),
+        emcy ? daemon::printf_text("0x%02X", static_cast<unsigned>(d->last_emcy_register[i]) & 0xFFu) : std::string("-"),
         count(d->emcy_count[i]),
-        fmt("0x%04X", static_cast<unsigned>(d->statusword[i]) & 0xFFFFu),
-        fmt("0x%04X", static_cast<unsigned>(d->controlword[i]) & 0xFFFFu),
-        d->master_faults[i] > 0xFFFF ? fmt("%X", static_cast<unsigned>(d->master_faults[i]))
-                                     : fmt("0x%04X", static_cast<unsigned>(d->master_faults[i])),
+        daemon::printf_text("0x%04X", static_cast<unsigned>(d->statusword[i]) & 0xFFFFu),
+        daemon::printf_text("0x%04X", static_cast<unsigned>(d->controlword[i]) & 0xFFFFu),
+        d->master_faults[i] > 0xFFFF ? daemon::printf_text("%X", static_cast<unsigned>(d->master_faults[i]))
+                                     : daemon::printf_text("0x%04X", static_cast<unsigned>(d->master_faults[i])),
         fixed(d->position[i] * 1e3, 10, 3),
         fixed(d->force[i], 8, 1)};
     out.push_back(line(cells));
@@ -489,7 +481,7 @@ Lines bus_lines(const drives_t* d, int width) {
   std::string state = bus_state_name(d->bus_state);
   std::replace(state.begin(), state.end(), '_', '-');
   const std::string s = left(state, 13);
-  const std::string load = fmt("%3.0f%%", 100 * d->bus_load);
+  const std::string load = daemon::printf_text("%3.0f%%", 100 * d->bus_load);
   auto ec = [](std::int32_t v) { return v < 0 ? std::string("-") : std::to_string(v); };
   const std::string frames = left(count(static_cast<double>(d->error_frames)), 6);
   const std::string tec = left(ec(d->tx_error_counter), 3), rec = left(ec(d->rx_error_counter), 3);
@@ -520,7 +512,7 @@ Lines input_lines(const drives_t* d, int /*width*/, bool per_input) {
   };
   auto each = [](const std::int8_t* v) {
     std::string r;
-    for (int i = 0; i < 3; ++i) r += fmt("%sact %d %s", i ? "   " : "", i + 1, v[i] ? "ON " : "off");
+    for (int i = 0; i < 3; ++i) r += daemon::printf_text("%sact %d %s", i ? "   " : "", i + 1, v[i] ? "ON " : "off");
     return r;
   };
   const char* estop = d->estop ? "PRESSED (chain open)" : "released";
@@ -655,7 +647,7 @@ std::string JogPad::press(Key k, double now) {
   }
   if (frame_ == control_command_t::JOG_ACTUATOR && axis != selected_) {
     static const char* keys[] = {"Left/Right", "Down/Up", "PgUp/PgDn"};
-    return fmt("actuator %d is selected (%s): press %d to jog actuator %d", selected_ + 1, keys[selected_], axis + 1,
+    return daemon::printf_text("actuator %d is selected (%s): press %d to jog actuator %d", selected_ + 1, keys[selected_], axis + 1,
                axis + 1);
   }
   if (axis == axis_ && sign == sign_ && holding(now)) {
@@ -696,13 +688,13 @@ Lines render_jog(const std::optional<state_t>& s, const JogPad& pad, const std::
   if (machine)
     out.push_back("frame   machine (Cartesian; needs every actuator homed)   1 2 3: an actuator");
   else
-    out.push_back(fmt("frame   actuator %d  (1 2 3 select an actuator; c: Cartesian, the machine frame)",
+    out.push_back(daemon::printf_text("frame   actuator %d  (1 2 3 select an actuator; c: Cartesian, the machine frame)",
                       pad.selected() + 1));
   std::string steps;
   for (double v : JogPad::kSteps)
-    if (pad.max_speed() <= 0 || v <= pad.max_speed() * (1 + 1e-9)) steps += fmt("%s%g", steps.empty() ? "" : " ", v * 1e3);
-  out.push_back(fmt("speed   %g mm/s   (+/-: %s mm/s; ", pad.speed() * 1e3, steps.c_str()) +
-                (pad.max_speed() > 0 ? fmt("jog.max_velocity %g mm/s)", pad.max_speed() * 1e3)
+    if (pad.max_speed() <= 0 || v <= pad.max_speed() * (1 + 1e-9)) steps += daemon::printf_text("%s%g", steps.empty() ? "" : " ", v * 1e3);
+  out.push_back(daemon::printf_text("speed   %g mm/s   (+/-: %s mm/s; ", pad.speed() * 1e3, steps.c_str()) +
+                (pad.max_speed() > 0 ? daemon::printf_text("jog.max_velocity %g mm/s)", pad.max_speed() * 1e3)
                                      : std::string("jog.max_velocity unknown)")));
   if (machine) {
     out.push_back("keys    Left/Right x-/x+   Down/Up y-/y+   PgUp z- (up)   PgDn z+ (down)");
@@ -721,12 +713,12 @@ Lines render_jog(const std::optional<state_t>& s, const JogPad& pad, const std::
     for (const char* l : {"position mm", "velocity mm/s", "actuator d mm"}) out.push_back(table_row_none(l, width));
   }
   if (sending)
-    out.push_back(fmt("sending %.1f, %.1f, %.1f mm/s (%s), 20 times a second while the key repeats", (*sending)[0] * 1e3,
+    out.push_back(daemon::printf_text("sending %.1f, %.1f, %.1f mm/s (%s), 20 times a second while the key repeats", (*sending)[0] * 1e3,
                       (*sending)[1] * 1e3, (*sending)[2] * 1e3, machine ? "x, y, z" : "d1, d2, d3"));
   else
     out.push_back("sending nothing (no key held)");
   const bool jogging = s && s->mode == state_t::MODE_JOGGING;
-  out.push_back(jogging ? fmt("deadman %.3f s left", s->jog_keepalive_left) : std::string("deadman -"));
+  out.push_back(jogging ? daemon::printf_text("deadman %.3f s left", s->jog_keepalive_left) : std::string("deadman -"));
   if (ack) {
     const Lines a = wrap(ack->accepted ? std::string("accepted") : "REFUSED: " + ack->message, width, "last jog  ", 10);
     out.insert(out.end(), a.begin(), a.end());

@@ -18,7 +18,8 @@ class StreamTrajectory final : public ctl::Trajectory {
   // Throws Error naming the point and what is wrong.
   StreamTrajectory(int n, const double* t, const double (*p)[3], const double (*v)[3]);
   [[nodiscard]] double duration() const noexcept override { return n_ > 0 ? t_[n_ - 1] : 0.0; }
-  // Before 0 and after the end: the end points, at rest.
+  // Before 0 and from the end on: the end points, at rest; at 0 the first
+  // point with its velocity.
   [[nodiscard]] ctl::TrajectorySample sample(double t) const noexcept override;
   [[nodiscard]] int size() const noexcept { return n_; }
   // The velocity given at the last point (m/s): non-zero means the stream

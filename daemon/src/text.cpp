@@ -1,0 +1,21 @@
+#include "cpm/daemon/text.hpp"
+
+#include <cstdarg>
+#include <cstdio>
+
+namespace cpm::daemon {
+
+std::string printf_text(const char* format, ...) {
+  va_list ap;
+  va_start(ap, format);
+  va_list again;
+  va_copy(again, ap);
+  const int n = std::vsnprintf(nullptr, 0, format, ap);
+  va_end(ap);
+  std::string s(n > 0 ? static_cast<std::size_t>(n) : 0, '\0');
+  if (n > 0) std::vsnprintf(s.data(), s.size() + 1, format, again);
+  va_end(again);
+  return s;
+}
+
+}  // namespace cpm::daemon
