@@ -77,7 +77,7 @@ expect "statusword: switch on disabled" "1 r 0x6041 0 u16" "576"
 expect "max torque written" "3 w 0x6072 0 u16 3000" "OK"
 expect "and read back" "3 r 0x6072 0 u16" "3000"
 expect "a read-only object refuses a write" "1 w 0x6041 0 u16 0" "ERROR:0x06010002 #Attempt to write a read only object."
-expect "an object that is not there" "1 r 0x6099 0 u32" "ERROR:0x06020000 #Object does not exist."
+expect "an object that is not there" "1 r 0x607A 0 u32" "ERROR:0x06020000 #Object does not exist."
 # SDO, segmented: the device name (26 bytes) and a 52-byte parameter block, written and read back.
 expect "device name, segmented read" "1 r 0x1008 0 vs" '"cpm virtual CiA 402 drive"'
 block="commissioning-parameter-block-0123456789-abcdefghij"

@@ -448,8 +448,13 @@ int run_homing(Sil& t) {
       400);
   SIL_REQUIRE(homed.has_value(), "homing did not end");
   SIL_REQUIRE(homed->mode == state_t::MODE_HOLDING, "homing ended in a fault: " + daemon::fault_report(*homed));
+  // Settled (the last actuator's final move has just ended), then where
+  // cpmd believes the platform is against where the simulation has it.
+  t.client->handle(1.0);
+  const auto held = t.client->state(2.0);
+  SIL_REQUIRE(held.has_value(), "no state after homing");
   const Vec3 truth = true_position(t);
-  const Vec3 believed(homed->position[0], homed->position[1], homed->position[2]);
+  const Vec3 believed(held->position[0], held->position[1], held->position[2]);
   std::printf("sil: homed in %.1f s (cycle %lld); believed at (%.4f, %.4f, %.4f) mm, truly at (%.4f, %.4f, %.4f) mm\n",
               since(h0), static_cast<long long>(homed->cycle), believed.x() * 1e3, believed.y() * 1e3,
               believed.z() * 1e3, truth.x() * 1e3, truth.y() * 1e3, truth.z() * 1e3);
