@@ -8,7 +8,7 @@
 
 # The daemon's configurations and the models they name: /etc/cpmd, conffiles
 # in the package. sil.yaml and machine-sil.yaml are the SIL tests' own.
-set(CPMD_CONFIG_FILES cpmd.yaml sim.yaml canopen.yaml machine.yaml machine-canopen.yaml)
+set(CPMD_CONFIG_FILES cpmd.yaml sim.yaml sim-homing.yaml canopen.yaml machine.yaml machine-canopen.yaml)
 set(CPMD_SYSTEMD_UNITDIR "" CACHE PATH
     "Folder for cpmd.service (empty: /lib/systemd/system for prefix /usr, PREFIX/lib/systemd/system otherwise)")
 
