@@ -7,6 +7,7 @@
 #include <cmath>
 #include <cstdio>
 
+#include "cpm/daemon/preflight.hpp"
 #include "loop_fixture.hpp"
 #include "server_fixture.hpp"
 
@@ -278,6 +279,49 @@ TEST(ControllerSwitch, ToALawWithoutGravityTheForceFadesAndThePlatformSagsSmooth
               s.settled * 1e3, s.force_step);
   EXPECT_LT(s.force_step, 0.5);
   EXPECT_GT(s.settled, 2e-3);
+}
+
+}  // namespace
+}  // namespace cpm::daemon
+
+namespace cpm::daemon {
+namespace {
+
+// What cpmd refuses at start when the configuration, the model and the
+// backend do not fit together (preflight.hpp).
+TEST(Preflight, RefusesWhatCannotBeRunSafelyWithTheKey) {
+  const ctl::Machine machine{ctl::MachineModel::elkady()};
+  SimBackend sim(std::make_unique<ctl::Machine>(ctl::MachineModel::elkady()), SimBackendOptions{});
+  auto refusal = [&](const DaemonConfig& c) -> std::string {
+    try {
+      preflight(c, machine, sim);
+    } catch (const Error& e) {
+      return e.what();
+    }
+    return "";
+  };
+  DaemonConfig ok = test::test_config();
+  ok.source = "t.yaml";
+  EXPECT_EQ(refusal(ok), "");
+  DaemonConfig c = ok;
+  c.homing.axes[0].method = HomingMethod::switch_;
+  c.homing.axes[0].home_position = 0.45;  // the stroke is [0, 400] mm
+  EXPECT_NE(refusal(c).find("homing.axes.x.home_position: 450.000 mm is outside the actuator's stroke [0.000 mm, 400.000 mm]"),
+            std::string::npos)
+      << refusal(c);
+  c = ok;
+  c.homing.axes[2].method = HomingMethod::drive;
+  EXPECT_NE(refusal(c).find("homing.axes.z.method: drive homing, but the sim backend cannot"), std::string::npos)
+      << refusal(c);
+  c = ok;
+  c.controller.law = ctl::ControlLaw::pd;
+  c.controller.gains.kp = Vec3::Constant(100.0);
+  c.controller.gains.kd = Vec3::Constant(436.0);
+  EXPECT_NE(refusal(c).find("t.yaml: controller: pd: kp_z = 100 N/m would let z sag"), std::string::npos) << refusal(c);
+  c = ok;
+  c.homing.axes[1].method = HomingMethod::switch_;
+  c.homing.actuator_gains.kd = Vec3::Constant(1e5);
+  EXPECT_NE(refusal(c).find("homing.actuator_gains: "), std::string::npos) << refusal(c);
 }
 
 }  // namespace
