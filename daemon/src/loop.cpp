@@ -497,7 +497,8 @@ void ControlLoop::handle_jog(const Command& c, std::int64_t k) noexcept {
   // Where the jog starts from, in its frame.
   if (mode_ == Mode::holding || machine_frame != ramp_task_ || !ramp_active_) {
     if (machine_frame) {
-      ramp_.reset(hold_);
+      // From the hold point, or where the other frame's jog came to rest.
+      ramp_.reset(mode_ == Mode::holding ? hold_ : ref_.p);
       ramp_task_ = true;
       ramp_active_ = true;
     } else {
