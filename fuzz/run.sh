@@ -54,7 +54,7 @@ case "$cmd" in
     fi
     san="-fsanitize=address,undefined -fno-sanitize-recover=all -fno-omit-frame-pointer -fsanitize=fuzzer-no-link"
     cmake -S "$repo" -B "$build" -DCMAKE_CXX_COMPILER=clang++ -DCMAKE_BUILD_TYPE=Fuzz \
-      -DCMAKE_CXX_FLAGS_FUZZ="-O1 -g" -DCMAKE_CXX_FLAGS="$san" \
+      -DCMAKE_CXX_FLAGS_FUZZ="-O1 -gline-tables-only" -DCMAKE_CXX_FLAGS="$san" \
       -DCPM_FUZZ=ON -DCPM_BUILD_TESTS=OFF -DCPM_BUILD_BENCH=OFF \
       "-DCPM_MODULES=kinematics;control;sim;io;path;msgs;hal;daemon;tools;fuzz" >/dev/null
     cmake --build "$build" --target fuzz_all -j"$jobs"
