@@ -329,13 +329,9 @@ TEST(Flood, TwentyThousandMessagesInTenSecondsMissNoCycleAndGrowNoMemory) {
   };
   // The decoy: the same group, a port nobody in this test listens on.
   std::string decoy_url = r.cfg.lcm.url;
-  {
-    const auto colon = decoy_url.rfind(':', decoy_url.find('?'));
-    const auto end = decoy_url.find_first_not_of("0123456789", colon + 1);
-    const int port = std::stoi(decoy_url.substr(colon + 1, end - colon - 1));
-    decoy_url.replace(colon + 1, end == std::string::npos ? std::string::npos : end - colon - 1,
-                      std::to_string(port + 1));
-  }
+  const std::string port = ":" + std::to_string(cpm::test::lcm_port());
+  ASSERT_NE(decoy_url.find(port), std::string::npos) << decoy_url;
+  decoy_url.replace(decoy_url.find(port), port.size(), ":" + std::to_string(cpm::test::lcm_port() + 1));
   ASSERT_NE(decoy_url, r.cfg.lcm.url);
   const int kDecoy = static_cast<int>(kRate * 5.0);  // each decoy window: 5 s
   auto decoy = [&](double seconds) {
