@@ -496,6 +496,9 @@ void ControlLoop::handle_jog(const Command& c, std::int64_t k) noexcept {
   }
   // Where the jog starts from, in its frame.
   if (mode_ == Mode::holding || machine_frame != ramp_task_ || !ramp_active_) {
+    // The ramp starts at rest; a target of the other frame means nothing in
+    // this one (and must not drive it if this command is refused).
+    jog_target_.setZero();
     if (machine_frame) {
       // From the hold point, or where the other frame's jog came to rest.
       ramp_.reset(mode_ == Mode::holding ? hold_ : ref_.p);
@@ -506,20 +509,37 @@ void ControlLoop::handle_jog(const Command& c, std::int64_t k) noexcept {
     }
   }
   // Refused outside the workspace: toward an end the reference is at (or
-  // beyond), nothing moves.
+  // beyond), nothing moves. An actuator jog once homed moves the platform
+  // too: its box keeps the platform in the workspace (computed here, for
+  // this command's velocity, and kept only if the command is taken).
   Vec3 lo, hi;
-  ramp_box(lo, hi);
+  unsigned by_workspace = 0;
+  const bool actuator_box = !machine_frame && all_homed();
+  if (actuator_box) {
+    by_workspace = actuator_jog_box(c.jog_velocity, lo, hi);
+  } else {
+    ramp_box(lo, hi);
+  }
   for (int i = 0; i < 3; ++i) {
     const double v = c.jog_velocity[i];
-    if ((v > 0.0 && ramp_.p[i] >= hi[i] - 1e-9) || (v < 0.0 && ramp_.p[i] <= lo[i] + 1e-9)) {
+    const bool up = v > 0.0 && ramp_.p[i] >= hi[i] - 1e-9, down = v < 0.0 && ramp_.p[i] <= lo[i] + 1e-9;
+    if (up || down) {
       if (mode_ == Mode::holding && all_homed()) {
         ramp_active_ = false;  // nothing moved: the task space holds as before
       }
+      const bool workspace = machine_frame || (by_workspace & (1u << (2 * i + (up ? 1 : 0)))) != 0;
       reply(c, false, ack_t::REASON_WORKSPACE,
             machine_frame ? "the jog leads out of the workspace (limits.workspace_min/max): the platform is at its edge"
+            : workspace   ? "the actuator jog would take the platform out of the workspace (limits.workspace_min/max): "
+                            "it is at the edge this actuator moves it across; jog in the machine frame along the edge"
                           : "the jog leads beyond the actuator's stroke: the actuator is at its end");
       return;
     }
+  }
+  if (actuator_box) {
+    actuator_box_lo_ = lo;
+    actuator_box_hi_ = hi;
+    actuator_box_ready_ = true;
   }
   jog_frame_ = c.jog_frame;
   jog_target_ = c.jog_velocity;
@@ -546,6 +566,7 @@ void ControlLoop::handle_settings(const Command& c) noexcept {
 }
 
 void ControlLoop::ramp_in_actuators() noexcept {
+  actuator_box_ready_ = false;  // the next actuator jog computes its own
   if (ramp_active_ && !ramp_task_) return;  // already there
   // From the actuator reference the task space last had: nothing jumps.
   ramp_.reset(d_ref_);
@@ -573,11 +594,85 @@ void ControlLoop::ramp_box(Vec3& lo, Vec3& hi) const noexcept {
     hi = cfg_.limits.workspace_max;
     return;
   }
+  if (all_homed() && actuator_box_ready_) {
+    lo = actuator_box_lo_;
+    hi = actuator_box_hi_;
+    return;
+  }
   const kin::Strokes& s = machine_->model().strokes;
   for (int i = 0; i < 3; ++i) {
     lo[i] = homed_[i] ? s.min[i] : -std::numeric_limits<double>::infinity();
     hi[i] = homed_[i] ? s.max[i] : std::numeric_limits<double>::infinity();
   }
+}
+
+unsigned ControlLoop::actuator_jog_box(const Vec3& v_target, Vec3& lo, Vec3& hi) const noexcept {
+  // Each end of each actuator's interval around d0, the reference now:
+  // end 2i + 0 toward -d_i, 2i + 1 toward +d_i. An end the jog drives to
+  // reaches the workspace's face (the inverse kinematics of the platform
+  // point on the face, the other coordinates where they are: exact for a
+  // one-actuator jog, whatever the model's effects) or the stroke's end;
+  // an end it does not drive to gets the distance the reference still
+  // needs to stop there, nothing if it does not move that way.
+  const kin::KinematicModel& km = machine_->kinematics();
+  const kin::Strokes& st = machine_->model().strokes;
+  const Vec3& wmin = cfg_.limits.workspace_min;
+  const Vec3& wmax = cfg_.limits.workspace_max;
+  const Vec3 d0 = ramp_.p;
+  lo = hi = d0;
+  Vec3 x0;
+  if (!kin::forward(km, d0, cin_.kin, x0).ok()) return 0x3fu;  // no platform point: nothing moves
+  std::array<double, 6> reach{};
+  std::array<Vec3, 6> moved{};  // the platform's displacement at each end (m)
+  unsigned by_workspace = 0;
+  for (int e = 0; e < 6; ++e) {
+    const int i = e / 2;
+    const double sign = (e % 2) ? 1.0 : -1.0;
+    kin::KinematicInputs in = cin_.kin;
+    in.dir[static_cast<std::size_t>(i)] = static_cast<std::int8_t>(sign);
+    double face = 0.0;
+    Vec3 xf = x0;
+    xf[i] = sign > 0 ? wmax[i] : wmin[i];
+    Vec3 df;
+    if (sign * (xf[i] - x0[i]) > 0.0 && kin::inverse(km, xf, in, df).ok()) face = std::max(0.0, sign * (df[i] - d0[i]));
+    const double stroke = std::max(0.0, sign > 0 ? st.max[i] - d0[i] : d0[i] - st.min[i]);
+    double r = std::min(face, stroke);
+    if (face <= stroke) by_workspace |= 1u << e;
+    if (!(sign * v_target[i] > 0.0)) {
+      const double v = sign * ramp_.v[i];
+      const double stop = v > 0.0 ? v * v / (2.0 * cfg_.jog.acceleration) + v * dt_ : 0.0;
+      r = std::min(r, stop);
+    }
+    reach[static_cast<std::size_t>(e)] = r;
+    Vec3 d = d0, x;
+    d[i] += sign * r;
+    moved[static_cast<std::size_t>(e)] = r > 0.0 && kin::forward(km, d, in, x).ok() ? Vec3(x - x0) : Vec3::Zero();
+  }
+  // An actuator also moves the platform across the other faces (a plane not
+  // square to its axis): where the ends together would cross a face, shrink
+  // every end that moves toward it in proportion (the map is near-linear).
+  std::array<double, 6> keep;
+  keep.fill(1.0);
+  for (int f = 0; f < 6; ++f) {
+    const int k = f / 2;
+    const double sign = (f % 2) ? 1.0 : -1.0;
+    const double room = std::max(0.0, sign > 0 ? wmax[k] - x0[k] : x0[k] - wmin[k]);
+    double total = 0.0;
+    for (int i = 0; i < 3; ++i)
+      total += std::max({0.0, sign * moved[static_cast<std::size_t>(2 * i)][k], sign * moved[static_cast<std::size_t>(2 * i + 1)][k]});
+    if (total <= room * (1.0 + 1e-9)) continue;
+    const double share = room / total;
+    for (int e = 0; e < 6; ++e)
+      if (sign * moved[static_cast<std::size_t>(e)][k] > 0.0) {
+        keep[static_cast<std::size_t>(e)] = std::min(keep[static_cast<std::size_t>(e)], share);
+        if (e / 2 != k || share < 1.0 - 1e-6) by_workspace |= 1u << e;
+      }
+  }
+  for (int i = 0; i < 3; ++i) {
+    lo[i] = d0[i] - reach[static_cast<std::size_t>(2 * i)] * keep[static_cast<std::size_t>(2 * i)];
+    hi[i] = d0[i] + reach[static_cast<std::size_t>(2 * i + 1)] * keep[static_cast<std::size_t>(2 * i + 1)];
+  }
+  return by_workspace;
 }
 
 void ControlLoop::handle_commands(std::int64_t k) noexcept {

@@ -80,7 +80,8 @@ namespace {
 TEST(NoAllocation, HomingJoggingAndTheActuatorSpace) {
   // The simulator with incremental encoders, home switches and index marks:
   // cycles before homing, every homing phase, the switch to the task space,
-  // and jogs in both frames with their deadman stops.
+  // and jogs in both frames (the actuator frame before and after homing)
+  // with their deadman stops.
   const DaemonConfig cfg = [] {
     DaemonConfig c = load_config(std::string(CPM_SOURCE_DIR) + "/config/sim-homing.yaml");
     c.model_file = "builtin:elkady";
@@ -122,6 +123,15 @@ TEST(NoAllocation, HomingJoggingAndTheActuatorSpace) {
     return c;
   }());
   EXPECT_EQ(counted(h, 800), 0) << "a jog in the machine frame and its deadman stop";
+  EXPECT_EQ(h.mode(), Mode::holding);
+  push([] {
+    Command c;
+    c.kind = CommandKind::jog;
+    c.jog_frame = 0;
+    c.jog_velocity = Vec3(-0.01, 0.02, 0.01);
+    return c;
+  }());
+  EXPECT_EQ(counted(h, 800), 0) << "an actuator jog once homed (its box through the kinematics) and its deadman stop";
   EXPECT_EQ(h.mode(), Mode::holding);
   EXPECT_EQ(h.state().faults, 0);
   Ack a;

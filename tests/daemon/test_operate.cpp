@@ -6,6 +6,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <string>
 
 #include "cpm/daemon/preflight.hpp"
 #include "loop_fixture.hpp"
@@ -91,6 +92,152 @@ TEST(Jog, StopsAtTheWorkspaceEdgeAndAJogOutwardThereIsRefused) {
   std::printf("jog outward at the edge: %s\n", out.message);
   EXPECT_EQ(h.mode(), Mode::holding);
   const Ack in = h.command(jog_command(control_command_t::JOG_MACHINE, Vec3(-0.01, 0.0, 0)));
+  EXPECT_TRUE(in.accepted) << in.message;
+}
+
+// Jog with keep-alives every 49 cycles for `keepalives` of them; the
+// farthest reference and measured coordinate `axis` reached in direction `sign`.
+struct JogRun {
+  double farthest_ref = -1e9, farthest_measured = -1e9;
+};
+JogRun jog_for(LoopHarness& h, std::int8_t frame, const Vec3& v, int keepalives, int axis, double sign) {
+  JogRun r;
+  for (int n = 0; n < keepalives; ++n) {
+    (void)h.command(jog_command(frame, v));
+    for (int i = 0; i < 49; ++i) {
+      h.run(1);
+      r.farthest_ref = std::max(r.farthest_ref, sign * reference(h)[axis]);
+      r.farthest_measured = std::max(r.farthest_measured, sign * measured(h)[axis]);
+    }
+  }
+  return r;
+}
+
+// Jog toward +x at full speed, a keep-alive every 20 cycles, until the
+// reference rests on the +x face; the jog is still held then (its
+// keep-alive window open). False if it never got there.
+bool jog_to_rest_on_the_x_edge(LoopHarness& h, std::int8_t frame) {
+  const double edge = h.cfg.limits.workspace_max.x();
+  for (int n = 0; n < 60; ++n) {
+    if (!h.command(jog_command(frame, Vec3(h.cfg.jog.max_velocity, 0, 0))).accepted) return false;
+    for (int i = 0; i < 20; ++i) {
+      h.run(1);
+      if (h.state().velocity_ref[0] == 0.0 && reference(h).x() > edge - 1e-6) return true;
+    }
+  }
+  return false;
+}
+
+TEST(Jog, AnActuatorJogOnceHomedStopsAtTheWorkspaceEdgeNotAtTheStroke) {
+  LoopHarness h;
+  h.to_holding();
+  ASSERT_EQ(h.state().control_space, state_t::SPACE_TASK);
+  const double edge = h.cfg.limits.workspace_max.x();
+  // The stroke of actuator 1 goes past the workspace's edge: the stroke alone would not stop it.
+  ASSERT_GT(h.machine.model().strokes.max.x() + h.machine.model().kinematics.d0.x(), edge + 1e-3);
+  const JogRun r = jog_for(h, control_command_t::JOG_ACTUATOR, Vec3(h.cfg.jog.max_velocity, 0, 0), 60, 0, 1.0);
+  std::printf("actuator 1 jogged at %.0f mm/s toward +x: reference stopped at x = %.4f mm, platform at most "
+              "%.4f mm (edge %.3f mm), faults %u\n",
+              h.cfg.jog.max_velocity * 1e3, reference(h).x() * 1e3, r.farthest_measured * 1e3, edge * 1e3,
+              static_cast<unsigned>(h.state().faults));
+  EXPECT_EQ(h.state().faults, 0) << reinterpret_cast<const char*>(h.state().fault_text);
+  EXPECT_LE(r.farthest_ref, edge + 1e-9);
+  EXPECT_LE(r.farthest_measured, edge + ControlLoop::kSoftLimitSlack);
+  EXPECT_NEAR(reference(h).x(), edge, 1e-6);  // at the edge, not short of it
+  // At rest there: an actuator jog outward is refused, inward taken.
+  h.run(400);
+  ASSERT_EQ(h.mode(), Mode::holding);
+  const Ack out = h.command(jog_command(control_command_t::JOG_ACTUATOR, Vec3(0.01, 0, 0)));
+  EXPECT_FALSE(out.accepted);
+  EXPECT_EQ(out.reason, ack_t::REASON_WORKSPACE);
+  EXPECT_NE(std::string(out.message).find("workspace"), std::string::npos) << out.message;
+  std::printf("actuator jog outward at the edge: %s\n", out.message);
+  EXPECT_EQ(h.mode(), Mode::holding);
+  const Ack back = h.command(jog_command(control_command_t::JOG_ACTUATOR, Vec3(-0.01, 0, 0)));
+  EXPECT_TRUE(back.accepted) << back.message;
+}
+
+TEST(Jog, AFrameChangeAtTheEdgeStartsWhereTheActuatorJogCameToRest) {
+  LoopHarness h;
+  h.to_holding();
+  // Toward the +x face with keep-alives until the reference rests on it,
+  // the jog still held (its keep-alive window open).
+  ASSERT_TRUE(jog_to_rest_on_the_x_edge(h, control_command_t::JOG_ACTUATOR));
+  ASSERT_EQ(h.mode(), Mode::jogging);
+  // The machine frame inward: from the rest point, not the old hold point,
+  // and the actuator jog's +x target is not carried into it.
+  const Vec3 rest = reference(h);
+  const Ack in = h.command(jog_command(control_command_t::JOG_MACHINE, Vec3(-0.01, 0, 0)));
+  ASSERT_TRUE(in.accepted) << in.message;
+  const double first = (reference(h) - rest).norm();
+  EXPECT_LT(first, 1e-4);
+  double largest_step = 0.0;
+  Vec3 last = reference(h);
+  for (int i = 0; i < 200; ++i) {
+    h.run(1);
+    largest_step = std::max(largest_step, (reference(h) - last).norm());
+    last = reference(h);
+  }
+  std::printf("frame change at the edge: first reference %.4f mm from the rest point, largest step %.4f mm/cycle\n",
+              first * 1e3, largest_step * 1e3);
+  EXPECT_LE(largest_step, 0.01 * 1e-3 * 1.001);  // 10 mm/s for 1 ms at most: no jump
+  EXPECT_LT(reference(h).x(), rest.x() - 1e-3);
+  EXPECT_EQ(h.state().faults, 0) << reinterpret_cast<const char*>(h.state().fault_text);
+}
+
+TEST(Jog, ARefusedActuatorJogAtTheEdgeDoesNotTakeOverTheMachineJogsMotion) {
+  LoopHarness h;
+  h.to_holding();
+  const double edge = h.cfg.limits.workspace_max.x();
+  ASSERT_TRUE(jog_to_rest_on_the_x_edge(h, control_command_t::JOG_MACHINE));
+  ASSERT_EQ(h.mode(), Mode::jogging);
+  // The machine jog's +x target must not drive the actuators once the frame
+  // changes, even though the actuator jog itself is refused.
+  const Ack out = h.command(jog_command(control_command_t::JOG_ACTUATOR, Vec3(0.01, 0, 0)));
+  EXPECT_FALSE(out.accepted);
+  EXPECT_EQ(out.reason, ack_t::REASON_WORKSPACE);
+  double farthest = 0.0;
+  for (int i = 0; i < 500; ++i) {
+    h.run(1);
+    farthest = std::max(farthest, reference(h).x());
+  }
+  EXPECT_LE(farthest, edge + 1e-9);
+  EXPECT_EQ(h.mode(), Mode::holding);
+  EXPECT_EQ(h.state().faults, 0) << reinterpret_cast<const char*>(h.state().fault_text);
+}
+
+TEST(Jog, AnActuatorWhosePlaneIsNotSquareToItsAxisIsStoppedWhereThePlatformMeetsAnotherFace) {
+  // Limb 1's plane tilted 5 mrad toward y: moving actuator 2 by dy moves the
+  // platform by -tan(5 mrad) dy in x. From 0.2 mm inside the +x face, a jog
+  // of actuator 2 toward -y meets that face after about 40 mm.
+  ctl::MachineModel tilted = ctl::MachineModel::elkady();
+  const double a = 5e-3;
+  tilted.kinematics.planes[0].normal = Vec3(std::cos(a), std::sin(a), 0.0);
+  LoopHarness h(test::test_config(), 0.005, tilted, tilted);
+  h.to_holding();
+  const double edge = h.cfg.limits.workspace_max.x();
+  const Vec3 start(edge - 2e-4, h.queue_end().y(), h.queue_end().z());
+  ASSERT_TRUE(h.command(h.move_to(start)).accepted);
+  for (int i = 0; i < 20000 && h.mode() != Mode::holding; ++i) h.run(1);
+  h.run(300);
+  ASSERT_EQ(h.mode(), Mode::holding);
+  const double y0 = reference(h).y();
+  const JogRun r = jog_for(h, control_command_t::JOG_ACTUATOR, Vec3(0, -h.cfg.jog.max_velocity, 0), 40, 0, 1.0);
+  const double dy = reference(h).y() - y0;
+  std::printf("tilted plane: actuator 2 jogged toward -y stopped after %.3f mm of y (closed form %.3f mm) with x = "
+              "%.4f mm, platform at most %.4f mm (edge %.3f mm)\n",
+              dy * 1e3, -2e-4 / std::tan(a) * 1e3, reference(h).x() * 1e3, r.farthest_measured * 1e3, edge * 1e3);
+  EXPECT_EQ(h.state().faults, 0) << reinterpret_cast<const char*>(h.state().fault_text);
+  EXPECT_LE(r.farthest_ref, edge + 1e-6);
+  EXPECT_LE(r.farthest_measured, edge + ControlLoop::kSoftLimitSlack);
+  EXPECT_NEAR(dy, -2e-4 / std::tan(a), 1e-3);  // stopped by the x face, not the y one
+  // At rest there: toward -y refused, toward +y (x moves inward) taken.
+  h.run(400);
+  ASSERT_EQ(h.mode(), Mode::holding);
+  const Ack out = h.command(jog_command(control_command_t::JOG_ACTUATOR, Vec3(0, -0.01, 0)));
+  EXPECT_FALSE(out.accepted);
+  EXPECT_EQ(out.reason, ack_t::REASON_WORKSPACE);
+  const Ack in = h.command(jog_command(control_command_t::JOG_ACTUATOR, Vec3(0, 0.01, 0)));
   EXPECT_TRUE(in.accepted) << in.message;
 }
 
