@@ -82,7 +82,7 @@ StateLogRead read_state_log(const std::string& path, const std::string& channel,
   for (const lcm::LogEvent* ev = log.readNextEvent(); ev; ev = log.readNextEvent()) {
     if (ev->channel != channel) continue;
     const std::string where = path + ": event " + std::to_string(ev->eventnum) + " on " + channel;
-    state_t s;
+    state_t s{};  // zeroed: decode fills what it reads, and -O2 cannot see that it fills all
     if (s.decode(ev->data, 0, ev->datalen) < 0) {
       if (strict) throw Error(where + ": not a cpmd state_t (it does not decode)");
       ++out.undecodable;
