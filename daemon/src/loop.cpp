@@ -625,11 +625,11 @@ unsigned ControlLoop::actuator_jog_box(const Vec3& v_target, Vec3& lo, Vec3& hi)
   std::array<double, 6> reach{};
   std::array<Vec3, 6> moved{};  // the platform's displacement at each end (m)
   unsigned by_workspace = 0;
-  for (int e = 0; e < 6; ++e) {
-    const int i = e / 2;
+  for (std::size_t e = 0; e < 6; ++e) {
+    const int i = static_cast<int>(e / 2);
     const double sign = (e % 2) ? 1.0 : -1.0;
     kin::KinematicInputs in = cin_.kin;
-    in.dir[static_cast<std::size_t>(i)] = static_cast<std::int8_t>(sign);
+    in.dir[e / 2] = static_cast<std::int8_t>(sign);
     double face = 0.0;
     Vec3 xf = x0;
     xf[i] = sign > 0 ? wmax[i] : wmin[i];
@@ -643,34 +643,34 @@ unsigned ControlLoop::actuator_jog_box(const Vec3& v_target, Vec3& lo, Vec3& hi)
       const double stop = v > 0.0 ? v * v / (2.0 * cfg_.jog.acceleration) + v * dt_ : 0.0;
       r = std::min(r, stop);
     }
-    reach[static_cast<std::size_t>(e)] = r;
+    reach[e] = r;
     Vec3 d = d0, x;
     d[i] += sign * r;
-    moved[static_cast<std::size_t>(e)] = r > 0.0 && kin::forward(km, d, in, x).ok() ? Vec3(x - x0) : Vec3::Zero();
+    moved[e] = r > 0.0 && kin::forward(km, d, in, x).ok() ? Vec3(x - x0) : Vec3::Zero();
   }
   // An actuator also moves the platform across the other faces (a plane not
   // square to its axis): where the ends together would cross a face, shrink
   // every end that moves toward it in proportion (the map is near-linear).
   std::array<double, 6> keep;
   keep.fill(1.0);
-  for (int f = 0; f < 6; ++f) {
-    const int k = f / 2;
+  for (std::size_t f = 0; f < 6; ++f) {
+    const int k = static_cast<int>(f / 2);
     const double sign = (f % 2) ? 1.0 : -1.0;
     const double room = std::max(0.0, sign > 0 ? wmax[k] - x0[k] : x0[k] - wmin[k]);
-    double total = 0.0;
-    for (int i = 0; i < 3; ++i)
-      total += std::max({0.0, sign * moved[static_cast<std::size_t>(2 * i)][k], sign * moved[static_cast<std::size_t>(2 * i + 1)][k]});
+    double total = 0.0;  // one end of each actuator at a time: the farther one
+    for (std::size_t e = 0; e < 6; e += 2) total += std::max({0.0, sign * moved[e][k], sign * moved[e + 1][k]});
     if (total <= room * (1.0 + 1e-9)) continue;
     const double share = room / total;
-    for (int e = 0; e < 6; ++e)
-      if (sign * moved[static_cast<std::size_t>(e)][k] > 0.0) {
-        keep[static_cast<std::size_t>(e)] = std::min(keep[static_cast<std::size_t>(e)], share);
-        if (e / 2 != k || share < 1.0 - 1e-6) by_workspace |= 1u << e;
+    for (std::size_t e = 0; e < 6; ++e)
+      if (sign * moved[e][k] > 0.0) {
+        keep[e] = std::min(keep[e], share);
+        if (e / 2 != f / 2 || share < 1.0 - 1e-6) by_workspace |= 1u << e;
       }
   }
   for (int i = 0; i < 3; ++i) {
-    lo[i] = d0[i] - reach[static_cast<std::size_t>(2 * i)] * keep[static_cast<std::size_t>(2 * i)];
-    hi[i] = d0[i] + reach[static_cast<std::size_t>(2 * i + 1)] * keep[static_cast<std::size_t>(2 * i + 1)];
+    const std::size_t down = 2 * static_cast<std::size_t>(i), up = down + 1;
+    lo[i] = d0[i] - reach[down] * keep[down];
+    hi[i] = d0[i] + reach[up] * keep[up];
   }
   return by_workspace;
 }
