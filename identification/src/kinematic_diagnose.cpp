@@ -98,15 +98,6 @@ std::vector<CandidateResult> evaluate_kinematic_candidates(const KinematicProble
   return out;
 }
 
-double kinematic_noise_floor(const KinematicProblem& P, const Engine& E, const std::vector<CandidateResult>& candidates) {
-  const double N = E.rows();
-  double best = Engine::rms(E.base_fit().residual) * std::sqrt(N / std::max(1.0, N - E.base_rank()));
-  for (const auto& c : candidates)
-    if (c.identifiable && c.rss > 0.0 && c.rss < E.rss_base())
-      best = std::min(best, Engine::rms(c.residual_after) * std::sqrt(N / std::max(1.0, N - c.k_total)));
-  return P.sigma_declared > 0.0 ? P.sigma_declared : best;
-}
-
 Diagnosis diagnose_kinematic(std::shared_ptr<const KinematicProblem> Pp, const DiagnoseOptions& opt) {
   const KinematicProblem& P = *Pp;
   for (const auto& e : opt.effects) check_effect_for_kind(e, P.kind);
@@ -118,7 +109,12 @@ Diagnosis diagnose_kinematic(std::shared_ptr<const KinematicProblem> Pp, const D
   // Stage 4: every candidate alone.
   D.candidates = evaluate_kinematic_candidates(P, E, opt);
   // Stage 5: selection and verdict.
-  D.noise_floor = kinematic_noise_floor(P, E, D.candidates);
+  const KinematicNoiseFloor floor = kinematic_noise_floor_of(P, E, D.candidates);
+  D.noise_floor = floor.value;
+  D.noise_floor_source = floor.source;
+  D.noise_floor_upper_bound = floor.upper_bound;
+  D.noise_floor_text = floor.text;
+  D.notes.push_back(floor.text);
   D.axis_noise = Vec3::Constant(D.noise_floor);
   const KinematicSpan sp = span_of(P);
   detail::rank_and_confound(D, E, opt, [&](const CandidateResult& a, const CandidateResult& b) {
@@ -126,8 +122,13 @@ Diagnosis diagnose_kinematic(std::shared_ptr<const KinematicProblem> Pp, const D
   });
   select_kinematic_effects(P, E, opt, D);
   data_notes(D, P);
+  // The verdict's rule: structure no library effect describes leads it.
+  if (opt.structure_search) kinematic_outside_library(P, E, opt, D);
   // Stage 6: structure.
-  if (opt.structure_search) D.structure = find_kinematic_structure(P, D.residual_final, opt);
+  if (opt.structure_search) {
+    D.structure = D.outside_library;
+    for (auto& f : find_kinematic_structure(P, D.residual_final, opt)) D.structure.push_back(std::move(f));
+  }
   return D;
 }
 

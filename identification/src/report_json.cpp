@@ -122,6 +122,19 @@ Json verdict_json(const Diagnosis& D) {
   v["effects"] = std::move(effects);
   // Structure no library effect describes that leads the verdict (missing = "outside_library").
   v["outside_library"] = structure_json(D.outside_library);
+  // Library effects that explain part of the outside finding, not named.
+  Json partial = Json::array();
+  for (int j : D.partial) {
+    const auto& c = D.candidates[static_cast<std::size_t>(j)];
+    partial.push_back({{"effect", c.effect}, {"axis", axis_json(c.axis)}});
+  }
+  v["partial"] = std::move(partial);
+  // User effects that would describe it, as model-file data (user_effects:).
+  Json user = Json::array();
+  for (const auto& u : D.suggested_user_effects)
+    user.push_back({{"kind", u.kind}, {"axis", axis_json(u.axis)}, {"nodes", u.nodes}, {"values", u.values},
+                    {"rms_after", u.rms_after}, {"text", u.text}});
+  v["suggested_user_effects"] = std::move(user);
   v["text"] = D.verdict_text;
   return v;
 }
@@ -178,6 +191,10 @@ std::string diagnosis_json(const Diagnosis& D) {
   o["baseline"] = {{"rms", D.baseline_rms}, {"max", D.baseline_max}, {"axis_rms", vec_json(D.baseline_axis_rms)}};
   o["base_refit"] = {{"rms", D.base_refit_rms}};
   o["noise_floor"] = D.noise_floor;
+  if (D.kind != "motion") {  // kinematic data: where it comes from (repeated poses, the bar's high band, ...)
+    o["noise_floor_source"] = D.noise_floor_source;
+    o["noise_floor_upper_bound"] = D.noise_floor_upper_bound;
+  }
   Json candidates = Json::array();
   for (const auto& c : D.candidates) candidates.push_back(candidate_json(c));
   o["candidates"] = std::move(candidates);

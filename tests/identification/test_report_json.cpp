@@ -73,7 +73,7 @@ TEST(ReportJson, FieldsInTheDocumentedOrder) {
   std::vector<std::string> keys;
   for (const auto& [k, v] : o.items()) keys.push_back(k);
   const std::vector<std::string> want = {"kind", "samples", "rows", "units", "data_file", "model_file", "baseline",
-                                         "base_refit", "noise_floor", "candidates", "verdict", "structure", "notes",
+                                         "base_refit", "noise_floor", "noise_floor_source", "noise_floor_upper_bound", "candidates", "verdict", "structure", "notes",
                                          "warnings"};
   EXPECT_EQ(keys, want);
   const auto& v = o["verdict"];

@@ -92,6 +92,17 @@ struct StructureFinding {
   double lo = 0.0, hi = 0.0;  // bump: the coordinate range it covers (SI)
 };
 
+// A user effect that would describe structure no library effect describes,
+// as data ready for the model file's `user_effects:` list (docs/model-file.md).
+struct SuggestedUserEffect {
+  std::string kind = "pitch_table";  // an error of axis `axis`' effective displacement against its reading
+  int axis = -1;                     // 0..2 (the file says 1..3)
+  std::vector<double> nodes;         // encoder readings covered (m), increasing
+  std::vector<double> values;        // error at each node (m): d~ = d + value, linear between nodes
+  double rms_after = 0.0;            // residual with the base refitted beside it (data units)
+  std::string text;                  // one sentence for people
+};
+
 struct DiagnoseOptions {
   MotionOptions motion;
   double alpha = 0.01;              // family-wise level of "significant"
@@ -131,6 +142,17 @@ struct Diagnosis {
   std::vector<StructureFinding> outside_library;
   std::vector<std::string> notes;
   std::vector<std::string> warnings;
+  // Kinematic data: where the noise floor comes from (repeated poses, the
+  // bar's high band, the instrument's declared sigma, or the residual, then
+  // only an upper bound) and the sentence saying so.
+  std::string noise_floor_source;
+  bool noise_floor_upper_bound = false;
+  std::string noise_floor_text;
+  // Library effects that explain part of an outside_library finding and are
+  // therefore not named (indices in candidates); and the user effect that
+  // would describe the finding.
+  std::vector<int> partial;
+  std::vector<SuggestedUserEffect> suggested_user_effects;
   Eigen::VectorXd residual_final;   // after the verdict's effects (or the base refit)
   MotionProblem motion;             // the processed data (plots, summaries), kind motion
   Alignment alignment;              // kind motion: when the logged force acts (align.hpp)

@@ -133,9 +133,53 @@ const KinematicEffectFitter* kinematic_fitter(kin::KinematicEffectType type) noe
 std::vector<CandidateResult> evaluate_kinematic_candidates(const KinematicProblem& P, const Engine& E,
                                                            const DiagnoseOptions& options);
 
-// The noise floor (m): the instrument's declared sigma, else the residual
-// sigma (dof-corrected) of the best description among the base refit and the
-// identifiable candidates.
+// The noise floor (m) from the data's own repeatability, never from what the
+// candidates leave: the pooled scatter of poses measured more than once (same
+// readings within 1 µm, same directions); else the instrument's declared
+// sigma; else, for ball-bar lengths, the high band of the bar's length along
+// the poses (each length against a local linear fit of its nearest
+// neighbours in reading space: a smooth machine error is nearly linear over
+// a neighbourhood, the noise is not); else the residual sigma (dof-corrected)
+// of the best description among the base refit and the identifiable
+// candidates, which is only an upper bound.
+struct KinematicNoiseFloor {
+  double value = 0.0;        // m
+  std::string source;        // "repeated poses", "declared sigma", "bar length high band", "residual (upper bound)"
+  bool upper_bound = false;
+  std::string text;          // how it was measured; with no repeats, how to measure them
+};
+KinematicNoiseFloor kinematic_noise_floor_of(const KinematicProblem& P, const Engine& E,
+                                             const std::vector<CandidateResult>& candidates);
 double kinematic_noise_floor(const KinematicProblem& P, const Engine& E, const std::vector<CandidateResult>& candidates);
+
+// The pooled standard deviation (m) of the residual rows over poses measured
+// more than once (readings within 1 µm, same directions when known); 0 when
+// fewer than 5 degrees of freedom. `poses` receives how many poses repeat.
+double repeated_pose_sigma(const KinematicProblem& P, const Eigen::VectorXd& residual, int* poses = nullptr);
+// The noise (m) of a per-sample residual from its local high band: each
+// sample against a polynomial fit (degree 1 or 2) of its k nearest
+// neighbours in reading space, in the directions they spread in.
+double local_high_band_sigma(const KinematicProblem& P, const Eigen::VectorXd& residual, int k = 8, int degree = 1);
+
+// A smooth, non-periodic error of axis `axis`' effective displacement:
+// displacement columns of the Legendre polynomials of degree 2 and 3 over the
+// readings covered (degree 0 and 1, an offset and a scale, are the base's);
+// degree 4 too when `degree` >= 4. No columns for an axis covering < 2 mm.
+Eigen::MatrixXd smooth_displacement_columns(const KinematicProblem& P, int axis, int degree = 3);
+
+// The verdict's rule on kinematic data (kinematic_outside.cpp): a library
+// effect is named only when the residual reaches the noise floor and no
+// significant smooth structure is left; otherwise the verdict leads with
+// outside_library on the axis whose reading the structure follows, the library
+// effects that explain part of it are listed as partial, and a pitch_table is
+// suggested. E: the base refit of P.
+void kinematic_outside_library(const KinematicProblem& P, const Engine& E, const DiagnoseOptions& options,
+                               Diagnosis& D);
+
+// A pitch table on `axis` fitted to what the base refit E leaves: `nodes`
+// nodes over the readings covered, values with a second-difference penalty
+// chosen by generalised cross-validation, the linear part (the base's offset
+// and scale) removed.
+SuggestedUserEffect fit_pitch_table(const KinematicProblem& P, const Engine& E, int axis, int nodes = 11);
 
 }  // namespace cpm::ident

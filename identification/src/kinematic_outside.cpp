@@ -1,0 +1,440 @@
+// Kinematic data in the open world (kinematic_stages.hpp): the noise floor
+// from the data's own repeatability, a smooth non-periodic error of an axis'
+// reading (a lead screw's pitch error growing along the stroke), the
+// verdict's rule that names a library effect only when nothing significant is
+// left, and the pitch table that would describe what is.
+//
+// Why: a pitch error growing along one axis was named a cyclic error of
+// 1.2 mm wavelength on position data, and a guide error, a cyclic error and a
+// limb twist on other axes on ball-bar data, because the floor was taken
+// from what those candidates left (1.19 µm for a bar whose noise was 0.29 µm).
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+
+#include "kinematic_internal.hpp"
+
+namespace cpm::ident {
+
+using namespace kinematic_detail;
+using detail::hcat;
+
+// ---------------------------------------------------------------------------
+// The noise floor
+
+double repeated_pose_sigma(const KinematicProblem& P, const Eigen::VectorXd& r, int* poses) {
+  constexpr double kSame = 1e-6;  // m: readings of one pose measured again
+  const int n = P.samples();
+  std::vector<int> order(static_cast<std::size_t>(n));
+  std::iota(order.begin(), order.end(), 0);
+  std::sort(order.begin(), order.end(), [&](int a, int b) { return P.d[a][0] < P.d[b][0]; });
+  auto same = [&](int a, int b) {
+    if ((P.d[a] - P.d[b]).cwiseAbs().maxCoeff() > kSame) return false;
+    return !P.has_dir || P.inputs[a].dir == P.inputs[b].dir;
+  };
+  std::vector<char> taken(static_cast<std::size_t>(n), 0);
+  double ss = 0.0;
+  long dof = 0;
+  int repeated = 0;
+  for (int s = 0; s < n; ++s) {
+    const int a = order[s];
+    if (taken[a]) continue;
+    std::vector<int> g{a};
+    for (int u = s + 1; u < n && P.d[order[u]][0] - P.d[a][0] <= kSame; ++u)
+      if (!taken[order[u]] && same(a, order[u])) g.push_back(order[u]);
+    for (int j : g) taken[j] = 1;
+    if (g.size() < 2) continue;
+    ++repeated;
+    for (int c = 0; c < P.per_sample; ++c) {
+      double m = 0.0;
+      for (int j : g) m += r(P.per_sample * j + c);
+      m /= static_cast<double>(g.size());
+      for (int j : g) ss += std::pow(r(P.per_sample * j + c) - m, 2);
+      dof += static_cast<long>(g.size()) - 1;
+    }
+  }
+  if (poses) *poses = repeated;
+  return dof >= 5 ? std::sqrt(ss / static_cast<double>(dof)) : 0.0;
+}
+
+double local_high_band_sigma(const KinematicProblem& P, const Eigen::VectorXd& r, int k, int degree) {
+  const int n = P.samples();
+  if (P.per_sample != 1 || n < k + 2 || r.size() != n) return 0.0;
+  double num = 0.0, den = 0.0;
+  std::vector<std::pair<double, int>> dist;
+  for (int j = 0; j < n; ++j) {
+    dist.clear();
+    for (int o = 0; o < n; ++o)
+      if (o != j) dist.emplace_back((P.d[o] - P.d[j]).squaredNorm(), o);
+    std::nth_element(dist.begin(), dist.begin() + (k - 1), dist.end());
+    Eigen::MatrixXd U(k, 3);
+    Eigen::VectorXd rn(k);
+    for (int q = 0; q < k; ++q) {
+      U.row(q) = (P.d[dist[q].second] - P.d[j]).transpose();
+      rn(q) = r(dist[q].second);
+    }
+    // The directions the neighbours spread in (a circle: one; a hemisphere:
+    // two; two radii: three); a local polynomial in those.
+    const Eigen::JacobiSVD<Eigen::MatrixXd> svd(U, Eigen::ComputeThinV);
+    const Eigen::VectorXd sv = svd.singularValues();
+    int m = 0;
+    while (m < 3 && sv(m) > 0.1 * sv(0)) ++m;
+    const Eigen::MatrixXd Z = U * svd.matrixV().leftCols(m) / std::max(sv(0), 1e-300);
+    const int cols = 1 + m + (degree >= 2 ? m * (m + 1) / 2 : 0);
+    if (k < cols + 3) continue;
+    Eigen::MatrixXd X(k, cols);
+    X.col(0).setOnes();
+    X.middleCols(1, m) = Z;
+    int c = 1 + m;
+    if (degree >= 2)
+      for (int a = 0; a < m; ++a)
+        for (int b = a; b < m; ++b) X.col(c++) = Z.col(a).cwiseProduct(Z.col(b));
+    Eigen::VectorXd e0 = Eigen::VectorXd::Zero(cols);
+    e0(0) = 1.0;
+    const Eigen::VectorXd a = (X.transpose() * X).ldlt().solve(e0);
+    const Eigen::VectorXd w = X * a;  // the prediction at this sample from its neighbours
+    if (!w.allFinite()) continue;
+    num += std::pow(r(j) - w.dot(rn), 2);
+    den += 1.0 + w.squaredNorm();
+  }
+  return den > 0.0 ? std::sqrt(num / den) : 0.0;
+}
+
+namespace {
+
+// What the base refit leaves less a smooth error of every axis' reading
+// (Legendre degree 2..4 each): the slow part a machine error lives in.
+Eigen::VectorXd without_smooth_part(const KinematicProblem& P, const Engine& E);
+
+}  // namespace
+
+KinematicNoiseFloor kinematic_noise_floor_of(const KinematicProblem& P, const Engine& E,
+                                             const std::vector<CandidateResult>& candidates) {
+  const int suggest = std::clamp(P.samples() / 5, 5, 20);
+  const std::string how = "repeat " + std::to_string(suggest) +
+                          " poses (the same readings, approached the same way, spread over the run) to measure the "
+                          "instrument's own scatter";
+  int repeated = 0;
+  const double rep = repeated_pose_sigma(P, P.residual, &repeated);
+  if (rep > 0.0)
+    return {rep, "repeated poses", false,
+            "noise floor " + fmt(rep * 1e6) + " µm from the scatter of the " + std::to_string(repeated) +
+                " poses measured more than once"};
+  if (P.sigma_declared > 0.0)
+    return {P.sigma_declared, "declared sigma", false,
+            "noise floor " + fmt(P.sigma_declared * 1e6) +
+                " µm: the instrument's declared sigma (no pose is repeated to check it: " + how + ")"};
+  const double N = E.rows();
+  double best = Engine::rms(E.base_fit().residual) * std::sqrt(N / std::max(1.0, N - E.base_rank()));
+  std::string best_label = "the base refit";
+  for (const auto& c : candidates)
+    if (c.identifiable && c.rss > 0.0 && c.rss < E.rss_base()) {
+      const double s = Engine::rms(c.residual_after) * std::sqrt(N / std::max(1.0, N - c.k_total));
+      if (s < best) { best = s; best_label = c.label(); }
+    }
+  if (P.kind == "ballbar") {
+    const double hb = local_high_band_sigma(P, without_smooth_part(P, E), 12, 1);
+    // Below what any description leaves by more than the scatter of either
+    // estimate: the high band holds structure finer than the poses' spacing
+    // (a short cyclic error), and the floor is known only as an upper bound.
+    if (hb > 0.0 && !(best < 0.8 * hb))
+      return {hb, "bar length high band", false,
+              "noise floor " + fmt(hb * 1e6) +
+                  " µm from the high band of the bar's length (each length against a linear fit of its 12 nearest "
+                  "poses, the smooth part of every axis' reading removed first); no pose is repeated: " + how +
+                  " to confirm it"};
+    if (hb > 0.0)
+      return {best, "residual (upper bound)", true,
+              "noise floor at most " + fmt(best * 1e6) + " µm, what " + best_label +
+                  " leaves: the high band of the bar's length (" + fmt(hb * 1e6) +
+                  " µm) holds structure finer than the poses' spacing; no pose is repeated: " + how};
+  }
+  return {best, "residual (upper bound)", true,
+          "noise floor at most " + fmt(best * 1e6) +
+              " µm: no pose is repeated, so it is the residual the best single description leaves, an upper "
+              "bound, not the instrument's noise; " + how};
+}
+
+double kinematic_noise_floor(const KinematicProblem& P, const Engine& E, const std::vector<CandidateResult>& candidates) {
+  return kinematic_noise_floor_of(P, E, candidates).value;
+}
+
+// ---------------------------------------------------------------------------
+// Smooth structure
+
+namespace {
+
+constexpr double kMinStroke = 2e-3;  // m: an axis covering less shows no curvature
+
+// Legendre polynomials of degree 2 and 3 on [-1, 1].
+double legendre2(double u) { return 0.5 * (3.0 * u * u - 1.0); }
+double legendre3(double u) { return 0.5 * (5.0 * u * u * u - 3.0 * u); }
+double legendre4(double u) { return (35.0 * u * u * u * u - 30.0 * u * u + 3.0) / 8.0; }
+
+}  // namespace
+
+Eigen::MatrixXd smooth_displacement_columns(const KinematicProblem& P, int axis, int degree) {
+  const KinematicSpan sp = span_of(P);
+  const double h = 0.5 * (sp.hi[axis] - sp.lo[axis]), c = 0.5 * (sp.hi[axis] + sp.lo[axis]);
+  if (!(2.0 * h > kMinStroke)) return Eigen::MatrixXd(P.rows(), 0);
+  auto u = [&](int j) { return (P.d[static_cast<std::size_t>(j)][axis] - c) / h; };
+  Eigen::MatrixXd X = hcat({displacement_column(P, axis, [&](int j) { return legendre2(u(j)); }),
+                            displacement_column(P, axis, [&](int j) { return legendre3(u(j)); })});
+  if (degree >= 4)
+    X = detail::hstack(X, hcat({displacement_column(P, axis, [&](int j) { return legendre4(u(j)); })}));
+  return X;
+}
+
+namespace {
+
+Eigen::VectorXd without_smooth_part(const KinematicProblem& P, const Engine& E) {
+  Eigen::MatrixXd X(P.rows(), 0);
+  for (int i = 0; i < 3; ++i) X = detail::hstack(X, smooth_displacement_columns(P, i, 4));
+  if (X.cols() == 0 || P.samples() < 3 * X.cols()) return E.base_fit().residual;
+  const JointFit f = E.fit(X);
+  return f.residual.allFinite() ? f.residual : E.base_fit().residual;
+}
+
+// A column set tested against an engine's base refit, p corrected for `trials`.
+struct ColumnTest {
+  bool ok = false;
+  double p = 1.0, f = 0.0, rss = 0.0;
+  JointFit fit;
+};
+
+ColumnTest test_columns(const Engine& E, const Eigen::MatrixXd& X, double trials) {
+  ColumnTest t;
+  if (X.cols() == 0 || X.rows() != E.rows() || E.base_share(X).maxCoeff() > 0.995) return t;
+  t.fit = E.fit(X);
+  if (!t.fit.full_rank) return t;
+  const int q = static_cast<int>(X.cols());
+  const NestedTest n = E.nested(E.rss_base(), t.fit.rss, q, E.base_rank() + q, t.fit.n_eff);
+  t.ok = n.f_stat > 0.0;
+  t.f = n.f_stat;
+  t.p = std::min(1.0, n.p_value * trials);
+  t.rss = t.fit.rss;
+  return t;
+}
+
+// The base refit with X as base columns too.
+Engine with_columns(const Engine& E, const Eigen::MatrixXd& X) {
+  LinearProblem L = E.problem();
+  L.B = detail::hstack(L.B, X);
+  for (Eigen::Index j = 0; j < X.cols(); ++j) {
+    L.base_names.emplace_back("smooth error");
+    L.base_units.emplace_back("m");
+    L.base_values.push_back(0.0);
+    L.nuisance.push_back(0);
+  }
+  return Engine(std::move(L));
+}
+
+// Peak to peak (m) over the stroke of the smooth error b2 P2 + b3 P3 (no linear part).
+double smooth_size(const Eigen::VectorXd& b) {
+  double lo = 1e300, hi = -1e300;
+  for (int s = 0; s <= 100; ++s) {
+    const double u = -1.0 + 0.02 * s, v = b(0) * legendre2(u) + b(1) * legendre3(u);
+    lo = std::min(lo, v);
+    hi = std::max(hi, v);
+  }
+  return hi - lo;
+}
+
+double weighted_rss(const Engine& E, const Eigen::VectorXd& r) {
+  return (r.array() * E.problem().w.array()).square().sum();
+}
+
+// Forms of one axis' smooth error tried, one per axis: the look-elsewhere factor.
+constexpr double kSmoothTrials = 3.0;
+// The residual reaches the floor: its sigma within this factor of it (the
+// floor's own scatter on 100-200 readings is 10-15 %).
+constexpr double kAtFloor = 1.3;
+// BIC by which a smooth error must beat the library's description when the
+// floor is only an upper bound ("strong" evidence).
+constexpr double kClearlyBetter = 6.0;
+
+}  // namespace
+
+SuggestedUserEffect fit_pitch_table(const KinematicProblem& P, const Engine& E, int axis, int n) {
+  SuggestedUserEffect T;
+  T.axis = axis;
+  const KinematicSpan sp = span_of(P);
+  const double lo = sp.lo[axis], hi = sp.hi[axis];
+  if (!(hi - lo > kMinStroke) || n < 4) return T;
+  for (int k = 0; k < n; ++k) T.nodes.push_back(lo + (hi - lo) * k / (n - 1));
+  // Hat functions of the nodes as displacement columns, weighted.
+  const LinearProblem& L = E.problem();
+  const int N = E.rows();
+  Eigen::MatrixXd H = Eigen::MatrixXd::Zero(N, n);
+  for (int r = 0; r < N; ++r) {
+    const double u = std::clamp((P.d[static_cast<std::size_t>(P.sample_of_row(r))][axis] - lo) / (hi - lo), 0.0, 1.0) *
+                     (n - 1);
+    const int k = std::min(n - 2, static_cast<int>(u));
+    const double f = u - k;
+    H(r, k) = P.sensitivity(r, axis) * (1.0 - f) * L.w(r);
+    H(r, k + 1) = P.sensitivity(r, axis) * f * L.w(r);
+  }
+  const Eigen::VectorXd wy = L.y.cwiseProduct(L.w);
+  const Eigen::MatrixXd WB = L.w.asDiagonal() * L.B;
+  // What the base takes out (its offset and scale of the axis among it).
+  const Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(WB);
+  const int rank = static_cast<int>(qr.rank());
+  const Eigen::MatrixXd Q = Eigen::MatrixXd(qr.householderQ()).leftCols(rank);
+  const Eigen::VectorXd y = wy - Q * (Q.transpose() * wy);
+  const Eigen::MatrixXd Hp = H - Q * (Q.transpose() * H);
+  Eigen::MatrixXd D2 = Eigen::MatrixXd::Zero(n - 2, n);
+  for (int k = 0; k + 2 < n; ++k) D2.row(k).segment(k, 3) << 1.0, -2.0, 1.0;
+  const Eigen::MatrixXd HtH = Hp.transpose() * Hp, R = D2.transpose() * D2;
+  const Eigen::VectorXd Hty = Hp.transpose() * y;
+  const double scale = std::max(HtH.trace() / n, 1e-300);
+  // The smoothness by generalised cross-validation over a log grid.
+  double best_gcv = 1e300;
+  Eigen::VectorXd best_v = Eigen::VectorXd::Zero(n);
+  for (int g = 0; g <= 40; ++g) {
+    const double lambda = scale * std::pow(10.0, -6.0 + 0.2 * g);
+    const Eigen::MatrixXd A = HtH + lambda * R + 1e-9 * scale * Eigen::MatrixXd::Identity(n, n);
+    const Eigen::LDLT<Eigen::MatrixXd> ldlt(A);
+    const Eigen::VectorXd v = ldlt.solve(Hty);
+    const double rss = (y - Hp * v).squaredNorm();
+    const double df = ldlt.solve(HtH).trace();
+    const double dof = N - rank - df;
+    if (!(dof > 1.0)) continue;
+    const double gcv = N * rss / (dof * dof);
+    if (gcv < best_gcv) { best_gcv = gcv; best_v = v; }
+  }
+  // The linear part of the table is an offset and a scale of the axis, which
+  // the calibration holds: removed so the table holds only what it does not.
+  Eigen::MatrixXd A(n, 2);
+  for (int k = 0; k < n; ++k) A.row(k) << 1.0, T.nodes[static_cast<std::size_t>(k)] - lo;
+  const Eigen::VectorXd lin = A.colPivHouseholderQr().solve(best_v);
+  const Eigen::VectorXd v = best_v - A * lin;
+  T.values.assign(v.data(), v.data() + n);
+  const Eigen::VectorXd left = (y - Hp * best_v).cwiseQuotient(L.w);
+  T.rms_after = Engine::rms(left);
+  double vmin = v.minCoeff(), vmax = v.maxCoeff();
+  T.text = "a pitch_table on axis " + std::to_string(axis + 1) + ": " + std::to_string(n) + " nodes over d" +
+           std::to_string(axis + 1) + " = " + fmt(lo * 1e3, 4) + " .. " + fmt(hi * 1e3, 4) + " mm, values " +
+           fmt(vmin * 1e6) + " .. " + fmt(vmax * 1e6) +
+           " µm (smoothness by cross-validation, its linear part left to the calibration); with it the residual is " +
+           fmt(T.rms_after * 1e6) + " µm RMS";
+  return T;
+}
+
+void kinematic_outside_library(const KinematicProblem& P, const Engine& E, const DiagnoseOptions& opt, Diagnosis& D) {
+  const int N = E.rows();
+  if (P.samples() < 12 || D.residual_final.size() != N) return;
+  const double lnN = std::log(static_cast<double>(N));
+  const std::vector<int> found = D.found();
+  int k_lib = 0;
+  for (int j : found) k_lib += D.candidates[static_cast<std::size_t>(j)].n_params;
+  const double rms_lib = Engine::rms(D.residual_final);
+  const double rss_lib = std::max(weighted_rss(E, D.residual_final), 1e-300);
+  const double bic_lib = N * std::log(rss_lib / N) + k_lib * lnN;
+  const double sigma_lib =
+      Engine::rms(D.residual_final) * std::sqrt(N / std::max(1.0, static_cast<double>(N - E.base_rank() - k_lib)));
+  const bool at_floor = sigma_lib <= kAtFloor * D.noise_floor;
+  // What the library's effects leave, as a problem of its own.
+  KinematicProblem Pf = P;
+  Pf.residual = -D.residual_final;
+  const Engine Ef(kinematic_linear_problem(Pf));
+
+  int axis = -1;
+  double best_p = 1.0;
+  ColumnTest alone_best, left_best;
+  Eigen::MatrixXd X_best;
+  for (int i = 0; i < 3; ++i) {
+    const Eigen::MatrixXd X = smooth_displacement_columns(P, i);
+    if (X.cols() == 0) continue;
+    const ColumnTest left = test_columns(Ef, X, kSmoothTrials);
+    const ColumnTest alone = test_columns(E, X, kSmoothTrials);
+    const bool left_sig = left.ok && left.p < opt.alpha;
+    bool better = false;
+    if (!found.empty() && alone.ok && alone.p < opt.alpha) {
+      const double bic_s = N * std::log(std::max(alone.rss, 1e-300) / N) + 2.0 * lnN;
+      better = bic_s < bic_lib - kClearlyBetter || (!D.noise_floor_upper_bound && !at_floor && bic_s < bic_lib);
+    }
+    if (!(left_sig || better)) continue;
+    const double p = left_sig ? std::min(left.p, alone.p) : alone.p;
+    if (axis < 0 || p < best_p) {
+      axis = i;
+      best_p = p;
+      alone_best = alone;
+      left_best = left;
+      X_best = X;
+    }
+  }
+  if (axis < 0) {
+    if (!found.empty() && !at_floor && !D.noise_floor_upper_bound)
+      D.notes.push_back("the residual after the effects named (" + fmt(sigma_lib * 1e6) + " µm) stays " +
+                        fmt(sigma_lib / D.noise_floor, 2) + " x the noise floor (" + D.noise_floor_source +
+                        "): part of it is not explained by the library nor by a smooth error of one axis");
+    return;
+  }
+  // The finding, sized by the smooth error fitted alone on the base refit.
+  const KinematicSpan sp = span_of(P);
+  const std::string ax = std::to_string(axis + 1);
+  const Eigen::VectorXd b = (alone_best.ok ? alone_best : left_best).fit.beta;
+  StructureFinding f;
+  f.kind = "smooth";
+  f.axis = axis;
+  f.coordinate = "d" + ax;
+  f.location = 0.5 * (sp.lo[axis] + sp.hi[axis]);
+  f.size = smooth_size(b);
+  f.z = std::sqrt(2.0 * std::max(alone_best.f, left_best.f));
+  f.lo = sp.lo[axis];
+  f.hi = sp.hi[axis];
+  f.text = "axis " + ax + ": an error that follows d" + ax + ", smooth, not periodic, size " + fmt(f.size * 1e6) +
+           " µm (peak to peak of its curved part over d" + ax + " = " + fmt(f.lo * 1e3, 4) + " .. " +
+           fmt(f.hi * 1e3, 4) + " mm; p = " + fmt(best_p, 2) + ")";
+
+  // Library effects that still add something beside it stay named; the others explained part of it only.
+  const Engine Es = with_columns(E, X_best);
+  std::vector<int> kept, partial;
+  Eigen::MatrixXd XK(N, 0);
+  for (int j : found) {
+    const CandidateResult& c = D.candidates[static_cast<std::size_t>(j)];
+    bool keep = false;
+    if (c.effect == "actuator_scale") {
+      keep = true;  // judged at the model as given, where the calibration does not absorb it
+    } else if (c.columns.rows() == N && c.columns.cols() > 0) {
+      const ColumnTest t = test_columns(Es, c.columns, std::max(1.0, c.trials) * static_cast<double>(found.size()));
+      keep = t.ok && t.p < opt.alpha;
+    }
+    (keep ? kept : partial).push_back(j);
+    if (keep && c.columns.rows() == N) XK = detail::hstack(XK, c.columns);
+  }
+  D.verdict = kept.empty() ? -1 : kept.front();
+  D.also.assign(kept.size() > 1 ? kept.begin() + 1 : kept.end(), kept.end());
+  D.partial = partial;
+  D.outside_library = {f};
+  const JointFit joint = Es.fit(XK);
+  D.residual_final = joint.residual;
+  const SuggestedUserEffect T = fit_pitch_table(P, E, axis, 11);
+  if (!T.values.empty()) D.suggested_user_effects = {T};
+
+  std::ostringstream os;
+  os << "missing: something no library effect describes: " << f.text << ". With it the residual falls from "
+     << detail::amount(D.base_refit_rms, D.units) << " (base refitted) to " << detail::amount(Engine::rms(joint.residual), D.units)
+     << " RMS; " << D.noise_floor_text;
+  if (!partial.empty()) {
+    os << ". Library effects explain part of it and are not named: ";
+    for (std::size_t k = 0; k < partial.size(); ++k) {
+      const CandidateResult& c = D.candidates[static_cast<std::size_t>(partial[k])];
+      os << (k ? ", " : "") << c.label();
+    }
+    os << " (the library's effects together leave " << detail::amount(rms_lib, D.units) << " RMS)";
+  }
+  if (!kept.empty()) {
+    os << ". Beside it, named: ";
+    for (std::size_t k = 0; k < kept.size(); ++k) os << (k ? ", " : "") << D.candidates[static_cast<std::size_t>(kept[k])].label();
+  }
+  os << ". To tell a pitch error from the library's effects, measure axis " << ax
+     << " alone along its whole stroke with a linear interferometer at steps of a few mm: a pitch error shows there "
+        "as a smooth curve, a cyclic error would repeat, a guide error or a limb twist would not show on the axis' own "
+        "reading";
+  if (!T.values.empty()) os << ". Suggested user effect: " << T.text;
+  D.verdict_text = os.str();
+  D.ambiguous = false;
+}
+
+}  // namespace cpm::ident
