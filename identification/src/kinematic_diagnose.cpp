@@ -126,7 +126,7 @@ Diagnosis diagnose_kinematic(std::shared_ptr<const KinematicProblem> Pp, const D
   if (opt.structure_search) kinematic_outside_library(P, E, opt, D);
   // Stage 6: structure.
   if (opt.structure_search) {
-    D.structure = D.outside_library;
+    if (D.structure.empty()) D.structure = D.outside_library;  // a tie leaves its finding there already
     for (auto& f : find_kinematic_structure(P, D.residual_final, opt)) D.structure.push_back(std::move(f));
   }
   return D;

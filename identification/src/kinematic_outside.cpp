@@ -251,7 +251,7 @@ constexpr double kSmoothTrials = 3.0;
 constexpr double kAtFloor = 1.3;
 // BIC by which a smooth error must beat the library's description when the
 // floor is only an upper bound ("strong" evidence).
-constexpr double kClearlyBetter = 6.0;
+constexpr double kClearlyBetter = 2.0;
 
 }  // namespace
 
@@ -338,8 +338,9 @@ void kinematic_outside_library(const KinematicProblem& P, const Engine& E, const
   Pf.residual = -D.residual_final;
   const Engine Ef(kinematic_linear_problem(Pf));
 
-  int axis = -1;
-  double best_p = 1.0;
+  int axis = -1, tie_axis = -1;
+  double best_p = 1.0, tie_delta = 0.0;
+  Eigen::VectorXd tie_beta;
   ColumnTest alone_best, left_best;
   Eigen::MatrixXd X_best;
   for (int i = 0; i < 3; ++i) {
@@ -352,6 +353,12 @@ void kinematic_outside_library(const KinematicProblem& P, const Engine& E, const
     if (!found.empty() && alone.ok && alone.p < opt.alpha) {
       const double bic_s = N * std::log(std::max(alone.rss, 1e-300) / N) + 2.0 * lnN;
       better = bic_s < bic_lib - kClearlyBetter || (!D.noise_floor_upper_bound && !at_floor && bic_s < bic_lib);
+      // Within the margin either way: the data fit both alike.
+      if (!better && std::fabs(bic_s - bic_lib) <= kClearlyBetter && (tie_axis < 0 || bic_s - bic_lib < tie_delta)) {
+        tie_axis = i;
+        tie_delta = bic_s - bic_lib;
+        tie_beta = alone.fit.beta;
+      }
     }
     if (!(left_sig || better)) continue;
     const double p = left_sig ? std::min(left.p, alone.p) : alone.p;
@@ -362,6 +369,33 @@ void kinematic_outside_library(const KinematicProblem& P, const Engine& E, const
       left_best = left;
       X_best = X;
     }
+  }
+  if (axis < 0 && tie_axis >= 0) {
+    // Two explanations fit alike: the library's stays named, the other is said beside it.
+    const KinematicSpan sp = span_of(P);
+    const std::string ax = std::to_string(tie_axis + 1);
+    StructureFinding f;
+    f.kind = "smooth";
+    f.axis = tie_axis;
+    f.coordinate = "d" + ax;
+    f.location = 0.5 * (sp.lo[tie_axis] + sp.hi[tie_axis]);
+    f.size = smooth_size(tie_beta);
+    f.lo = sp.lo[tie_axis];
+    f.hi = sp.hi[tie_axis];
+    const std::string apart = P.kind == "ballbar" ? "measure with a second bar radius, or axis " + ax +
+                                                        " alone along its stroke with a linear interferometer"
+                                                  : "measure axis " + ax +
+                                                        " alone along its stroke with a linear interferometer";
+    f.text = "axis " + ax + ": an error that follows d" + ax + ", smooth, not periodic, size " + fmt(f.size * 1e6) +
+             " µm, fits these data as well as the effects named (BIC " + fmt(tie_delta, 2) +
+             " against them): a pitch error outside the library is as likely; to tell them apart, " + apart;
+    D.structure.push_back(f);
+    D.ambiguous = true;
+    CandidateResult& v = D.candidates[static_cast<std::size_t>(found.front())];
+    v.alternatives.push_back("outside_library[axis " + ax + "]");
+    v.confounded.push_back({"outside_library[axis " + ax + "]", "", tie_axis, 1.0, apart});
+    D.verdict_text += ". As well as these, " + f.text;
+    return;
   }
   if (axis < 0) {
     if (!found.empty() && !at_floor && !D.noise_floor_upper_bound)
