@@ -24,6 +24,8 @@
 #include <random>
 #include <string>
 
+#include <Eigen/Dense>
+
 #include "cpm/calibration/kim.hpp"
 #include "cpm/calibration/simulate.hpp"
 #include "cpm/identification/kinematic.hpp"
@@ -206,6 +208,42 @@ TEST(KinematicOutside, SmoothPitchErrorIsOutsideTheLibraryOnItsAxis) {
       // A library effect named without saying the pitch error fits alike is a wrong answer everywhere.
       EXPECT_GE(no_library + alike, 0.9 * kSets) << c.name << " " << mult << "x" << misses;
     }
+}
+
+// The suggested pitch_table follows the planted error: its values against
+// the planted e at the nodes, both less their straight line (the part the
+// calibration holds), and the residual with it near the noise.
+TEST(KinematicOutside, SuggestedPitchTableFollowsThePlantedError) {
+  for (const Condition& c : conditions()) {
+    PitchSet s{c.position, c.radii, 1, 2, 10.0, 61};
+    const io::DataSet ds = pitch_data(s);
+    const ident::Diagnosis D = diagnose(ds);
+    ASSERT_TRUE(outside_on(D, 1)) << c.name << ": " << D.verdict_text;
+    ASSERT_EQ(D.suggested_user_effects.size(), 1u);
+    const ident::SuggestedUserEffect& T = D.suggested_user_effects.front();
+    EXPECT_EQ(T.kind, "pitch_table");
+    EXPECT_EQ(T.axis, 1);
+    const std::size_t n = T.nodes.size();
+    ASSERT_GE(n, 4u);
+    const double lo = T.nodes.front(), hi = T.nodes.back();
+    const double sigma = c.position ? kPosSigma : kBarSigma, A = s.multiple * sigma / curved_part_ptp(s.shape);
+    // planted at the nodes, less the straight line through the values' own fit
+    Eigen::MatrixXd L(n, 2);
+    Eigen::VectorXd e(n), v(n);
+    for (std::size_t k = 0; k < n; ++k) {
+      L.row(k) << 1.0, T.nodes[k] - lo;
+      e(k) = A * shape_of(s.shape, (T.nodes[k] - lo) / (hi - lo));
+      v(k) = T.values[k];
+    }
+    e -= L * L.colPivHouseholderQr().solve(e);
+    v -= L * L.colPivHouseholderQr().solve(v);
+    const double ptp = e.maxCoeff() - e.minCoeff(), diff = std::sqrt((v - e).squaredNorm() / n);
+    std::printf("%s, exponential pitch error 10x on axis 2: table %zu nodes, RMS off the planted %.3f µm of %.3f µm "
+                "peak to peak; residual with it %.3f µm (floor %.3f µm)\n",
+                c.name, n, diff * 1e6, ptp * 1e6, T.rms_after * 1e6, D.noise_floor * 1e6);
+    EXPECT_LT(diff, 0.25 * ptp) << c.name;
+    EXPECT_LT(T.rms_after, 1.3 * sigma) << c.name;
+  }
 }
 
 // Null sets (Kim's machine, nothing planted beyond its calibrated planes):
