@@ -25,11 +25,13 @@
 #include <string>
 
 #include <Eigen/Dense>
+#include <nlohmann/json.hpp>
 
 #include "cpm/calibration/kim.hpp"
 #include "cpm/calibration/simulate.hpp"
 #include "cpm/identification/kinematic.hpp"
 #include "cpm/identification/kinematic_stages.hpp"
+#include "cpm/identification/report.hpp"
 #include "identification/kin_data.hpp"
 
 namespace cpm::test {
@@ -244,6 +246,28 @@ TEST(KinematicOutside, SuggestedPitchTableFollowsThePlantedError) {
     EXPECT_LT(diff, 0.25 * ptp) << c.name;
     EXPECT_LT(T.rms_after, 1.3 * sigma) << c.name;
   }
+}
+
+// The report: JSON verdict.missing = "outside_library" on the axis, the
+// floor's source, the table ready for the model file; the text says it.
+TEST(KinematicOutside, ReportCarriesTheFindingTheFloorSourceAndTheTable) {
+  const ident::Diagnosis D = diagnose(pitch_data({false, {0.100, 0.150}, 2, 0, 10.0, 62}));
+  const auto j = nlohmann::json::parse(ident::diagnosis_json(D));
+  EXPECT_EQ(j["verdict"]["missing"], "outside_library");
+  EXPECT_EQ(j["verdict"]["axis"], 3);
+  EXPECT_EQ(j["verdict"]["outside_library"][0]["kind"], "smooth");
+  EXPECT_EQ(j["verdict"]["outside_library"][0]["coordinate"], "d3");
+  EXPECT_TRUE(j["verdict"]["effects"].empty());
+  EXPECT_EQ(j["noise_floor_source"], "bar length high band");
+  EXPECT_EQ(j["noise_floor_upper_bound"], false);
+  const auto& t = j["verdict"]["suggested_user_effects"][0];
+  EXPECT_EQ(t["kind"], "pitch_table");
+  EXPECT_EQ(t["axis"], 3);
+  EXPECT_EQ(t["nodes"].size(), t["values"].size());
+  const std::string text = ident::diagnosis_text(D);
+  EXPECT_NE(text.find("smooth, not periodic"), std::string::npos) << text;
+  EXPECT_NE(text.find("pitch_table on axis 3"), std::string::npos) << text;
+  std::printf("%s\n", D.verdict_text.c_str());
 }
 
 // Null sets (Kim's machine, nothing planted beyond its calibrated planes):
