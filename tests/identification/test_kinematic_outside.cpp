@@ -49,6 +49,7 @@ struct PitchSet {
   double multiple = 0.0; // curved part, peak to peak, in noise sigmas (0: a null set)
   std::uint64_t seed = 1;
   bool noise = true;     // false: the exact readings (a test adds its own noise)
+  std::vector<PlantedKinematic> library{};  // library effects planted beside it (kin_data.hpp)
 };
 
 // Peak to peak of u^n less its least-squares line over u in [0, 1] (fine grid).
@@ -78,7 +79,7 @@ double curved_part_ptp(int shape) {
 io::DataSet pitch_data(const PitchSet& s) {
   const std::vector<Vec3> poses =
       s.position ? hemisphere_poses(s.radii, 5, 12, s.seed) : hemisphere_poses(s.radii, 6, 16, s.seed);
-  const auto truth = cal::kim_true_machine();
+  const auto truth = kim_truth_with(s.library);
   const auto nominal = ctl::MachineModel::elkady();
   const auto inputs = cal::sequence_inputs(nominal, poses, 20.0, 60.0);
   const std::vector<cal::SimulatedPose> sim = cal::simulate_poses(truth, nominal, poses, inputs);
@@ -268,6 +269,37 @@ TEST(KinematicOutside, ReportCarriesTheFindingTheFloorSourceAndTheTable) {
   EXPECT_NE(text.find("smooth, not periodic"), std::string::npos) << text;
   EXPECT_NE(text.find("pitch_table on axis 3"), std::string::npos) << text;
   std::printf("%s\n", D.verdict_text.c_str());
+}
+
+// A library effect beside the pitch error stays named: backlash (5 µm) or a
+// cyclic error (2.6 µm, 16 mm) on axis 1, the pitch error (10x) on axis 2,
+// ball-bar with two radii and positions.
+TEST(KinematicOutside, ALibraryEffectBesideThePitchErrorIsStillNamed) {
+  const std::vector<std::vector<PlantedKinematic>> beside = {{{"backlash", 0, {5e-6, 0, 0}}},
+                                                             {{"cyclic_error", 0, {2.6e-6, 0.016, 0.3}}}};
+  for (const Condition& c : conditions()) {
+    if (c.radii.size() < 2) continue;
+    for (const auto& lib : beside) {
+      int both = 0;
+      const int n = 6;
+      std::string misses;
+      for (int k = 0; k < n; ++k) {
+        PitchSet s{c.position, c.radii, 1, k % 3, 10.0, static_cast<std::uint64_t>(700 + k)};
+        s.library = lib;
+        if (c.position) s.library[0].params[0] *= 3.0;  // 2 µm noise: the cells' 10x on positions
+        const ident::Diagnosis D = diagnose(pitch_data(s));
+        const std::string want = std::string(lib[0].effect) + "[axis 1]";
+        bool named = false;
+        for (int j : D.found()) named = named || D.candidates[static_cast<std::size_t>(j)].label() == want;
+        const bool ok = outside_on(D, 1) && named && D.found().size() == 1;
+        both += ok;
+        if (!ok) misses += "\n  seed " + std::to_string(s.seed) + ": " + named_text(D);
+      }
+      std::printf("%s, %s on axis 1 beside a pitch error 10x on axis 2: both found, nothing else, %d/%d%s\n", c.name,
+                  lib[0].effect, both, n, misses.c_str());
+      EXPECT_GE(both, n - 1) << c.name << " " << lib[0].effect << misses;
+    }
+  }
 }
 
 // Null sets (Kim's machine, nothing planted beyond its calibrated planes):
