@@ -345,18 +345,31 @@ TEST(KinematicOutside, BallbarNoiseFloorWithin30PercentOfThePlantedNoise) {
   }
 }
 
-// A planted library effect keeps the ball-bar floor honest too (it is not
-// what the candidates leave): a cyclic error of 2 µm on axis 2.
+// A planted library effect keeps the ball-bar floor near the bar's noise:
+// each effect of the library alone on axis 2 at the kinematic cells' 10x for
+// two radii (docs/identification.md), 3 seeds each. Where the effect is not
+// smooth in the readings (backlash, a 16 mm cyclic error on poses ~30 mm
+// apart, a drift in time) the high band holds it and the floor is what the
+// best description leaves, labelled an upper bound; within 30 % either way.
 TEST(KinematicOutside, BallbarNoiseFloorBesideALibraryEffect) {
-  const std::vector<Vec3> poses = hemisphere_poses({0.100, 0.150}, 6, 16, 41);
-  KinSimOptions o;
-  o.seed = 41;
-  const io::DataSet ds = kim_ballbar({{"cyclic_error", 1, {2e-6, 0.016, 0.3}}}, poses, o);
-  const ident::Diagnosis D = diagnose(ds);
-  std::printf("cyclic error 2 µm on axis 2: floor %.3f µm (%s), verdict %s\n", D.noise_floor * 1e6,
-              D.noise_floor_source.c_str(), named_text(D).c_str());
-  EXPECT_NEAR(D.noise_floor / kBarSigma, 1.0, 0.3);
-  EXPECT_TRUE(D.outside_library.empty());
+  const std::vector<PlantedKinematic> effects = {{"backlash", 1, {5e-6, 0, 0}},
+                                                 {"cyclic_error", 1, {2.6e-6, 0.016, 0.3}},
+                                                 {"guide_angular_error", 1, {4.7e-4, 0, 0}},
+                                                 {"limb_twist", 1, {4.9e-4, 0, 0}},
+                                                 {"thermal_drift", 1, {3.3e-5, 1500.0, 0}}};
+  for (const auto& e : effects) {
+    std::string line;
+    for (std::uint64_t seed : {41u, 42u, 43u}) {
+      KinSimOptions o;
+      o.seed = seed;
+      const ident::Diagnosis D = diagnose(kim_ballbar({e}, hemisphere_poses({0.100, 0.150}, 6, 16, seed), o));
+      const double ratio = D.noise_floor / kBarSigma;
+      line += " " + std::to_string(ratio).substr(0, 5) + (D.noise_floor_upper_bound ? " (upper bound)" : " (high band)");
+      EXPECT_NEAR(ratio, 1.0, 0.3) << e.effect << " seed " << seed;
+      EXPECT_TRUE(D.outside_library.empty()) << e.effect << " seed " << seed << ": " << D.verdict_text;
+    }
+    std::printf("ball-bar 100 + 150 mm, %s on axis 2: floor / planted sigma%s\n", e.effect, line.c_str());
+  }
 }
 
 // Repeated poses give the floor when present: 20 of the 120 poses measured
