@@ -62,9 +62,12 @@ double local_high_band_sigma(const KinematicProblem& P, const Eigen::VectorXd& r
   if (P.per_sample != 1 || n < k + 2 || r.size() != n) return 0.0;
   double num = 0.0, den = 0.0;
   std::vector<std::pair<double, int>> dist;
+  // Long files (a dense path, thousands of lengths): the neighbours are
+  // looked for within 500 samples of the file order, which keeps it linear.
+  const int window = n > 4000 ? 500 : n;
   for (int j = 0; j < n; ++j) {
     dist.clear();
-    for (int o = 0; o < n; ++o)
+    for (int o = std::max(0, j - window); o < std::min(n, j + window + 1); ++o)
       if (o != j) dist.emplace_back((P.d[o] - P.d[j]).squaredNorm(), o);
     std::nth_element(dist.begin(), dist.begin() + (k - 1), dist.end());
     Eigen::MatrixXd U(k, 3);
