@@ -54,6 +54,14 @@ constexpr DynamicEffectInfo kInfo[kDynamicEffectTypes] = {
      {{{"tau", "s", 0.0, 0.05, false}}},
      "dead time between command and force: a synchronous PDO acts at the next SYNC, the current loop lags",
      "force residual proportional to the rate of change of the commanded force (looks like viscous friction)"},
+    // Bounds: a 1e-4 kg m^2 rotor on a 5 mm lead screw reflects (2 pi / 5 mm)^2 1e-4 = 158 kg; a
+    // large servo (6e-4 kg m^2) on a 4 mm lead ~1500 kg. Negative down to -5 kg so that a model
+    // which puts too much mass on one actuator can be corrected (Elkady's machine carries
+    // 2A = 3.8 kg per axis; the Machine refuses a total that is no longer positive definite).
+    {DynamicEffectType::actuator_inertia, "actuator_inertia", true, {false, false, false, true}, 1,
+     {{{"m", "kg", -5.0, 2000.0, false}}},
+     "the motor rotor, coupling and screw of one axis, reflected onto its carriage",
+     "force residual proportional to that axis' own acceleration, on that axis only"},
 };
 
 inline double sgn_eps(double v) noexcept { return std::tanh(v / kSignEpsilon); }
@@ -113,7 +121,8 @@ double effect_force(const DynamicEffect& e, double d, double v) noexcept {
     case DynamicEffectType::force_gain:
     case DynamicEffectType::payload_mass:
     case DynamicEffectType::inertia_error:
-    case DynamicEffectType::actuation_delay: return 0.0;
+    case DynamicEffectType::actuation_delay:
+    case DynamicEffectType::actuator_inertia: return 0.0;
   }
   return 0.0;
 }
@@ -138,7 +147,8 @@ double effect_force_gradient(const DynamicEffect& e, int j, double d, double v) 
     case DynamicEffectType::force_gain:
     case DynamicEffectType::payload_mass:
     case DynamicEffectType::inertia_error:
-    case DynamicEffectType::actuation_delay: return 0.0;
+    case DynamicEffectType::actuation_delay:
+    case DynamicEffectType::actuator_inertia: return 0.0;
   }
   return 0.0;
 }

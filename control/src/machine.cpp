@@ -88,6 +88,7 @@ Machine::Machine(MachineModel model) : model_(std::move(model)) {
         inertia_.E += e.param[3];
         break;
       case DynamicEffectType::actuation_delay: actuation_delay_ += e.param[0]; break;
+      case DynamicEffectType::actuator_inertia: reflected_mass_[e.axis] += e.param[0]; break;
       default: additive_effects_ = true; break;
     }
   }
@@ -105,6 +106,25 @@ Machine::Machine(MachineModel model) : model_(std::move(model)) {
        << " kg m^2; A must be > 0 and B >= 0 (is a payload or inertia error too negative?)";
     throw Error(os.str());
   }
+  if (!reflected_mass_.isZero()) {
+    // The planes' J (constant): the kinematic effects bend it by a relative 1e-4..1e-2 only.
+    kin::KinematicModel planes = k;
+    planes.effects = {};
+    Mat3 Jp;
+    if (!kin::jacobian(planes, Vec3::Zero(), Vec3::Zero(), {}, Jp))
+      throw Error("model: the limb planes do not meet in one point");
+    const Mat3 Jp_inv = Jp.inverse();
+    reflected_inertia_ = Jp_inv.transpose() * reflected_mass_.asDiagonal() * Jp_inv;
+    // M = 2A I + 2B Gamma^T Gamma + this, and B >= 0: positive definite everywhere if this
+    // with 2A I is.
+    const Mat3 least = reflected_inertia_ + 2.0 * inertia_.A * Mat3::Identity();
+    if (least.llt().info() != Eigen::Success) {
+      std::ostringstream os;
+      os << "model: the actuator_inertia effects (" << reflected_mass_.transpose()
+         << " kg on axes 1..3) leave the machine a negative inertia";
+      throw Error(os.str());
+    }
+  }
 }
 
 Status Machine::rigid_body(const Vec3& p, const Vec3& p_dot, RigidBodyTerms& out) const noexcept {
@@ -113,6 +133,7 @@ Status Machine::rigid_body(const Vec3& p, const Vec3& p_dot, RigidBodyTerms& out
   const InertiaConstants& c = inertia_;
   out.M.noalias() = 2.0 * c.B * Gam.transpose() * Gam;
   out.M.diagonal().array() += 2.0 * c.A;
+  out.M += reflected_inertia_;
   out.Gv.noalias() = 2.0 * c.B * Gam.transpose() * (out.limbs.Gamma_dot * p_dot);
   const Vec3 lambda(-out.limbs.pose.cos_theta[0], out.limbs.pose.sin_theta[1], 0.0);
   out.K.noalias() = c.C * Gam.transpose() * lambda;
@@ -200,7 +221,8 @@ Status Machine::task_state(const Vec3& d, const Vec3& d_dot, const kin::Kinemati
 Status Machine::kinetic_energy(const Vec3& p, const Vec3& p_dot, double& T) const noexcept {
   kin::LimbPose pose;
   if (Status s = kin::solve_limbs(limbs(), p, pose); !s) return s;
-  T = inertia_.A * p_dot.squaredNorm() + inertia_.B * (pose.Gamma * p_dot).squaredNorm();
+  T = inertia_.A * p_dot.squaredNorm() + inertia_.B * (pose.Gamma * p_dot).squaredNorm() +
+      0.5 * p_dot.dot(reflected_inertia_ * p_dot);
   return {};
 }
 

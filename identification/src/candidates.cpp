@@ -31,6 +31,7 @@ constexpr CandidateFitting kFitting[ctl::kDynamicEffectTypes] = {
     {T::payload_mass,      K::base_direction, fit_payload,       false, false, false},
     {T::inertia_error,     K::base_refit,     fit_base_refit,    false, false, false},
     {T::actuation_delay,   K::alignment,      nullptr,           false, false, false},
+    {T::actuator_inertia,  K::column,         fit_linear_column, false, false, false},
 };
 
 // Columns (nearly) in the span of the base: the candidate is the base itself in these data.

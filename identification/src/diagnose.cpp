@@ -34,9 +34,14 @@ std::string separate_advice(const CandidateResult& a, const CandidateResult& b,
   const bool one_direction = ax >= 0 && x.one_way[ax];
   // Both act through the force, one on every axis (a payload, an inertia
   // error), the other on one axis only (a drive gain).
+  const bool rotor = ia.type == ctl::DynamicEffectType::actuator_inertia || ib.type == ctl::DynamicEffectType::actuator_inertia;
   if (da.force && db.force && ia.per_axis != ib.per_axis)
-    return "accelerate the other axes harder (a payload or an inertia error acts on every axis, a drive gain "
-           "only on " + axis_text + ")";
+    return std::string("accelerate the other axes harder (a payload or an inertia error acts on every axis, ") +
+           (rotor ? "a rotor's inertia" : "a drive gain") + " only on " + axis_text + ")";
+  // A drive gain and a rotor's inertia on one axis: only the gain scales a force that is not inertia.
+  if (da.force && db.force && rotor)
+    return "hold " + axis_text + " against a steady force (on z the weight) or run it at a steady feed against its "
+           "friction: a drive gain scales that force, a rotor's inertia adds none without acceleration";
   if (da.direction != db.direction && one_direction)
     return "move " + axis_text + " in both directions";
   if ((da.direction && db.direction) || (da.speed != db.speed))

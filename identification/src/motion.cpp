@@ -33,13 +33,21 @@ double noise_expectation(F&& f, double v, double sigma) {
 
 Eigen::VectorXd MotionProblem::effect_column(const ctl::DynamicEffect& e, int j) const {
   const int i = e.axis;
+  if (e.type == ctl::DynamicEffectType::actuator_inertia) return actuator_acceleration_column(i);
   return filter_axis(i, [&](int k, int ax) {
     return noise_expectation([&](double vel) { return ctl::effect_force_gradient(e, j, d_hat[k][ax], vel); },
                              v_hat[k][ax], v_hat_noise[ax]);
   });
 }
 
+Eigen::VectorXd MotionProblem::actuator_acceleration_column(int axis) const {
+  Eigen::VectorXd c = Eigen::VectorXd::Zero(3 * rows());
+  for (int r = 0; r < rows(); ++r) c(3 * r + axis) = a_columns[r][axis];
+  return c;
+}
+
 Eigen::VectorXd MotionProblem::effect_force_column(const ctl::DynamicEffect& e) const {
+  if (e.type == ctl::DynamicEffectType::actuator_inertia) return e.param[0] * actuator_acceleration_column(e.axis);
   return filter_axis(e.axis, [&](int k, int ax) {
     return noise_expectation([&](double vel) { return ctl::effect_force(e, d_hat[k][ax], vel); }, v_hat[k][ax],
                              v_hat_noise[ax]);

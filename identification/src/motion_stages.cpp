@@ -546,7 +546,10 @@ void add_model_effects(const ctl::Machine& model, int n_model_base, MotionProble
   const int n_eff = mm.effects.size();
   for (int e = 0; e < n_eff; ++e) {
     const ctl::DynamicEffect& ef = mm.effects[e];
-    if (ef.axis < 0 || ef.type == ctl::DynamicEffectType::force_gain) continue;
+    // force_gain scales the command; actuator_inertia is in the rigid body's M already.
+    if (ef.axis < 0 || ef.type == ctl::DynamicEffectType::force_gain ||
+        ef.type == ctl::DynamicEffectType::actuator_inertia)
+      continue;
     P.model_force += P.effect_force_column(ef);
   }
   // The force acts as the model says it does (its own actuation_delay), until

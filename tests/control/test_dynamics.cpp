@@ -219,5 +219,96 @@ TEST(Machine, TaskStateUsesTheCalibratedKinematics) {
   EXPECT_LT((s.p_dot - (p2 - p) / 1e-6).norm(), 1e-8);
 }
 
+// actuator_inertia (docs/effects.md): m_i kg that only actuator i carries.
+MachineModel with_actuator_inertia(const Vec3& m, kin::KinematicModel k = kin::KinematicModel::nominal()) {
+  MachineModel mm = MachineModel::elkady();
+  mm.kinematics = std::move(k);
+  for (int i = 0; i < 3; ++i)
+    if (m[i] != 0.0) add_effect(mm, "actuator_inertia", i, {m[i]});
+  return mm;
+}
+
+TEST(ActuatorInertia, OneAxisAcceleratedNeedsExactlyMTimesAMoreOnThatAxis) {
+  // Closed form: actuator 2 accelerated alone at a from rest (and at speed: J
+  // is constant, so no velocity term), m = 2.5 kg on it: the actuator forces
+  // differ by (0, m a, 0), to rounding.
+  std::mt19937_64 rng(5);
+  const Machine a(with_actuator_inertia(Vec3::Zero(), test::random_calibrated_kinematics(rng, false)));
+  const Machine b(with_actuator_inertia(Vec3(0.0, 2.5, 0.0), a.kinematics()));
+  ASSERT_TRUE(b.has_constant_jacobian());
+  const Mat3& J = b.constant_jacobian();
+  const Vec3 p(0.45, 0.40, 0.35);
+  for (const Vec3& d_dot : {Vec3(0, 0, 0), Vec3(0.2, -0.1, 0.3)}) {
+    const double acc = 3.0;  // m/s^2 on actuator 2
+    const Vec3 p_dd = J * Vec3(0.0, acc, 0.0), p_dot = J * d_dot;
+    Vec3 fa, fb;
+    ASSERT_TRUE(a.inverse_dynamics(p, p_dot, p_dd, fa));
+    ASSERT_TRUE(b.inverse_dynamics(p, p_dot, p_dd, fb));
+    const Vec3 extra = J.transpose() * (fb - fa);
+    EXPECT_NEAR(extra.x(), 0.0, 1e-12);
+    EXPECT_NEAR(extra.y(), 2.5 * acc, 1e-12);
+    EXPECT_NEAR(extra.z(), 0.0, 1e-12);
+  }
+  EXPECT_EQ(b.reflected_masses(), Vec3(0.0, 2.5, 0.0));
+  EXPECT_EQ(b.effect_forces(Vec3::Constant(0.1), Vec3::Constant(0.2)), Vec3::Zero());  // not an additive force
+}
+
+TEST(ActuatorInertia, ForwardThenInverseDynamicsGivesBackTheCommand) {
+  // The plant's equation (forward) and the controller's (inverse) agree with
+  // the reflected inertias on every axis, drive gain and friction beside them.
+  std::mt19937_64 rng(9);
+  MachineModel mm = with_actuator_inertia(Vec3(1.2, 40.0, 160.0), test::random_calibrated_kinematics(rng, false));
+  add_effect(mm, "force_gain", 0, {0.05});
+  add_effect(mm, "viscous_friction", 2, {30.0});
+  const Machine m(mm);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  int checked = 0;
+  for (int k = 0; k < 50; ++k) {
+    const Vec3 p = test::random_platform_point(rng);
+    const Vec3 p_dot(0.3 * u(rng), 0.3 * u(rng), 0.3 * u(rng)), cmd(50 * u(rng), 50 * u(rng), 50 * u(rng));
+    Vec3 p_dd, F_p, d;
+    if (!m.forward_dynamics(p, p_dot, cmd, {}, p_dd)) continue;  // outside the limbs' reach
+    ASSERT_TRUE(kin::inverse(m.kinematics(), p, {}, d));
+    ASSERT_TRUE(m.inverse_dynamics(p, p_dot, p_dd, F_p));
+    const Mat3& J = m.constant_jacobian();
+    const Vec3 back = (J.transpose() * F_p + m.effect_forces(d, m.constant_jacobian_inverse() * p_dot))
+                          .cwiseQuotient(m.drive_gain());
+    EXPECT_LT((back - cmd).norm(), 1e-9 * (1.0 + cmd.norm())) << k;
+    ++checked;
+  }
+  EXPECT_GT(checked, 40);
+}
+
+TEST(ActuatorInertia, KineticEnergyGainsHalfMTimesTheActuatorSpeedSquared) {
+  std::mt19937_64 rng(13);
+  const kin::KinematicModel k = test::random_calibrated_kinematics(rng, false);
+  const Vec3 masses(3.0, 0.0, 7.5);
+  const Machine a(with_actuator_inertia(Vec3::Zero(), k)), b(with_actuator_inertia(masses, k));
+  const Vec3 p(0.42, 0.38, 0.33), p_dot(0.2, -0.3, 0.1);
+  double Ta, Tb;
+  ASSERT_TRUE(a.kinetic_energy(p, p_dot, Ta));
+  ASSERT_TRUE(b.kinetic_energy(p, p_dot, Tb));
+  const Vec3 d_dot = b.constant_jacobian_inverse() * p_dot;
+  EXPECT_NEAR(Tb - Ta, 0.5 * (masses.array() * d_dot.array().square()).sum(), 1e-12);
+}
+
+TEST(ActuatorInertia, RefusesAMassBelowItsBoundOrATotalInertiaThatIsNotPositive) {
+  MachineModel mm = MachineModel::elkady();
+  try {
+    add_effect(mm, "actuator_inertia", 0, {-6.0});
+    ADD_FAILURE();
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("actuator_inertia[axis 1]: parameter m"), std::string::npos) << e.what();
+  }
+  // -4.9 kg is within the bound, but more than the 2A = 3.78 kg the nominal machine puts on axis 1.
+  add_effect(mm, "actuator_inertia", 0, {-4.9});
+  try {
+    const Machine m(mm);
+    ADD_FAILURE();
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("negative inertia"), std::string::npos) << e.what();
+  }
+}
+
 }  // namespace
 }  // namespace cpm::ctl

@@ -82,6 +82,8 @@ ModelFile everything(std::uint64_t seed) {
   ctl::add_effect(m, "force_gain", 1, {-0.03});
   ctl::add_effect(m, "payload_mass", -1, {0.25});
   ctl::add_effect(m, "inertia_error", -1, {0.01, -0.002, 0.3, -0.1});
+  ctl::add_effect(m, "actuator_inertia", 2, {157.91367041742973});  // 1e-4 kg m^2 on a 5 mm lead
+  ctl::add_effect(m, "actuator_inertia", 0, {-0.75});
   mf.fitted.push_back({"kinematics.limb2.scale", "1", 1.0, 0.99987654321, 1.1e-6});
   mf.fitted.push_back({"effects.coulomb_friction.axis3.f_c", "N", 0.0, 3.0 / 7.0, -1.0});
   mf.history.push_back({"cpm calibrate --method ballbar", "runs/ball bar \"A\".csv",
@@ -135,6 +137,7 @@ TEST(ModelFile, FileNamesEffectsAndUnitsForAPersonToRead) {
   EXPECT_THAT(text, HasSubstr("      backlash:\n        b: "));
   EXPECT_THAT(text, HasSubstr("  - effect: coulomb_friction\n    axis: 3\n    f_c: "));
   EXPECT_THAT(text, HasSubstr("  - effect: payload_mass\n    dm: 0.25"));
+  EXPECT_THAT(text, ::testing::ContainsRegex("  - effect: actuator_inertia\n    axis: 3\n    m: 157.91367041742973 +# kg"));
   EXPECT_THAT(text, ::testing::ContainsRegex("lambda: 0.012 +# m"));
   EXPECT_THAT(text, ::testing::ContainsRegex("force_limit: 150 +# N"));
   // Nominal values print short (shortest exact form, not 17 digits).
@@ -191,6 +194,24 @@ std::string edited(const std::string& from, const std::string& to) {
 int line_of(const std::string& text, const std::string& needle) {
   const auto pos = text.find(needle);
   return 1 + static_cast<int>(std::count(text.begin(), text.begin() + static_cast<long>(pos), '\n'));
+}
+
+TEST(ModelFile, ActuatorInertiaLoadsPerAxisAndTheMachineRefusesANegativeTotal) {
+  const ModelFile mf = parse_model_file(edited("dynamic_effects: []", "dynamic_effects:\n  - {effect: actuator_inertia, axis: 2, m: 2.5}"),
+                                        "rotor.yaml");
+  EXPECT_EQ(ctl::Machine(mf.model).reflected_masses(), Vec3(0.0, 2.5, 0.0));
+  // Without its axis, or with more mass taken off than the platform puts on axis 1.
+  EXPECT_THAT(error_of([&] {
+                parse_model_file(edited("dynamic_effects: []", "dynamic_effects:\n  - {effect: actuator_inertia, m: 2.5}"),
+                                 "noaxis.yaml");
+              }),
+              HasSubstr("axis"));
+  EXPECT_THAT(error_of([&] {
+                parse_model_file(
+                    edited("dynamic_effects: []", "dynamic_effects:\n  - {effect: actuator_inertia, axis: 1, m: -4.9}"),
+                    "light.yaml");
+              }),
+              HasSubstr("negative inertia"));
 }
 
 TEST(ModelFile, WrongTypeNamesFileLineAndKeyPath) {

@@ -128,7 +128,19 @@ ctl::MachineModel true_model(const std::vector<PlantedEffect>& effects) {
 GeneratedLog generate(const GeneratorSpec& spec) {
   if (!(spec.duration > 0.0)) throw Error("generator: duration must be > 0 s");
   const Clock clk = make_clock(spec);
-  const ctl::Machine truth(true_model(spec.effects));
+  // The rotors' reflected inertia (actuator_inertia, m_i on actuator i) is
+  // this generator's own: diag(m) added to J^T M J below, not the Machine's.
+  Vec3 rotor = Vec3::Zero();
+  std::vector<PlantedEffect> rigid;
+  for (const PlantedEffect& e : spec.effects) {
+    if (e.name != "actuator_inertia") {
+      rigid.push_back(e);
+      continue;
+    }
+    if (e.axis < 0 || e.axis > 2 || e.values.size() != 1) throw Error("generator: actuator_inertia needs an axis and m (kg)");
+    rotor[e.axis] += e.values[0];
+  }
+  const ctl::Machine truth(true_model(rigid));
   const ctl::Machine nominal(ctl::MachineModel::elkady());
   if (!truth.has_constant_jacobian() || !nominal.has_constant_jacobian())
     throw Error("generator: only machines without kinematic effects (constant J)");
@@ -166,12 +178,12 @@ GeneratedLog generate(const GeneratorSpec& spec) {
   };
 
   // The true plant in actuator coordinates (J constant, so p_dd = J d_dd):
-  //   J^T M J d_dd = gain * u + w - f_eff(d, v) - J^T (G p_dot + K).
+  //   (J^T M J + diag(rotor)) d_dd = gain * u + w - f_eff(d, v) - J^T (G p_dot + K).
   auto accel = [&](double t, const Vec3& d, const Vec3& v, const Vec3& u, const Vec3& w) {
     const Vec3 p = p0 + Jt * d, p_dot = Jt * v;
     ctl::RigidBodyTerms rb;
     check(truth.rigid_body(p, p_dot, rb), "plant dynamics", t);
-    const Mat3 Ma = Jt.transpose() * rb.M * Jt;
+    const Mat3 Ma = Jt.transpose() * rb.M * Jt + Mat3(rotor.asDiagonal());
     const Vec3 rhs = gain.cwiseProduct(u) + w - truth.effect_forces(d, v) - Jt.transpose() * (rb.Gv + rb.K);
     return Vec3(Ma.ldlt().solve(rhs));
   };

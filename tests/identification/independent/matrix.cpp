@@ -91,6 +91,7 @@ const std::vector<EffectShape>& dynamic_library() {
       // The first links' centre of mass lying further out than mid-length:
       // B and C change (m1 L1 / 2, m1 g), A and E do not (kLinkBalanceShape).
       {"inertia_error", false, {0.0, kM1 * kL1 / 2.0, kM1 * ctl::kGravity, 0.0}, -1},
+      {"actuator_inertia", true, {1.0}, 0},
   };
   return lib;
 }

@@ -72,6 +72,26 @@ TEST(IndependentGenerator, ZohHeldForceGivesTheVelocityChangeOverEachPeriod) {
     ASSERT_LT((g.applied_mean[k] - g.commanded[k]).cwiseAbs().maxCoeff(), 1e-12) << k;
 }
 
+TEST(IndependentGenerator, RotorInertiaOfTheGeneratorAgreesWithTheMachines) {
+  // The generator adds actuator_inertia as diag(m) in actuator coordinates;
+  // ctl::Machine as J^-T diag(m) J^-1 in M. The needed force by the Machine's
+  // dynamics must match the held force as closely as without it.
+  GeneratorSpec s = quiet(Timing::zoh);
+  s.effects.push_back({"actuator_inertia", 1, {4.0}});
+  const GeneratedLog g = generate(s);
+  const ctl::Machine truth(true_model(s.effects));
+  const auto need = needed_force(g, truth);
+  const double held = worst(need, [&](std::size_t k) { return g.log.f[k]; }, 2);
+  ctl::MachineModel without = true_model(s.effects);
+  without.effects.clear();
+  for (const auto& e : quiet(Timing::zoh).effects) ctl::add_effect(without, e.name, e.axis, e.values);
+  const double ignored = worst(needed_force(g, ctl::Machine(without)), [&](std::size_t k) { return g.log.f[k]; }, 2);
+  std::printf("zoh with 4 kg on axis 2: |needed - f_k| <= %.3g N; without the rotor in the Machine %.3g N\n", held,
+              ignored);
+  EXPECT_LT(held, 1e-4);
+  EXPECT_GT(ignored, 50 * held);
+}
+
 TEST(IndependentGenerator, Delay1IsZohWithTheAppliedForceShiftedByOneSample) {
   const GeneratorSpec s = quiet(Timing::delay1);
   const GeneratedLog g = generate(s);

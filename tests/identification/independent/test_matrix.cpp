@@ -55,10 +55,18 @@ TEST(Combinations, EverySizeHasSeparableCombinationsAndEachIsSeparable) {
 }
 
 
+// The dynamic library when the combination logs below were found: a seed's
+// combination is drawn from the effects given, so these keep planting the same
+// logs as the library grows (cpm_robustness --combos N --first-seed S --effects ...).
+const std::vector<std::string> kLibraryOfTheseLogs = {"viscous_friction", "coulomb_friction", "stribeck_friction",
+                                                      "cogging",          "spring",           "force_gain",
+                                                      "payload_mass",     "inertia_error"};
+
 // One log of the combination matrix (10x each effect), as cpm_robustness
 // --combos plants it for that seed and cell.
 LogResult combination_log(Timing timing, NoisePlacement noise, double rate, int size, int seed) {
   MatrixOptions o;
+  o.effects = kLibraryOfTheseLogs;
   o.timings = {timing};
   o.noises = {noise};
   o.rates = {rate};

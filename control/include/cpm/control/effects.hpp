@@ -34,8 +34,10 @@ enum class DynamicEffectType : std::uint8_t {
   inertia_error,      // dA (kg), dB (kg m^2), dC (N m), dE (N), all axes
   actuation_delay,    // tau (s), all axes: the drive applies the command of t_k over
                       // [t_k + tau, t_k+1 + tau) (dead time: a synchronous PDO acts at the next SYNC)
+  actuator_inertia,   // m (kg), per axis:     m d_dd, the rotor, coupling and screw only that
+                      // actuator carries; acts through the inertia (Machine), not effect_force
 };
-inline constexpr int kDynamicEffectTypes = 9;
+inline constexpr int kDynamicEffectTypes = 10;
 
 // sgn_eps(v) = tanh(v / eps), the smooth sign of docs/effects.md.
 inline constexpr double kSignEpsilon = 1e-3;  // m/s
@@ -84,8 +86,9 @@ struct DynamicEffect {
 };
 
 // The force an additive effect adds on its axis at displacement d and
-// velocity v (0 for force_gain, payload_mass and inertia_error, which act
-// through the drive gain and the rigid-body constants).
+// velocity v (0 for force_gain, payload_mass, inertia_error and
+// actuator_inertia, which act through the drive gain, the rigid-body
+// constants and the inertia matrix).
 double effect_force(const DynamicEffect& e, double d, double v) noexcept;
 
 // d(effect_force)/d(param[j]) for j < n_params: the regressor that

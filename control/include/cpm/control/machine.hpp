@@ -12,6 +12,14 @@
 // F is the force on the platform in the machine frame (N). Actuator forces
 // are F_d = J^T F + sum of the additive effects, J = dp/dd of the calibrated
 // kinematics.
+//
+// actuator_inertia effects (m_i kg on actuator i: rotor, coupling, screw)
+// add m_i d_dd_i to actuator i's force. With d_dd = J^-1 p_dd + (d/dt J^-1) p_dot
+// that is, on the platform, M gains J^-T diag(m) J^-1 and G p_dot gains
+// J^-T diag(m) (d/dt J^-1) p_dot. Here J is the planes' (the calibrated
+// kinematics without its kinematic effects), constant, so the second term is
+// zero; kinematic effects bend J by a relative 1e-4..1e-2, which changes the
+// reflected force by that share only (docs/effects.md, actuator_inertia).
 #pragma once
 
 #include <string_view>
@@ -91,6 +99,10 @@ class Machine {
   [[nodiscard]] const InertiaConstants& inertia() const noexcept { return inertia_; }
   // Per actuator, the factor (1 + k) by which the drive scales its command.
   [[nodiscard]] const Vec3& drive_gain() const noexcept { return drive_gain_; }
+  // Per actuator, the reflected inertia m_i (kg) of its actuator_inertia effects, and
+  // J^-T diag(m) J^-1 (kg), the platform-space inertia it adds to M (see the top).
+  [[nodiscard]] const Vec3& reflected_masses() const noexcept { return reflected_mass_; }
+  [[nodiscard]] const Mat3& reflected_inertia() const noexcept { return reflected_inertia_; }
   // Dead time between a command and the force it makes (s): actuation_delay effects summed.
   [[nodiscard]] double actuation_delay() const noexcept { return actuation_delay_; }
   [[nodiscard]] double force_limit() const noexcept { return model_.force_limit; }
@@ -101,7 +113,8 @@ class Machine {
   [[nodiscard]] const Mat3& constant_jacobian() const noexcept { return J_; }
   [[nodiscard]] const Mat3& constant_jacobian_inverse() const noexcept { return J_inv_; }
 
-  // M, G q_d and K at (p, p_dot). Fails outside the limbs' reach or at a singularity.
+  // M, G q_d and K at (p, p_dot), M with the reflected inertia of the actuators.
+  // Fails outside the limbs' reach or at a singularity.
   Status rigid_body(const Vec3& p, const Vec3& p_dot, RigidBodyTerms& out) const noexcept;
   // Platform force for a motion: M p_dd + G p_dot + K (N).
   Status inverse_dynamics(const Vec3& p, const Vec3& p_dot, const Vec3& p_dd,
@@ -131,7 +144,8 @@ class Machine {
   Status task_state(const Vec3& d, const Vec3& d_dot, const kin::KinematicInputs& in,
                     TaskState& out) const noexcept;
 
-  // Energies of Elkady eqs. 4-5 (J), for checks and diagnostics.
+  // Energies of Elkady eqs. 4-5 (J), for checks and diagnostics; the kinetic
+  // energy includes the actuators' 1/2 sum m_i d_dot_i^2.
   Status kinetic_energy(const Vec3& p, const Vec3& p_dot, double& T) const noexcept;
   Status potential_energy(const Vec3& p, double& V) const noexcept;
 
@@ -139,6 +153,8 @@ class Machine {
   MachineModel model_;
   InertiaConstants inertia_;
   Vec3 drive_gain_ = Vec3::Ones();
+  Vec3 reflected_mass_ = Vec3::Zero();
+  Mat3 reflected_inertia_ = Mat3::Zero();
   double actuation_delay_ = 0.0;
   bool additive_effects_ = false;
   bool constant_jacobian_ = false;

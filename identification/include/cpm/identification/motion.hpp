@@ -179,6 +179,9 @@ struct MotionProblem {
   // calibration): evaluating a sharp function at a noisy velocity would
   // attenuate its fitted amplitude.
   [[nodiscard]] Eigen::VectorXd effect_column(const ctl::DynamicEffect& e, int j) const;
+  // actuator_inertia's column: the actuator's own acceleration d_dd on `axis`
+  // (a_columns, already filtered, free of the residual's noise), m/s^2.
+  [[nodiscard]] Eigen::VectorXd actuator_acceleration_column(int axis) const;
   // The effect's force itself, filtered.
   [[nodiscard]] Eigen::VectorXd effect_force_column(const ctl::DynamicEffect& e) const;
   // Column of a force-gain change on `axis`: -g F, F predicted from before the
