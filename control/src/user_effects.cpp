@@ -20,6 +20,13 @@ std::string where(int index, const std::string& key) {
   throw Error(where(index, key) + ": " + why);
 }
 
+// muparser's message, with the position (counted from 0) when it does not say it.
+std::string parser_message(const mu::Parser::exception_type& err) {
+  std::string m = err.GetMsg();
+  if (m.find("position") == std::string::npos) m += " (at position " + std::to_string(err.GetPos()) + ")";
+  return m;
+}
+
 bool is_variable(const std::string& s) {
   for (const char* v : kUserVariables)
     if (s == v) return true;
@@ -41,7 +48,7 @@ void bind(mu::Parser& parser, const UserEffect& e, int index, double* vars, doub
     for (int k = 0; k < 10; ++k) parser.DefineVar(kUserVariables[k], &vars[k]);
     for (std::size_t k = 0; k < e.params.size(); ++k) parser.DefineVar(e.params[k].name, &params[k]);
   } catch (const mu::Parser::exception_type& err) {
-    fail(index, "formula", "'" + e.formula + "': " + err.GetMsg());
+    fail(index, "formula", "'" + e.formula + "': " + parser_message(err));
   }
 }
 
@@ -60,7 +67,7 @@ std::vector<std::string> formula_variables(const UserEffect& e, int index) {
     for (const auto& [name, ptr] : p.GetUsedVar()) used.push_back(name);
   } catch (const mu::Parser::exception_type& err) {
     std::ostringstream os;
-    os << "'" << e.formula << "' does not parse: " << err.GetMsg();
+    os << "'" << e.formula << "' does not parse: " << parser_message(err);
     fail(index, "formula", os.str());
   }
   for (const std::string& name : used) {
@@ -126,7 +133,7 @@ void validate_user_effect(const UserEffect& e, int index) {
   try {
     f = parser.Eval();
   } catch (const mu::Parser::exception_type& err) {
-    fail(index, "formula", "'" + e.formula + "': " + err.GetMsg());
+    fail(index, "formula", "'" + e.formula + "': " + parser_message(err));
   }
   if (!std::isfinite(f)) fail(index, "formula", "'" + e.formula + "' is not finite at rest (all variables 0)");
 }
@@ -173,7 +180,7 @@ struct UserEffectsRuntime::Impl {
         try {
           (void)it.parser->Eval();
         } catch (const mu::Parser::exception_type& err) {
-          fail(index, "formula", "'" + e.formula + "': " + err.GetMsg());
+          fail(index, "formula", "'" + e.formula + "': " + parser_message(err));
         }
       }
       items.push_back(std::move(it));

@@ -33,6 +33,7 @@ struct UserParameter {
   double value = 0.0;
   double lower = -std::numeric_limits<double>::infinity();  // bounds for fitting, inclusive
   double upper = std::numeric_limits<double>::infinity();
+  bool operator==(const UserParameter&) const = default;
 };
 
 struct UserEffect {
