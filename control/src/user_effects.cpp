@@ -7,6 +7,7 @@
 #include <set>
 #include <sstream>
 
+#include "cpm/control/machine.hpp"
 #include "cpm/kinematics/pitch_table.hpp"
 
 namespace cpm::ctl {
@@ -223,6 +224,106 @@ void UserEffectsRuntime::add_forces(const Vec3& d, const Vec3& v, const Vec3& a,
       // formula reaches the caller's finiteness checks.
       f[it.axis] += it.parser->Eval();
   }
+}
+
+
+// ------------------------------------------------------- command-line form
+
+namespace {
+
+std::vector<std::string> split(const std::string& s, char sep) {
+  std::vector<std::string> out;
+  std::string part;
+  std::istringstream is(s);
+  while (std::getline(is, part, sep)) out.push_back(part);
+  if (!s.empty() && s.back() == sep) out.emplace_back();
+  return out;
+}
+
+std::vector<double> numbers(const std::string& spec, const std::string& text) {
+  std::vector<double> v;
+  for (const std::string& part : split(text, ',')) {
+    std::size_t used = 0;
+    double x = 0.0;
+    try {
+      x = std::stod(part, &used);
+    } catch (const std::exception&) {
+      used = 0;
+    }
+    if (used == 0 || used != part.size() || !std::isfinite(x))
+      throw Error("'" + spec + "': '" + part + "' is not a number");
+    v.push_back(x);
+  }
+  return v;
+}
+
+int axis_of(const std::string& spec, const std::string& text) {
+  if (text != "1" && text != "2" && text != "3") throw Error("'" + spec + "': axis must be 1, 2 or 3");
+  return text[0] - '1';
+}
+
+}  // namespace
+
+bool is_user_effect_spec(const std::string& spec) noexcept {
+  const std::string kind = spec.substr(0, spec.find(':'));
+  return kind == "table" || kind == "expression" || kind == "pitch_table";
+}
+
+void add_user_effect(MachineModel& model, const std::string& spec) {
+  const std::vector<std::string> f = split(spec, ':');
+  const std::string& kind = f.empty() ? spec : f[0];
+  if (kind == "pitch_table") {
+    if (f.size() != 4) throw Error("'" + spec + "': expected pitch_table:AXIS:N1,N2,...:E1,E2,... (m)");
+    const int axis = axis_of(spec, f[1]);
+    const std::vector<double> x = numbers(spec, f[2]), y = numbers(spec, f[3]);
+    if (x.size() != y.size()) throw Error("'" + spec + "': as many errors as nodes");
+    if (x.size() > static_cast<std::size_t>(kin::PitchTable::kCapacity))
+      throw Error("'" + spec + "': at most " + std::to_string(kin::PitchTable::kCapacity) + " nodes");
+    kin::PitchTable t;
+    t.size = static_cast<int>(x.size());
+    std::copy(x.begin(), x.end(), t.node.begin());
+    std::copy(y.begin(), y.end(), t.error.begin());
+    t.validate();
+    model.kinematics.effects[static_cast<std::size_t>(axis)].pitch_table = t;
+    return;
+  }
+  UserEffect e;
+  if (kind == "table") {
+    if (f.size() != 5) throw Error("'" + spec + "': expected table:AXIS:INPUT:N1,N2,...:V1,V2,...");
+    e.kind = UserEffectKind::table;
+    e.axis = axis_of(spec, f[1]);
+    const std::string& in = f[2];
+    if (in.size() != 2 || (in[0] != 'd' && in[0] != 'v') || in[1] < '1' || in[1] > '3')
+      throw Error("'" + spec + "': input must be d1..d3 or v1..v3");
+    e.input = in[0];
+    e.input_axis = in[1] - '1';
+    e.nodes = numbers(spec, f[3]);
+    e.values = numbers(spec, f[4]);
+  } else if (kind == "expression") {
+    if (f.size() < 3) throw Error("'" + spec + "': expected expression:AXIS:FORMULA[:NAME=VALUE,...]");
+    e.kind = UserEffectKind::expression;
+    e.axis = axis_of(spec, f[1]);
+    // The formula may hold ':' (a ? b : c): the last field is the parameters
+    // only when it reads NAME=VALUE,...
+    std::size_t end = f.size();
+    const std::string& last = f.back();
+    if (f.size() >= 4 && last.find('=') != std::string::npos && std::isalpha(static_cast<unsigned char>(last[0]))) {
+      for (const std::string& kv : split(last, ',')) {
+        const auto eq = kv.find('=');
+        if (eq == std::string::npos) throw Error("'" + spec + "': parameter '" + kv + "' is not NAME=VALUE");
+        UserParameter p;
+        p.name = kv.substr(0, eq);
+        p.value = numbers(spec, kv.substr(eq + 1))[0];
+        e.params.push_back(p);
+      }
+      end = f.size() - 1;
+    }
+    for (std::size_t k = 2; k < end; ++k) e.formula += (k > 2 ? ":" : "") + f[k];
+  } else {
+    throw Error("'" + spec + "': not a user effect (table, expression, pitch_table)");
+  }
+  validate_user_effect(e, static_cast<int>(model.user_effects.size()));
+  model.user_effects.push_back(std::move(e));
 }
 
 }  // namespace cpm::ctl

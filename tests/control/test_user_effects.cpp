@@ -202,3 +202,32 @@ TEST(UserEffects, ControllerCompensatesATableForceItsModelHas) {
 
 }  // namespace
 }  // namespace cpm::ctl
+
+namespace cpm::ctl {
+namespace {
+
+TEST(UserEffects, TheCommandLineFormAddsEachKind) {
+  MachineModel m = MachineModel::elkady();
+  add_user_effect(m, "expression:2:c*v1:c=3");
+  add_user_effect(m, "expression:1:v1 > 0 ? f : -f:f=2.5");  // a formula holding ':'
+  add_user_effect(m, "table:3:v3:-0.1,0,0.1:-1,0,2");
+  add_user_effect(m, "pitch_table:1:0,0.2,0.4:0,5e-6,12e-6");
+  ASSERT_EQ(m.user_effects.size(), 3u);
+  EXPECT_EQ(m.user_effects[0].formula, "c*v1");
+  EXPECT_EQ(m.user_effects[0].axis, 1);
+  EXPECT_EQ(m.user_effects[0].params[0].value, 3.0);
+  EXPECT_EQ(m.user_effects[1].formula, "v1 > 0 ? f : -f");
+  EXPECT_EQ(m.user_effects[2].input, 'v');
+  EXPECT_EQ(m.user_effects[2].input_axis, 2);
+  EXPECT_EQ(m.kinematics.effects[0].pitch_table.size, 3);
+  const Machine machine(m);
+  EXPECT_DOUBLE_EQ(machine.effect_forces(Vec3::Zero(), Vec3(0.1, 0, 0.05))[0], 2.5);
+  EXPECT_DOUBLE_EQ(machine.effect_forces(Vec3::Zero(), Vec3(0.1, 0, 0.05))[1], 0.3);
+  EXPECT_DOUBLE_EQ(machine.effect_forces(Vec3::Zero(), Vec3(0.1, 0, 0.05))[2], 1.0);
+  EXPECT_THROW(add_user_effect(m, "table:2:a2:0,1:0,1"), Error);
+  EXPECT_THROW(add_user_effect(m, "expression:4:c*v1:c=1"), Error);
+  EXPECT_THROW(add_user_effect(m, "pitch_table:1:0,0.1:0"), Error);
+}
+
+}  // namespace
+}  // namespace cpm::ctl

@@ -128,7 +128,10 @@ ctl::MachineModel true_model(const std::vector<PlantedEffect>& effects) {
 GeneratedLog generate(const GeneratorSpec& spec) {
   if (!(spec.duration > 0.0)) throw Error("generator: duration must be > 0 s");
   const Clock clk = make_clock(spec);
-  const ctl::Machine truth(true_model(spec.effects));
+  ctl::MachineModel truth_model = true_model(spec.effects);
+  for (const std::string& u : spec.user_effects) ctl::add_user_effect(truth_model, u);
+  const ctl::Machine truth(truth_model);
+  if (truth.user_effects_use_acceleration()) throw Error("generator: user effects that read a1..a3 are not planted");
   const ctl::Machine nominal(ctl::MachineModel::elkady());
   if (!truth.has_constant_jacobian() || !nominal.has_constant_jacobian())
     throw Error("generator: only machines without kinematic effects (constant J)");

@@ -69,6 +69,18 @@ void validate_user_effect(const UserEffect& e, int index);
 // it); throws like validate_user_effect.
 std::vector<std::string> formula_variables(const UserEffect& e, int index);
 
+struct MachineModel;
+
+// Add a user effect given in the command line's short form (cpm sim
+// --truth-effect, tests), SI units:
+//   table:AXIS:INPUT:N1,N2,...:V1,V2,...   e.g. table:2:d2:0.1,0.2,0.3:0,1.5,0 (force in N)
+//   expression:AXIS:FORMULA[:NAME=VALUE,...] e.g. expression:2:c*v1:c=3 (no bounds)
+//   pitch_table:AXIS:N1,N2,...:E1,E2,...   e.g. pitch_table:1:0,0.2,0.4:0,5e-6,12e-6 (m)
+// Throws Error naming the spec and what is wrong (and validates the effect).
+void add_user_effect(MachineModel& model, const std::string& spec);
+// The spec names a user effect kind (table, expression, pitch_table).
+bool is_user_effect_spec(const std::string& spec) noexcept;
+
 // The user effects, prepared: tables copied into arrays, formulas parsed,
 // bound to their variables and evaluated once (so muparser has compiled them
 // to bytecode and its stack is sized). Construction and copying allocate
