@@ -25,8 +25,8 @@ std::string render_linuxcnc_comp(const kin::PitchTable& t, int type, const CompU
     const double nominal = t.node[k] * u.per_metre;
     const double error = t.error[k] * u.per_metre;
     // Type 0: where the axis is; type 1: the trim LinuxCNC adds, nominal - actual.
-    const double a = type == 0 ? nominal + error : -error;
-    std::snprintf(line, sizeof line, "%.15g %.15g %.15g\n", nominal, a, a);
+    const double a = type == 0 ? nominal + error : -error;  // 12 digits: 1e-12 m over a metre
+    std::snprintf(line, sizeof line, "%.12g %.12g %.12g\n", nominal + 0.0, a + 0.0, a + 0.0);  // + 0.0: no "-0"
     out += line;
   }
   return out;

@@ -101,8 +101,8 @@ TEST(LinuxcncComp, ImportInvertsExportInBothTypesAndUnits) {
       const ImportedComp back = parse_linuxcnc_comp(render_linuxcnc_comp(t, type, u), "f.comp", type, u);
       ASSERT_EQ(back.table.size, t.size);
       for (int k = 0; k < t.size; ++k) {
-        EXPECT_NEAR(back.table.node[k], t.node[k], 1e-12) << units << " type " << type;
-        EXPECT_NEAR(back.table.error[k], t.error[k], 1e-12) << units << " type " << type;
+        EXPECT_NEAR(back.table.node[k], t.node[k], 1e-11) << units << " type " << type;
+        EXPECT_NEAR(back.table.error[k], t.error[k], 1e-11) << units << " type " << type;
       }
       EXPECT_TRUE(back.notes.empty());
     }
