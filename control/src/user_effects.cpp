@@ -3,6 +3,8 @@
 #include <muParser.h>
 
 #include <algorithm>
+#include <array>
+#include <atomic>
 #include <cmath>
 #include <set>
 #include <sstream>
@@ -141,50 +143,65 @@ void validate_user_effect(const UserEffect& e, int index) {
 
 // ------------------------------------------------------------------ runtime
 
+// Several threads may evaluate one prepared machine at once (cpmd's loop and
+// its server, which checks a trajectory or gains against the model in use).
+// A muparser parser is not reentrant (its variables and its stack are its
+// own), so each formula is prepared in kSlots copies; an evaluation takes a
+// free slot with an atomic test-and-set (no lock, no wait while a slot is
+// free) and gives it back.
+constexpr int kSlots = 8;
+
 struct UserEffectsRuntime::Impl {
-  struct Item {
-    UserEffectKind kind = UserEffectKind::table;
+  struct Table {
     int axis = 0;
     int input = 0;  // index into the 10 variables (d1..t)
     std::vector<double> x, y;
-    std::unique_ptr<mu::Parser> parser;
-    std::unique_ptr<double[]> params;
+  };
+  struct Formula {
+    int axis = 0;
+    int parser = 0;  // index into each slot's parsers
+  };
+  struct Slot {
+    double vars[10] = {};
+    std::vector<std::unique_ptr<mu::Parser>> parsers;
+    std::vector<std::unique_ptr<double[]>> params;
+    std::atomic_flag busy = ATOMIC_FLAG_INIT;
   };
   std::vector<UserEffect> source;
-  std::vector<Item> items;
-  mutable double vars[10] = {};
+  std::vector<Table> tables;
+  std::vector<Formula> formulas;
+  std::array<std::unique_ptr<Slot>, kSlots> slots;
   bool acceleration = false;
 
   explicit Impl(const std::vector<UserEffect>& effects) : source(effects) {
-    items.reserve(effects.size());
+    for (auto& s : slots) s = std::make_unique<Slot>();
     for (std::size_t i = 0; i < effects.size(); ++i) {
       const UserEffect& e = effects[i];
       const int index = static_cast<int>(i);
       validate_user_effect(e, index);
-      Item it;
-      it.kind = e.kind;
-      it.axis = e.axis;
       if (e.kind == UserEffectKind::table) {
-        it.input = (e.input == 'd' ? 0 : 3) + e.input_axis;
-        it.x = e.nodes;
-        it.y = e.values;
-      } else {
-        for (const std::string& name : formula_variables(e, index))
-          if (name == "a1" || name == "a2" || name == "a3") acceleration = true;
-        it.params = std::make_unique<double[]>(e.params.size() + 1);
-        for (std::size_t k = 0; k < e.params.size(); ++k) it.params[k] = e.params[k].value;
-        it.parser = std::make_unique<mu::Parser>();
-        bind(*it.parser, e, index, vars, it.params.get());
+        tables.push_back({e.axis, (e.input == 'd' ? 0 : 3) + e.input_axis, e.nodes, e.values});
+        continue;
+      }
+      for (const std::string& name : formula_variables(e, index))
+        if (name == "a1" || name == "a2" || name == "a3") acceleration = true;
+      formulas.push_back({e.axis, static_cast<int>(slots[0]->parsers.size())});
+      for (auto& s : slots) {
+        auto params = std::make_unique<double[]>(e.params.size() + 1);
+        for (std::size_t k = 0; k < e.params.size(); ++k) params[k] = e.params[k].value;
+        auto parser = std::make_unique<mu::Parser>();
+        bind(*parser, e, index, s->vars, params.get());
         // The first Eval parses to bytecode and sizes the stack; later ones
         // only run the bytecode (tests/control/test_user_effects.cpp counts
         // their allocations: none).
         try {
-          (void)it.parser->Eval();
+          (void)parser->Eval();
         } catch (const mu::Parser::exception_type& err) {
           fail(index, "formula", "'" + e.formula + "': " + parser_message(err));
         }
+        s->parsers.push_back(std::move(parser));
+        s->params.push_back(std::move(params));
       }
-      items.push_back(std::move(it));
     }
   }
 };
@@ -208,24 +225,30 @@ bool UserEffectsRuntime::uses_acceleration() const noexcept { return impl_ && im
 void UserEffectsRuntime::add_forces(const Vec3& d, const Vec3& v, const Vec3& a, double t,
                                     Vec3& f) const noexcept {
   if (!impl_) return;
-  double* x = impl_->vars;
+  double x[10];
   for (int k = 0; k < 3; ++k) {
     x[k] = d[k];
     x[3 + k] = v[k];
     x[6 + k] = a[k];
   }
   x[9] = t;
-  for (const Impl::Item& it : impl_->items) {
-    if (it.kind == UserEffectKind::table)
-      f[it.axis] += kin::interpolate_held(it.x.data(), it.y.data(), static_cast<int>(it.x.size()), x[it.input]);
-    else
-      // Bytecode only (compiled at preparation): muparser's evaluation of
-      // compiled bytecode raises no error of its own; a NaN or inf from the
-      // formula reaches the caller's finiteness checks.
-      f[it.axis] += it.parser->Eval();
+  for (const Impl::Table& tb : impl_->tables)
+    f[tb.axis] += kin::interpolate_held(tb.x.data(), tb.y.data(), static_cast<int>(tb.x.size()), x[tb.input]);
+  if (impl_->formulas.empty()) return;
+  // A free slot: one per thread evaluating now (kSlots of them).
+  for (int k = 0;; k = (k + 1) % kSlots) {
+    Impl::Slot& s = *impl_->slots[static_cast<std::size_t>(k)];
+    if (s.busy.test_and_set(std::memory_order_acquire)) continue;
+    std::copy(x, x + 10, s.vars);
+    // Bytecode only (compiled at preparation): muparser's evaluation of
+    // compiled bytecode raises no error of its own; a NaN or inf from the
+    // formula reaches the caller's finiteness checks.
+    for (const Impl::Formula& fm : impl_->formulas)
+      f[fm.axis] += s.parsers[static_cast<std::size_t>(fm.parser)]->Eval();
+    s.busy.clear(std::memory_order_release);
+    return;
   }
 }
-
 
 // ------------------------------------------------------- command-line form
 

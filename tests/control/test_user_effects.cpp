@@ -231,3 +231,28 @@ TEST(UserEffects, TheCommandLineFormAddsEachKind) {
 
 }  // namespace
 }  // namespace cpm::ctl
+
+#include <thread>
+
+namespace cpm::ctl {
+namespace {
+
+TEST(UserEffects, ThreadsEvaluatingOneMachineAtOnceGetTheirOwnAnswers) {
+  // cpmd's loop and its server read the same Machine: a formula's variables
+  // must not be shared between two evaluations running at the same time.
+  const Machine m(with_user(expression(1, "c*v1 + 0*d3", {{"c", "N s/m", 2.0, -10, 10}})));
+  std::vector<std::thread> threads;
+  std::array<int, 4> wrong{};
+  for (int id = 0; id < 4; ++id)
+    threads.emplace_back([&, id] {
+      for (int k = 0; k < 20000; ++k) {
+        const double v1 = id + 1e-4 * k;
+        if (m.effect_forces(Vec3::Zero(), Vec3(v1, 0, 0))[1] != 2.0 * v1) ++wrong[static_cast<std::size_t>(id)];
+      }
+    });
+  for (auto& t : threads) t.join();
+  for (int id = 0; id < 4; ++id) EXPECT_EQ(wrong[static_cast<std::size_t>(id)], 0) << "thread " << id;
+}
+
+}  // namespace
+}  // namespace cpm::ctl

@@ -84,9 +84,9 @@ bool is_user_effect_spec(const std::string& spec) noexcept;
 // The user effects, prepared: tables copied into arrays, formulas parsed,
 // bound to their variables and evaluated once (so muparser has compiled them
 // to bytecode and its stack is sized). Construction and copying allocate
-// and may throw; forces() does neither. A runtime evaluates one state at a
-// time: the variables are its own, so two threads need two copies (copying
-// one prepares its own parsers).
+// and may throw; add_forces() does neither. Up to 8 threads may evaluate one
+// runtime at once (each formula is prepared 8 times; an evaluation takes a
+// free copy by an atomic test-and-set, never waiting while one is free).
 class UserEffectsRuntime {
  public:
   UserEffectsRuntime();
