@@ -8,6 +8,7 @@ packages=(
   libgtest-dev libgmock-dev googletest
   libbenchmark-dev
   libyaml-cpp-dev          # configuration and model files
+  libmuparser-dev          # formulas of user expression effects (docs/libraries.md)
   libcli11-dev             # every command line (cpm, cpmd, the drives, the tools)
   nlohmann-json3-dev       # every JSON read and written
   help2man                 # man pages generated from --help

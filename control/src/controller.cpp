@@ -100,7 +100,10 @@ Status Controller::control_law(const ControlInput& in, const ControllerState& st
     const Vec3 accel = in.ref.a + gains_.kd.cwiseProduct(in.ref.v - x.p_dot) +
                        gains_.kp.cwiseProduct(in.ref.p - x.p);
     F.noalias() = x.J.transpose() * (t.M * accel + t.Gv + t.K);
-    F += m.effect_forces(d, d_dot);
+    // User expressions may read the axes' accelerations: the commanded ones
+    // through J^-1 (dJ/dt d_dot left out, zero without kinematic effects).
+    const Vec3 d_dd = m.user_effects_use_acceleration() ? Vec3(x.J.partialPivLu().solve(accel)) : Vec3::Zero();
+    F += m.effect_forces(d, d_dot, d_dd, in.kin.t);
   } else {
     F = gains_.kp.cwiseProduct(out.d_ref - d) + gains_.kd.cwiseProduct(out.d_dot_ref - d_dot);
     if (law_ != ControlLaw::pd) {
@@ -109,7 +112,9 @@ Status Controller::control_law(const ControlInput& in, const ControllerState& st
       Vec3 Fp = t.K;
       if (law_ == ControlLaw::pd_feedforward) {
         Fp.noalias() += t.M * in.ref.a + t.Gv;
-        F += m.effect_forces(out.d_ref, out.d_dot_ref);
+        const Vec3 d_dd_ref =
+            m.user_effects_use_acceleration() ? Vec3(J_ref.partialPivLu().solve(in.ref.a)) : Vec3::Zero();
+        F += m.effect_forces(out.d_ref, out.d_dot_ref, d_dd_ref, in.kin.t);
       }
       F.noalias() += J_ref.transpose() * Fp;
     }

@@ -31,6 +31,8 @@ void MachineModel::validate() const {
       throw Error("model limbs: assembly mode of limb " + std::to_string(i + 1) +
                   " must be +1 or -1");
   for (const DynamicEffect& e : effects) e.validate();
+  for (std::size_t i = 0; i < user_effects.size(); ++i)
+    validate_user_effect(user_effects[i], static_cast<int>(i));
 }
 
 void add_effect(MachineModel& model, std::string_view name, int axis,
@@ -73,6 +75,8 @@ void add_effect(MachineModel& model, std::string_view name, int axis,
 
 Machine::Machine(MachineModel model) : model_(std::move(model)) {
   model_.validate();
+  user_ = UserEffectsRuntime(model_.user_effects);
+  if (!user_.empty()) additive_effects_ = true;
   inertia_ = InertiaConstants::from_masses(model_.masses, model_.kinematics.limbs.L1);
   for (const DynamicEffect& e : model_.effects) {
     switch (e.type) {
@@ -167,12 +171,40 @@ Status Machine::forward_dynamics(const Vec3& p, const Vec3& p_dot, const Vec3& f
   RigidBodyTerms t;
   if (Status s = rigid_body(p, p_dot, t); !s) return s;
   const Vec3 d_dot = J_inv * p_dot;
-  const Vec3 f_act = drive_gain().cwiseProduct(force_command) - effect_forces(d, d_dot);
+  const Vec3 f_act = drive_gain().cwiseProduct(force_command) - effect_forces(d, d_dot, Vec3::Zero(), in.t);
   // Platform force from actuator forces: F_d = J^T F_p.
   const Vec3 f_platform = J_inv.transpose() * f_act;
   p_dd = t.M.llt().solve(f_platform - t.Gv - t.K);
   if (!all_finite(p_dd)) return Status::failure(Fault::not_finite);
-  return {};
+  if (!user_.uses_acceleration()) return {};
+  // A user force f(a) that reads the axes' accelerations makes the equation
+  // implicit: M p_dd + Gv + K = J^-T (g F - f(a)), a = J^-1 p_dd (the term
+  // dJ^-1/dt p_dot is left out: it is zero without kinematic effects and of
+  // the order of their micrometres with them). Newton's method on p_dd, with
+  // df/da by differences of step 1 m/s^2 (exact for a law linear in a):
+  // one step solves a linear law, nonlinear ones take a few.
+  Vec3 f_user_rest = Vec3::Zero();
+  user_.add_forces(d, d_dot, Vec3::Zero(), in.t, f_user_rest);
+  const Vec3 f_drive = drive_gain().cwiseProduct(force_command) - (effect_forces(d, d_dot, Vec3::Zero(), in.t));
+  for (int it = 0; it < 8; ++it) {
+    const Vec3 a = J_inv * p_dd;
+    Vec3 f0 = Vec3::Zero();
+    user_.add_forces(d, d_dot, a, in.t, f0);
+    Mat3 Ka;
+    for (int j = 0; j < 3; ++j) {
+      Vec3 fj = Vec3::Zero();
+      user_.add_forces(d, d_dot, a + Vec3::Unit(j), in.t, fj);
+      Ka.col(j) = fj - f0;
+    }
+    // Residual of the platform equation at p_dd and its derivative.
+    const Vec3 r = t.M * p_dd + t.Gv + t.K - J_inv.transpose() * (f_drive + f_user_rest - f0);
+    const Mat3 D = t.M + J_inv.transpose() * Ka * J_inv;
+    const Vec3 step = D.partialPivLu().solve(r);
+    p_dd -= step;
+    if (!all_finite(p_dd)) return Status::failure(Fault::not_finite);
+    if (step.norm() <= 1e-12 * (1.0 + p_dd.norm())) return {};
+  }
+  return Status::failure(Fault::no_convergence);
 }
 
 Status Machine::holding_command(const Vec3& p, const kin::KinematicInputs& in, Vec3& command) const noexcept {
@@ -181,15 +213,20 @@ Status Machine::holding_command(const Vec3& p, const kin::KinematicInputs& in, V
   if (Status s = kin::inverse(kinematics(), p, in, d); !s) return s;
   if (Status s = jacobian(d, p, in, J); !s) return s;
   if (Status s = inverse_dynamics(p, Vec3::Zero(), Vec3::Zero(), F_p); !s) return s;
-  command = (J.transpose() * F_p + effect_forces(d, Vec3::Zero())).cwiseQuotient(drive_gain());
+  command = (J.transpose() * F_p + effect_forces(d, Vec3::Zero(), Vec3::Zero(), in.t)).cwiseQuotient(drive_gain());
   return {};
 }
 
 Vec3 Machine::effect_forces(const Vec3& d, const Vec3& d_dot) const noexcept {
+  return effect_forces(d, d_dot, Vec3::Zero(), 0.0);
+}
+
+Vec3 Machine::effect_forces(const Vec3& d, const Vec3& d_dot, const Vec3& d_dd, double t) const noexcept {
   Vec3 f = Vec3::Zero();
   if (!additive_effects_) return f;
   for (const DynamicEffect& e : model_.effects)
     if (e.axis >= 0) f[e.axis] += effect_force(e, d[e.axis], d_dot[e.axis]);
+  user_.add_forces(d, d_dot, d_dd, t, f);
   return f;
 }
 

@@ -54,6 +54,32 @@ Eigen::VectorXd MotionProblem::effect_force_column(const ctl::DynamicEffect& e) 
   });
 }
 
+Eigen::VectorXd MotionProblem::user_force_column(const std::vector<ctl::UserEffect>& effects) const {
+  Eigen::VectorXd out = Eigen::VectorXd::Zero(3 * rows());
+  if (effects.empty()) return out;
+  const ctl::UserEffectsRuntime user(effects);  // its own: one evaluation at a time
+  if (user.uses_acceleration()) {
+    for (int r = 0; r < rows(); ++r) {
+      Vec3 force = Vec3::Zero();
+      user.add_forces(d[r], v[r], a[r], t[r], force);
+      out.segment<3>(3 * r) = force;
+    }
+    return out;
+  }
+  // Every axis at each sample at once, then filtered per axis.
+  const int n = static_cast<int>(d_hat.size());
+  std::vector<Vec3> per_sample(static_cast<std::size_t>(n));
+  for (int k = 0; k < n; ++k) {
+    const auto kk = static_cast<std::size_t>(k);
+    Vec3 force = Vec3::Zero();
+    user.add_forces(d_hat[kk], v_hat[kk], Vec3::Zero(), t_sample[kk], force);
+    per_sample[kk] = force;
+  }
+  for (int i = 0; i < 3; ++i)
+    out += filter_axis(i, [&](int k, int ax) { return per_sample[static_cast<std::size_t>(k)][ax]; });
+  return out;
+}
+
 Eigen::VectorXd MotionProblem::force_gain_column_logged(int axis) const {
   Eigen::VectorXd c = Eigen::VectorXd::Zero(3 * rows());
   for (int r = 0; r < rows(); ++r) c(3 * r + axis) = -drive_gain[axis] * f[r][axis];

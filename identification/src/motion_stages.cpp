@@ -552,6 +552,8 @@ void add_model_effects(const ctl::Machine& model, int n_model_base, MotionProble
       continue;
     P.model_force += P.effect_force_column(ef);
   }
+  // The user effects of the model file (docs/effects.md, "Effects you add").
+  if (model.has_user_effects()) P.model_force += P.user_force_column(mm.user_effects);
   // The force acts as the model says it does (its own actuation_delay), until
   // the alignment stage (align.hpp) estimates it from the data.
   P.delay_model = model.actuation_delay();

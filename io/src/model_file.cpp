@@ -8,6 +8,7 @@
 #include <yaml-cpp/yaml.h>
 
 #include <cmath>
+#include <algorithm>
 #include <filesystem>
 #include <map>
 #include <numbers>
@@ -268,6 +269,102 @@ ctl::DynamicEffect load_dynamic_effect(const Loader& ld, const YAML::Node& n, co
   return e;
 }
 
+
+// user_effects (docs/model-file.md): table and expression effects go to the
+// model's user_effects, a pitch_table to its limb's kinematics.
+std::vector<double> number_list(const Loader& ld, const YAML::Node& n, const std::string& path) {
+  if (!n.IsSequence()) ld.fail_got(n, path, "expected a list of numbers [a, b, ...]");
+  std::vector<double> v;
+  for (std::size_t k = 0; k < n.size(); ++k) v.push_back(ld.number(n[k], path + "[" + std::to_string(k) + "]"));
+  return v;
+}
+
+void load_user_effect(const Loader& ld, const YAML::Node& n, int index, ctl::MachineModel& m) {
+  const std::string path = "user_effects[" + std::to_string(index) + "]";
+  if (!n.IsMap()) ld.fail_got(n, path, "expected a mapping {kind: table|expression|pitch_table, axis: N, ...}");
+  const YAML::Node kind_node = n["kind"];
+  if (!kind_node) ld.fail(n, path, "missing required key 'kind' (table, expression or pitch_table)");
+  const std::string kind = ld.text(kind_node, join(path, "kind"));
+  std::set<std::string> allowed;
+  if (kind == "table") allowed = {"kind", "axis", "input", "nodes", "values"};
+  else if (kind == "expression") allowed = {"kind", "axis", "formula", "params"};
+  else if (kind == "pitch_table") allowed = {"kind", "axis", "nodes", "values"};
+  else
+    ld.fail(kind_node, join(path, "kind"), "unknown kind (one of: table, expression, pitch_table)",
+            "unknown kind '" + kind + "' (one of: table, expression, pitch_table)");
+  const Map mp(ld, n, path, allowed);
+  const long axis = ld.integer(mp.get("axis"), mp.path("axis"));
+  if (axis < 1 || axis > 3) ld.fail(mp.get("axis"), mp.path("axis"), "must be 1, 2 or 3");
+  if (kind == "pitch_table") {
+    kin::PitchTable& t = m.kinematics.effects[static_cast<std::size_t>(axis - 1)].pitch_table;
+    if (!t.empty())
+      ld.fail(mp.get("axis"), mp.path("axis"), "a second pitch_table on this axis (one per axis)");
+    const std::vector<double> x = number_list(ld, mp.get("nodes"), mp.path("nodes"));
+    const std::vector<double> y = number_list(ld, mp.get("values"), mp.path("values"));
+    if (x.size() != y.size())
+      ld.fail(mp.get("values"), mp.path("values"),
+              "has " + std::to_string(y.size()) + " values for " + std::to_string(x.size()) + " nodes");
+    if (x.size() < 2 || x.size() > static_cast<std::size_t>(kin::PitchTable::kCapacity))
+      ld.fail(mp.get("nodes"), mp.path("nodes"),
+              "needs 2 to " + std::to_string(kin::PitchTable::kCapacity) + " nodes, has " + std::to_string(x.size()));
+    t.size = static_cast<int>(x.size());
+    std::copy(x.begin(), x.end(), t.node.begin());
+    std::copy(y.begin(), y.end(), t.error.begin());
+    try {
+      t.validate();
+    } catch (const Error& e) {
+      ld.fail(mp.get("nodes"), path, e.what());
+    }
+    return;
+  }
+  ctl::UserEffect e;
+  e.axis = static_cast<int>(axis - 1);
+  if (kind == "table") {
+    e.kind = ctl::UserEffectKind::table;
+    const std::string in = ld.text(mp.get("input"), mp.path("input"));
+    if (in.size() != 2 || (in[0] != 'd' && in[0] != 'v') || in[1] < '1' || in[1] > '3')
+      ld.fail(mp.get("input"), mp.path("input"), "must be d1..d3 (position) or v1..v3 (velocity)",
+              "'" + in + "' must be d1..d3 (position) or v1..v3 (velocity)");
+    e.input = in[0];
+    e.input_axis = in[1] - '1';
+    e.nodes = number_list(ld, mp.get("nodes"), mp.path("nodes"));
+    e.values = number_list(ld, mp.get("values"), mp.path("values"));
+  } else {
+    e.kind = ctl::UserEffectKind::expression;
+    e.formula = ld.text(mp.get("formula"), mp.path("formula"));
+    if (mp.has("params") && !mp.get("params").IsNull()) {
+      const YAML::Node pn = mp.get("params");
+      if (!pn.IsMap()) ld.fail_got(pn, mp.path("params"), "expected a mapping NAME: {value: ..., lower: ..., upper: ..., unit: ...}");
+      // In the file's order (the order `fitted` and reports list them).
+      for (auto it = pn.begin(); it != pn.end(); ++it) {
+        ctl::UserParameter p;
+        p.name = it->first.Scalar();
+        const std::string ppath = mp.path("params") + "." + p.name;
+        const std::string public_path = mp.path("params");
+        if (std::any_of(e.params.begin(), e.params.end(), [&](const auto& q) { return q.name == p.name; }))
+          ld.fail(it->first, ppath, "parameter given twice", "", &public_path);
+        const Map pm(ld, it->second, ppath, {"value", "lower", "upper", "unit"});
+        p.value = pm.number("value");
+        if (pm.has("lower")) p.lower = pm.number("lower");
+        if (pm.has("upper")) p.upper = pm.number("upper");
+        if (pm.has("unit")) p.unit = ld.text(pm.get("unit"), pm.path("unit"));
+        e.params.push_back(std::move(p));
+      }
+    }
+  }
+  try {
+    ctl::validate_user_effect(e, index);
+  } catch (const Error& err) {
+    // "user_effects[i].KEY: reason": point at KEY's node. The reason may
+    // quote the formula or a parameter's name: only the local message has it.
+    const std::string what = err.what();
+    const std::string rest = what.substr(path.size() + (what.size() > path.size() && what[path.size()] == '.' ? 1 : 0));
+    const std::string key = rest.substr(0, rest.find_first_of(".[:"));
+    const YAML::Node at = mp.has(key) ? mp.get(key) : n;
+    ld.fail(at, "", "not a usable user effect", what, &path);
+  }
+  m.user_effects.push_back(std::move(e));
+}
 }  // namespace
 
 ModelFile parse_model_file(const std::string& text, const std::string& name) {
@@ -285,7 +382,7 @@ ModelFile parse_model_file(const std::string& text, const std::string& name) {
   if (!root || root.IsNull()) throw ModelFileError(name + ": empty model file", 0, "empty model file");
   const Map top(ld, root, "",
                 {"cpmd_model", "geometry", "masses", "force_limit", "kinematics", "dynamic_effects",
-                 "fitted", "history"});
+                 "user_effects", "fitted", "history"});
   {
     const long v = ld.integer(top.get("cpmd_model"), "cpmd_model");
     if (v != kFormatVersion)
@@ -331,6 +428,12 @@ ModelFile parse_model_file(const std::string& text, const std::string& name) {
       for (std::size_t i = 0; i < de.size(); ++i)
         m.effects.add(load_dynamic_effect(ld, de[i], "dynamic_effects[" + std::to_string(i) + "]"));
     }
+  }
+  m.user_effects.clear();
+  if (top.has("user_effects") && !top.get("user_effects").IsNull()) {
+    const YAML::Node ue = top.get("user_effects");
+    if (!ue.IsSequence()) ld.fail_got(ue, "user_effects", "expected a list of effects");
+    for (std::size_t i = 0; i < ue.size(); ++i) load_user_effect(ld, ue[i], static_cast<int>(i), m);
   }
   if (top.has("fitted") && !top.get("fitted").IsNull()) {
     const YAML::Node fl = top.get("fitted");
@@ -443,6 +546,59 @@ class Writer {
 std::string num(double v) { return detail::format_double(v); }
 std::string vec(const Vec3& v) { return "[" + num(v.x()) + ", " + num(v.y()) + ", " + num(v.z()) + "]"; }
 
+
+std::string num_list(const double* v, std::size_t n) {
+  std::string s = "[";
+  for (std::size_t k = 0; k < n; ++k) s += (k ? ", " : "") + num(v[k]);
+  return s + "]";
+}
+
+// Written only when the model has some, so that files without them stay as they were.
+void render_user_effects(Writer& w, const ctl::MachineModel& m) {
+  bool any_pitch = false;
+  for (const auto& e : m.kinematics.effects) any_pitch |= !e.pitch_table.empty();
+  if (m.user_effects.empty() && !any_pitch) return;
+  w.raw("\n# Effects added by the user (docs/effects.md, \"Effects you add\"): tables and formulas.\n"
+        "# table: a force (N) on `axis` against `input` (d_j in m, v_j in m/s), linear between the\n"
+        "# nodes, held at the end values beyond them; expression: a force (N) on `axis` from a\n"
+        "# formula over d1..d3, v1..v3, a1..a3, t and its parameters; pitch_table: the error e (m)\n"
+        "# of axis' effective displacement against its position (m), d~ = d + e(d).\n");
+  w.kv(0, "user_effects", "");
+  for (const ctl::UserEffect& e : m.user_effects) {
+    if (e.kind == ctl::UserEffectKind::table) {
+      w.kv(2, "- kind", "table");
+      w.kv(4, "axis", std::to_string(e.axis + 1), "the force acts on this axis");
+      w.kv(4, "input", e.input_name(), e.input == 'd' ? "position of an axis (m)" : "velocity of an axis (m/s)");
+      w.kv(4, "nodes", num_list(e.nodes.data(), e.nodes.size()), e.input == 'd' ? "m" : "m/s");
+      w.kv(4, "values", num_list(e.values.data(), e.values.size()), "N");
+    } else {
+      w.kv(2, "- kind", "expression");
+      w.kv(4, "axis", std::to_string(e.axis + 1), "the force (N) acts on this axis");
+      w.kv(4, "formula", quoted(e.formula));
+      if (e.params.empty()) {
+        w.kv(4, "params", "{}");
+        continue;
+      }
+      w.kv(4, "params", "");
+      for (const ctl::UserParameter& p : e.params) {
+        std::string v = "{value: " + num(p.value);
+        if (std::isfinite(p.lower)) v += ", lower: " + num(p.lower);
+        if (std::isfinite(p.upper)) v += ", upper: " + num(p.upper);
+        v += ", unit: " + quoted(p.unit) + "}";
+        w.kv(6, p.name, v);
+      }
+    }
+  }
+  for (int i = 0; i < 3; ++i) {
+    const kin::PitchTable& t = m.kinematics.effects[i].pitch_table;
+    if (t.empty()) continue;
+    const auto n = static_cast<std::size_t>(t.size);
+    w.kv(2, "- kind", "pitch_table");
+    w.kv(4, "axis", std::to_string(i + 1));
+    w.kv(4, "nodes", num_list(t.node.data(), n), "m, axis position");
+    w.kv(4, "values", num_list(t.error.data(), n), "m, error e of the effective displacement");
+  }
+}
 }  // namespace
 
 std::string render_model_file(const ModelFile& mf) {
@@ -517,6 +673,7 @@ std::string render_model_file(const ModelFile& mf) {
       for (int j = 0; j < in.n_params; ++j) w.kv(4, in.params[j].name, num(e.param[j]), in.params[j].unit);
     }
   }
+  render_user_effects(w, m);
   w.raw("\n# Parameters a tool fitted: nominal (before) and fitted value, standard error\n"
         "# (-1: unknown), in `unit`.\n");
   if (mf.fitted.empty()) {

@@ -25,7 +25,7 @@ Status twist_offsets(const KinematicModel& m, const Vec3& p, Vec3& out) noexcept
 
 bool LimbKinematicEffects::any() const noexcept {
   return backlash != 0.0 || cyclic_amplitude != 0.0 || guide_ka != 0.0 || guide_kb != 0.0 ||
-         twist != 0.0 || thermal_expansion != 0.0 || actuator_scale != 0.0;
+         twist != 0.0 || thermal_expansion != 0.0 || actuator_scale != 0.0 || !pitch_table.empty();
 }
 
 KinematicModel KinematicModel::nominal() {
@@ -76,6 +76,11 @@ void KinematicModel::validate() const {
     if (!(e.actuator_scale > -0.5 && e.actuator_scale < 0.5))
       fail(i, "actuator_scale s must be within (-0.5, 0.5)");
     if (std::abs(e.twist) > 0.1) fail(i, "limb_twist alpha must be small (|alpha| <= 0.1 rad)");
+    try {
+      e.pitch_table.validate();
+    } catch (const Error& err) {
+      fail(i, err.what());
+    }
   }
   Mat3 U;
   for (int i = 0; i < 3; ++i) U.row(i) = planes[i].normal.transpose();
@@ -103,6 +108,11 @@ double effective_displacement(const LimbKinematicEffects& e, double d, int dir, 
     const double arg = kTwoPi * d / e.cyclic_wavelength + e.cyclic_phase;
     dt += e.cyclic_amplitude * std::sin(arg);
     slope += e.cyclic_amplitude * kTwoPi / e.cyclic_wavelength * std::cos(arg);
+  }
+  if (!e.pitch_table.empty()) {
+    double de = 0.0;
+    dt += e.pitch_table(d, &de);
+    slope += de;
   }
   if (e.backlash != 0.0) dt -= 0.5 * e.backlash * (dir >= 0 ? 1.0 : -1.0);
   if (d_dd) *d_dd = slope;
@@ -171,7 +181,7 @@ Status inverse(const KinematicModel& m, const Vec3& p, const KinematicInputs& in
     double di = (pl.normal.dot(p) - pl.offset - tw[i]) / pl.scale - m.d0[i];
     const bool needs_newton = e.guide_ka != 0.0 || e.guide_kb != 0.0 ||
                               e.cyclic_amplitude != 0.0 || e.thermal_expansion != 0.0 ||
-                              e.actuator_scale != 0.0;
+                              e.actuator_scale != 0.0 || !e.pitch_table.empty();
     if (!needs_newton) {
       // Nothing or only backlash: d~ = d - (b/2) dir inverts directly.
       d[i] = di + 0.5 * e.backlash * (in.dir[i] >= 0 ? 1.0 : -1.0);

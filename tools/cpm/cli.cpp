@@ -89,7 +89,9 @@ const CLI::Validator& effect_name() {
       [](std::string& s) -> std::string {
         const std::string name = s.substr(0, s.find(':'));
         if (ctl::dynamic_effect_from_name(name) || kin::kinematic_effect_from_name(name)) return {};
-        return "unknown effect '" + name + "'; the effects are: " + effect_list();
+        if (ctl::is_user_effect_spec(s)) return {};  // table, expression, pitch_table (docs/effects.md)
+        return "unknown effect '" + name + "'; the effects are: " + effect_list() +
+               "; user effects (docs/effects.md): table, expression, pitch_table";
       },
       "");
   return v;

@@ -5,6 +5,7 @@
 
 #include "ident_common.hpp"
 #include "cpm/identification/fit.hpp"
+#include "cpm/identification/fit_user.hpp"
 #include "cpm/identification/kinematic.hpp"
 #include "cpm/identification/report.hpp"
 #include "cpm/io/data_files.hpp"
@@ -98,7 +99,86 @@ int run_kinematic(const io::DataSet& ds, const std::vector<ident::FitRequest>& r
   return 0;
 }
 
+// A user effect (docs/effects.md, "Effects you add") added and fitted on a motion log:
+//   table:AXIS:INPUT[:NODES]                 nodes evenly over the log's range of INPUT (default 20)
+//   expression:AXIS:FORMULA:NAME=START,...   parameters from their start values, unbounded
+// or user effect N of the model file refitted (--fit-user N, 1-based, with its bounds).
+int run_user(const io::MotionData& data, const std::string& add, int refit, const std::string& model_path,
+             const std::string& data_path, const std::string& out_path, const std::optional<std::string>& json_path,
+             const ident::MotionOptions& mo) {
+  io::ModelFile mf = io::load_model_file(model_path);
+  int index = refit;
+  if (!add.empty()) {
+    if (add.rfind("table:", 0) == 0) {
+      std::vector<std::string> f;
+      std::string part;
+      std::istringstream is(add);
+      while (std::getline(is, part, ':')) f.push_back(part);
+      if (f.size() < 3 || f.size() > 4 || f[1].size() != 1 || f[1][0] < '1' || f[1][0] > '3')
+        throw UsageError("--add " + add + ": expected table:AXIS:INPUT[:NODES] (e.g. table:2:d2:20)");
+      int nodes = 20;
+      if (f.size() == 4 && !CLI::detail::lexical_cast(f[3], nodes))
+        throw UsageError("--add " + add + ": NODES must be a whole number");
+      mf.model.user_effects.push_back(ident::table_over_data(data, f[1][0] - '1', f[2], nodes));
+    } else if (add.rfind("expression:", 0) == 0) {
+      ctl::add_user_effect(mf.model, add);
+    } else {
+      throw UsageError("--add " + add + ": a pitch_table is not fitted from motion logs");
+    }
+    index = static_cast<int>(mf.model.user_effects.size()) - 1;
+  }
+  if (index < 0 || index >= static_cast<int>(mf.model.user_effects.size()))
+    throw UsageError("--fit-user " + std::to_string(index + 1) + ": the model has " +
+                     std::to_string(mf.model.user_effects.size()) + " user effects");
+  const ident::UserFit F = ident::fit_user_effect(data, mf.model, index, mo);
+  mf.model = F.model;
+  const ctl::UserEffect& e = F.model.user_effects[static_cast<std::size_t>(index)];
+  std::vector<io::FittedParameter> fitted;
+  const std::string key = "user_effects[" + std::to_string(index) + "].";
+  for (std::size_t k = 0; k < F.value.size(); ++k) {
+    const std::string unit =
+        e.kind == ctl::UserEffectKind::table ? "N" : e.params[k].unit;
+    fitted.push_back({key + (e.kind == ctl::UserEffectKind::table ? F.names[k] : "params." + F.names[k]), unit, 0.0,
+                      F.value[k], F.std_error[k]});
+  }
+  std::ostringstream note;
+  note << (add.empty() ? "refitted user effect " + std::to_string(index + 1) : "added " + add)
+       << "; force residual RMS " << F.rms_before << " -> " << F.rms_after << " N";
+  record_fit(mf, fitted, "cpm fit", data_path, note.str());
+  io::save_model_file(out_path, mf, model_path);
+  if (e.kind == ctl::UserEffectKind::table) {
+    std::printf("table on axis %d against %s (%s), smoothness chosen by GCV: lambda %.3g, %.1f effective parameters\n",
+                e.axis + 1, e.input_name().c_str(), e.input == 'd' ? "mm" : "mm/s", F.lambda, F.effective_parameters);
+    std::printf("%12s  %10s  %10s\n", e.input == 'd' ? "node (mm)" : "node (mm/s)", "force (N)", "std (N)");
+    for (std::size_t k = 0; k < e.nodes.size(); ++k)
+      std::printf("%12.3f  %10.4f  %10.4f\n", e.nodes[k] * 1e3, F.value[k], F.std_error[k]);
+  } else {
+    std::printf("expression on axis %d: %s\n", e.axis + 1, e.formula.c_str());
+    for (std::size_t k = 0; k < F.value.size(); ++k)
+      std::printf("  %s = %.6g ± %.2g %s\n", F.names[k].c_str(), F.value[k], F.std_error[k], e.params[k].unit.c_str());
+  }
+  std::printf("force residual RMS on the fitted data: %.4g N without the effect, %.4g N with it\n", F.rms_before,
+              F.rms_after);
+  for (const auto& n : F.notes) std::printf("note: %s\n", n.c_str());
+  std::printf("new model: %s\n", out_path.c_str());
+  if (json_path) {
+    Json params = Json::object(), errors = Json::object();
+    for (std::size_t k = 0; k < F.value.size(); ++k) {
+      params[F.names[k]] = F.value[k];
+      errors[F.names[k]] = F.std_error[k];
+    }
+    Json js{{"model", model_path}, {"out", out_path}, {"data", data_path},
+            {"before", {{"rms", F.rms_before}}}, {"after", {{"rms", F.rms_after}}},
+            {"user_effect", {{"index", index + 1}, {"kind", e.kind == ctl::UserEffectKind::table ? "table" : "expression"},
+                             {"axis", e.axis + 1}, {"params", params}, {"std_errors", errors}}}};
+    if (e.kind == ctl::UserEffectKind::table) js["user_effect"]["lambda"] = F.lambda;
+    write_json(*json_path, js);
+  }
+  return 0;
+}
+
 struct Options {
+  int fit_user = 0;
   MeasurementOptions in;
   std::optional<std::string> holdout, json;
   std::string out;
@@ -114,6 +194,18 @@ int run(const Options& opt) {
   const std::vector<std::string>& adds = opt.adds;
   ident::DiagnoseOptions o;
   o.motion.half_window = opt.in.half_window();
+  std::string user_add;
+  for (const auto& s : adds)
+    if (ctl::is_user_effect_spec(s)) user_add = s;
+  if (!user_add.empty() || opt.fit_user > 0) {
+    if (adds.size() > (user_add.empty() ? 0u : 1u))
+      throw UsageError("a user effect (table, expression, --fit-user) is fitted alone: give no other --add");
+    const io::DataSet ds = read_measurements(data_path);
+    if (!std::holds_alternative<io::MotionData>(ds))
+      throw UsageError(std::string("user effects are fitted on motion logs only (not yet on ") + io::kind_name(io::kind_of(ds)) + " data)");
+    return run_user(std::get<io::MotionData>(ds), user_add, opt.fit_user - 1, model_path, data_path, out_path,
+                    json_path, o.motion);
+  }
   std::vector<ident::FitRequest> req;
   for (const auto& s : adds) req.push_back(ident::parse_fit_request(s));
   const io::DataSet ds = read_measurements(data_path);
@@ -174,11 +266,16 @@ Run setup(CLI::App& app) {
   add_measurement_options(app, o->in, "the model to extend");
   app.add_option("--add", o->adds,
                  "an effect to add and fit, with its axis when it acts on one (repeat the option; e.g. --add "
-                 "coulomb_friction:2 --add payload_mass)")
+                 "coulomb_friction:2 --add payload_mass; a user effect: table:AXIS:INPUT[:NODES] or "
+                 "expression:AXIS:FORMULA:NAME=START,..., docs/effects.md \"Effects you add\")")
       ->type_name("EFFECT[:AXIS]")
       ->check(effect_name())
-      ->allow_extra_args(false)
-      ->required();
+      ->allow_extra_args(false);
+  app.add_option("--fit-user", o->fit_user,
+                 "refit user effect N of the model file (1-based, in user_effects' order) on a motion log")
+      ->type_name("N")
+      ->default_str("none")
+      ->check(CLI::Range(1, 1000));
   add_new_model_option(app, o->out);
   app.add_option("--holdout", o->holdout, "measurements of the same kind to judge the fit on, unseen by it")
       ->type_name("FILE.csv");
@@ -186,7 +283,10 @@ Run setup(CLI::App& app) {
   app.footer("Without --holdout the error on unseen data is a 2-fold cross-validation (motion: halves in time;\n"
              "ball-bar and position data: alternate samples). Kinematic effects (backlash:2, cyclic_error:1, ...)\n"
              "go into the kinematics and the planes are recalibrated with them.");
-  return [o] { return run(*o); };
+  return [o] {
+    if (o->adds.empty() && o->fit_user == 0) throw UsageError("give --add EFFECT (or --fit-user N)");
+    return run(*o);
+  };
 }
 
 const Command reg{"fit", "add effects to a model, refit, write a new model file, show the error before and after",

@@ -1,5 +1,6 @@
 // cpm model check|show|init: validate a model file, print it for a person
 // (mm, µm, degrees, labelled), or write the nominal machine as a new file.
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -79,6 +80,34 @@ void show(const io::ModelFile& mf) {
       std::printf("  %s = %s", in.params[j].name, shown(e.param[j], in.params[j].unit).c_str());
   }
   std::printf("%s\n", m.effects.size() ? "" : " none");
+  // User effects (docs/effects.md, "Effects you add"), in mm and µm on screen.
+  bool user = !m.user_effects.empty();
+  for (int i = 0; i < 3; ++i) user |= !km.effects[i].pitch_table.empty();
+  if (user) std::printf("user effects:");
+  for (const ctl::UserEffect& e : m.user_effects) {
+    if (e.kind == ctl::UserEffectKind::table) {
+      std::printf("\n  table on axis %d against %s: %zu nodes, %s to %s, force %.4g to %.4g N", e.axis + 1,
+                  e.input_name().c_str(), e.nodes.size(), shown(e.nodes.front(), e.input == 'd' ? "m" : "m/s").c_str(),
+                  shown(e.nodes.back(), e.input == 'd' ? "m" : "m/s").c_str(),
+                  *std::min_element(e.values.begin(), e.values.end()), *std::max_element(e.values.begin(), e.values.end()));
+    } else {
+      std::printf("\n  expression on axis %d: %s (N)", e.axis + 1, e.formula.c_str());
+      for (const ctl::UserParameter& p : e.params) std::printf("  %s = %.6g %s", p.name.c_str(), p.value, p.unit.c_str());
+    }
+  }
+  for (int i = 0; i < 3; ++i) {
+    const kin::PitchTable& t = km.effects[i].pitch_table;
+    if (t.empty()) continue;
+    double lo = t.error[0], hi = t.error[0];
+    for (int k = 0; k < t.size; ++k) {
+      lo = std::min(lo, t.error[k]);
+      hi = std::max(hi, t.error[k]);
+    }
+    std::printf("\n  pitch_table on axis %d: %d nodes, %s to %s, error %s to %s", i + 1, t.size,
+                shown(t.node[0], "m").c_str(), shown(t.node[t.size - 1], "m").c_str(), shown(lo, "m").c_str(),
+                shown(hi, "m").c_str());
+  }
+  if (user) std::printf("\n");
   if (!mf.fitted.empty()) {
     std::printf("\nfitted parameters (%zu):\n  %-40s %16s %16s %16s %16s\n", mf.fitted.size(), "name",
                 "nominal", "value", "change", "std. error");
@@ -144,6 +173,9 @@ int run(const Options& o) {
               file.c_str(), n_kin, n_kin == 1 ? "" : "s", mf.model.effects.size(),
               mf.model.effects.size() == 1 ? "" : "s", mf.fitted.size(), mf.fitted.size() == 1 ? "" : "s",
               mf.history.size(), mf.history.size() == 1 ? "y" : "ies");
+  std::size_t n_user = mf.model.user_effects.size();
+  for (const auto& e : mf.model.kinematics.effects) n_user += e.pitch_table.empty() ? 0 : 1;
+  if (n_user > 0) std::printf("  with %zu user effect%s (table, expression, pitch_table)\n", n_user, n_user == 1 ? "" : "s");
   if (action == "show") {
     std::printf("\n");
     show(mf);

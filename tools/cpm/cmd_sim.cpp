@@ -12,7 +12,16 @@ namespace cpm::cli {
 namespace {
 
 // NAME:AXIS:V1,V2,... (axis 1..3, empty for machine-wide effects).
+// Or a user effect: table:..., expression:..., pitch_table:... (ctl::add_user_effect).
 void apply_effect(ctl::MachineModel& m, const std::string& spec) {
+  if (ctl::is_user_effect_spec(spec)) {
+    try {
+      ctl::add_user_effect(m, spec);
+    } catch (const Error& e) {
+      throw UsageError(std::string("--truth-effect ") + e.what());
+    }
+    return;
+  }
   const auto c1 = spec.find(':');
   const auto c2 = c1 == std::string::npos ? c1 : spec.find(':', c1 + 1);
   if (c2 == std::string::npos)
@@ -180,7 +189,9 @@ Run setup(CLI::App& app) {
       ->default_str("the nominal machine, built in");
   app.add_option("--truth-effect", o->truth_effects,
                  "add an effect to the true machine: NAME, axis 1..3 (empty for machine-wide ones), its parameters in "
-                 "SI units (e.g. coulomb_friction:2:4.5, actuation_delay::0.001)")
+                 "SI units (e.g. coulomb_friction:2:4.5, actuation_delay::0.001); or a user effect (docs/effects.md, "
+                 "\"Effects you add\"): table:AXIS:INPUT:NODES:FORCES, expression:AXIS:FORMULA:NAME=VALUE,..., "
+                 "pitch_table:AXIS:NODES:ERRORS (e.g. expression:2:c*v1:c=3)")
       ->type_name("NAME:AXIS:V1,V2,...")
       ->check(effect_name())
       ->allow_extra_args(false);

@@ -140,7 +140,10 @@ GeneratedLog generate(const GeneratorSpec& spec) {
     if (e.axis < 0 || e.axis > 2 || e.values.size() != 1) throw Error("generator: actuator_inertia needs an axis and m (kg)");
     rotor[e.axis] += e.values[0];
   }
-  const ctl::Machine truth(true_model(rigid));
+  ctl::MachineModel truth_model = true_model(rigid);
+  for (const std::string& u : spec.user_effects) ctl::add_user_effect(truth_model, u);
+  const ctl::Machine truth(truth_model);
+  if (truth.user_effects_use_acceleration()) throw Error("generator: user effects that read a1..a3 are not planted");
   const ctl::Machine nominal(ctl::MachineModel::elkady());
   if (!truth.has_constant_jacobian() || !nominal.has_constant_jacobian())
     throw Error("generator: only machines without kinematic effects (constant J)");

@@ -64,6 +64,10 @@ struct GeneratorSpec {
   double duration = 20.0;              // s of log
   std::uint64_t seed = 1;
   std::vector<PlantedEffect> effects;  // on the true machine
+  // User effects on the true machine, in ctl::add_user_effect's short form
+  // (table:..., expression:...): the generator's plant takes the effect
+  // forces at the state, so a formula may not read a1..a3 and sees t = 0.
+  std::vector<std::string> user_effects;
   double disturbance_sigma = 0.3;      // N per axis, per sample period (plant noise)
   double force_noise_sigma = 0.3;      // N per axis, white on the logged force (command noise)
   double position_noise = 1e-6;        // m, white on logged d

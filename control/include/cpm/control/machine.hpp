@@ -26,6 +26,7 @@
 #include <vector>
 
 #include "cpm/control/effects.hpp"
+#include "cpm/control/user_effects.hpp"
 #include "cpm/kinematics/kinematic_effects.hpp"
 #include "cpm/kinematics/limbs.hpp"
 #include "cpm/kinematics/plane_model.hpp"
@@ -56,6 +57,7 @@ struct MachineModel {
   kin::Strokes strokes;
   LinkMasses masses;
   DynamicEffects effects;
+  std::vector<UserEffect> user_effects;  // table and expression effects (user_effects.hpp)
   double force_limit = 120.0;  // |F_i| per actuator (N)
 
   static MachineModel elkady();  // the nominal machine of docs/model.md
@@ -131,8 +133,16 @@ class Machine {
   // weight through J^T, the effects at rest, over the drive gain. What the
   // drives were applying before a motion that starts at rest.
   Status holding_command(const Vec3& p, const kin::KinematicInputs& in, Vec3& command) const noexcept;
-  // Sum of the additive effect forces on each actuator (N).
+  // Sum of the additive effect forces on each actuator (N): the library's and
+  // the user's, these at zero acceleration and t = 0.
   [[nodiscard]] Vec3 effect_forces(const Vec3& d, const Vec3& d_dot) const noexcept;
+  // The same with the axes' accelerations d_dd (m/s^2) and time t (s), which
+  // user expression effects may read (a1..a3, t).
+  [[nodiscard]] Vec3 effect_forces(const Vec3& d, const Vec3& d_dot, const Vec3& d_dd,
+                                   double t) const noexcept;
+  [[nodiscard]] bool has_user_effects() const noexcept { return !user_.empty(); }
+  // Some user expression reads a1..a3 (then forward_dynamics solves for p_dd).
+  [[nodiscard]] bool user_effects_use_acceleration() const noexcept { return user_.uses_acceleration(); }
   // J = dp/dd at (d, p): the prepared constant one when the planes carry no
   // kinematic effects, else kin::jacobian.
   Status jacobian(const Vec3& d, const Vec3& p, const kin::KinematicInputs& in,
@@ -151,6 +161,7 @@ class Machine {
 
  private:
   MachineModel model_;
+  UserEffectsRuntime user_;
   InertiaConstants inertia_;
   Vec3 drive_gain_ = Vec3::Ones();
   Vec3 reflected_mass_ = Vec3::Zero();

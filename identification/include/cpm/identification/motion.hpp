@@ -184,6 +184,11 @@ struct MotionProblem {
   [[nodiscard]] Eigen::VectorXd actuator_acceleration_column(int axis) const;
   // The effect's force itself, filtered.
   [[nodiscard]] Eigen::VectorXd effect_force_column(const ctl::DynamicEffect& e) const;
+  // The force of user effects (table, expression) at the rows, 3 per row:
+  // filtered per sample as the library effects are, or, for a formula that
+  // reads a1..a3, evaluated at the rows' filtered state (no per-sample
+  // acceleration exists; second order in the motion within a kernel width).
+  [[nodiscard]] Eigen::VectorXd user_force_column(const std::vector<ctl::UserEffect>& effects) const;
   // Column of a force-gain change on `axis`: -g F, F predicted from before the
   // row's window (the instrument, f_predicted), and the same with the row's own
   // filtered force (which shares the residual's noise).

@@ -17,6 +17,7 @@
 #include <cstdint>
 
 #include "cpm/kinematics/limbs.hpp"
+#include "cpm/kinematics/pitch_table.hpp"
 #include "cpm/kinematics/types.hpp"
 
 namespace cpm::kin {
@@ -39,6 +40,7 @@ struct LimbKinematicEffects {
   double thermal_expansion = 0.0;    // e (1)
   double thermal_time_constant = 0.0;// tau (s); needed when e != 0
   double actuator_scale = 0.0;       // s (1)
+  PitchTable pitch_table;            // e(d) (m): d~ = d + e(d), a user-added table
 
   [[nodiscard]] bool any() const noexcept;
 };
