@@ -30,13 +30,18 @@ Eigen::MatrixXd structure_columns(const StructureFinding& f, const MotionProblem
   // (one bin's mean leaves the shape of a narrow excess for other columns to take).
   constexpr int kBumpBins = 6;
   const bool bump = f.kind == "bump";
-  Eigen::MatrixXd X = Eigen::MatrixXd::Zero(3 * R, bump ? kBumpBins : (two ? 2 : 1));
+  const bool smooth = f.kind == "smooth";
+  Eigen::MatrixXd X = Eigen::MatrixXd::Zero(3 * R, bump ? kBumpBins : smooth ? kSmoothDegree : (two ? 2 : 1));
   const double w = std::max(f.hi - f.lo, 1e-6), x0 = f.location - w;
   double tm = 0.0;
   for (int r = 0; r < R; ++r) tm += P.t[r] / R;
   for (int r = 0; r < R; ++r) {
     const int row = 3 * r + i;
-    if (bump) {
+    if (smooth) {
+      double row_values[kSmoothDegree];
+      legendre_row(state_variable(P, r, f.coordinate), f.lo, f.hi, row_values);
+      for (int k = 0; k < kSmoothDegree; ++k) X(row, k) = row_values[k];
+    } else if (bump) {
       const int b = static_cast<int>(std::floor((P.d[r][i] - x0) / (2.0 * w) * kBumpBins));
       if (b >= 0 && b < kBumpBins) X(row, b) = 1.0;
     }
@@ -90,6 +95,7 @@ bool same_finding(const StructureFinding& a, const StructureFinding& b) {
   if (a.axis != b.axis || a.kind != b.kind || a.coordinate != b.coordinate) return false;
   const double width = std::max({a.hi - a.lo, b.hi - b.lo, 1e-3});
   if (a.kind == "bump" || a.kind == "step") return std::fabs(a.location - b.location) <= width;
+  if (a.kind == "smooth") return true;  // same axis and variable
   if (a.kind == "periodic" || a.kind == "periodic_time")
     return std::fabs(a.location - b.location) <= 0.1 * std::max(std::fabs(a.location), std::fabs(b.location));
   return true;

@@ -87,14 +87,19 @@ Json named_effect_json(const CandidateResult& c) {
 
 Json structure_json(const std::vector<StructureFinding>& items) {
   Json a = Json::array();
-  for (const auto& f : items)
-    a.push_back({{"kind", f.kind},
-                 {"axis", axis_json(f.axis)},
-                 {"coordinate", f.coordinate},
-                 {"location", f.location},
-                 {"size", f.size},
-                 {"z", f.z},
-                 {"text", f.text}});
+  for (const auto& f : items) {
+    Json j = {{"kind", f.kind},
+              {"axis", axis_json(f.axis)},
+              {"coordinate", f.coordinate},
+              {"location", f.location},
+              {"size", f.size},
+              {"z", f.z},
+              {"text", f.text}};
+    if (f.kind == "smooth")
+      j["smooth"] = {{"range", {f.lo, f.hi}}, {"shape", f.shape}, {"slope", f.slope},
+                     {"nodes", f.nodes}, {"values", f.values}, {"also_in", f.also_in}};
+    a.push_back(std::move(j));
+  }
   return a;
 }
 
@@ -122,6 +127,8 @@ Json verdict_json(const Diagnosis& D) {
   v["effects"] = std::move(effects);
   // Structure no library effect describes that leads the verdict (missing = "outside_library").
   v["outside_library"] = structure_json(D.outside_library);
+  // Library effects that explained part of the outside structure (named before it was fitted beside them).
+  v["partial"] = D.partial;
   v["text"] = D.verdict_text;
   return v;
 }
@@ -178,6 +185,11 @@ std::string diagnosis_json(const Diagnosis& D) {
   o["baseline"] = {{"rms", D.baseline_rms}, {"max", D.baseline_max}, {"axis_rms", vec_json(D.baseline_axis_rms)}};
   o["base_refit"] = {{"rms", D.base_refit_rms}};
   o["noise_floor"] = D.noise_floor;
+  if (D.kind == "motion") {
+    o["noise_floor_source"] = D.noise_floor_source;
+    o["axis_noise_floor"] = vec_json(D.axis_floor);
+    o["axis_residual_rms"] = vec_json(D.axis_residual_rms);
+  }
   Json candidates = Json::array();
   for (const auto& c : D.candidates) candidates.push_back(candidate_json(c));
   o["candidates"] = std::move(candidates);

@@ -236,6 +236,113 @@ std::optional<StructureFinding> bump_finding(const MotionProblem& P, const AxisR
                           blo, bhi};
 }
 
+// 6. A smooth force that follows one variable of the state: for each of d1..d3,
+// v1..v3, a1..a3 and t, Legendre polynomials of degree 1..kSmoothDegree fitted
+// to the axis' residual; the removed sum of squares, in units of the
+// residual's variance inflated by its autocorrelation, is ~ chi^2 with
+// kSmoothDegree dof under noise. Look-elsewhere over every (axis, variable)
+// pair. The variable that removes most is reported, with those that remove at
+// least 80 % as much (v_j and a_j of one sine, d_j and a_j).
+constexpr double kSmoothAlsoShare = 0.8;
+const char* const kSmoothVariables[] = {"d1", "d2", "d3", "v1", "v2", "v3", "a1", "a2", "a3", "t"};
+constexpr int kSmoothPairs = 3 * 10;
+
+struct SmoothFit {
+  std::string var;
+  double lo = 0.0, hi = 0.0;
+  double removed = 0.0, chi = 0.0, p = 1.0;
+  Eigen::VectorXd coef;       // on the Legendre columns (after the mean)
+  double linear_share = 0.0, odd_share = 0.0;
+};
+
+SmoothFit smooth_fit(const MotionProblem& P, const AxisResidual& A, const std::string& var) {
+  constexpr int K = kSmoothDegree;
+  const int R = P.rows();
+  SmoothFit s;
+  s.var = var;
+  std::vector<double> x(R);
+  for (int r = 0; r < R; ++r) x[r] = state_variable(P, r, var);
+  const auto [mn, mx] = std::minmax_element(x.begin(), x.end());
+  s.lo = *mn;
+  s.hi = *mx;
+  if (!(s.hi > s.lo)) return s;
+  Eigen::MatrixXd X(R, K);
+  double row[K];
+  for (int r = 0; r < R; ++r) {
+    legendre_row(x[r], s.lo, s.hi, row);
+    for (int k = 0; k < K; ++k) X(r, k) = row[k];
+  }
+  X.rowwise() -= X.colwise().mean();
+  Eigen::VectorXd y(R);
+  for (int r = 0; r < R; ++r) y(r) = A.y[r] - A.mean;
+  const Eigen::MatrixXd G = X.transpose() * X;
+  const Eigen::VectorXd b = X.transpose() * y;
+  const Eigen::LDLT<Eigen::MatrixXd> ldlt(G);
+  if (ldlt.info() != Eigen::Success) return s;
+  s.coef = ldlt.solve(b);
+  s.removed = std::max(0.0, s.coef.dot(b));
+  s.chi = s.removed / (A.var * A.infl);
+  s.p = std::min(1.0, f_tail(s.chi / K, K, 1e7) * kSmoothPairs);
+  // Shares of the fitted curve: its linear part and its odd part (P1, P3, P5).
+  const Eigen::VectorXd fit = X * s.coef;
+  const double ff = fit.squaredNorm();
+  if (ff > 0.0) {
+    const double x0f = X.col(0).dot(fit), x0x0 = X.col(0).squaredNorm();
+    s.linear_share = x0x0 > 0.0 ? x0f * x0f / (x0x0 * ff) : 0.0;
+    Eigen::VectorXd odd = Eigen::VectorXd::Zero(R);
+    for (int k = 0; k < K; k += 2) odd += X.col(k) * s.coef(k);
+    s.odd_share = odd.squaredNorm() / ff;
+  }
+  return s;
+}
+
+std::optional<StructureFinding> smooth_finding(const MotionProblem& P, const AxisResidual& A) {
+  const int R = P.rows(), i = A.axis;
+  std::vector<SmoothFit> fits;
+  for (const char* v : kSmoothVariables) fits.push_back(smooth_fit(P, A, v));
+  const auto best = std::max_element(fits.begin(), fits.end(),
+                                     [](const SmoothFit& a, const SmoothFit& b) { return a.removed < b.removed; });
+  if (best->coef.size() == 0 || !(best->p < 1e-4)) return std::nullopt;
+  const double size = std::sqrt(best->removed / R);
+  if (!(size > A.tiny)) return std::nullopt;
+  StructureFinding f;
+  f.kind = "smooth";
+  f.axis = i;
+  f.coordinate = best->var;
+  f.size = size;
+  f.z = std::sqrt(best->chi);
+  f.lo = best->lo;
+  f.hi = best->hi;
+  f.shape = best->linear_share > 0.9 ? "linear" : best->odd_share > 0.9 ? "odd" : best->odd_share < 0.1 ? "even" : "mixed";
+  // The curve at 7 values across the range, less its value at the middle (the mean goes with the base).
+  double row[kSmoothDegree], mid[kSmoothDegree];
+  legendre_row(0.5 * (f.lo + f.hi), f.lo, f.hi, mid);
+  for (int q = 0; q < 7; ++q) {
+    const double x = f.lo + (f.hi - f.lo) * q / 6.0;
+    legendre_row(x, f.lo, f.hi, row);
+    double v = 0.0;
+    for (int k = 0; k < kSmoothDegree; ++k) v += (row[k] - mid[k]) * best->coef(k);
+    f.nodes.push_back(x);
+    f.values.push_back(v);
+  }
+  // The linear part per unit of the variable: P1 = 2 (x - mid) / (hi - lo).
+  f.slope = 2.0 * best->coef(0) / (f.hi - f.lo);
+  for (const SmoothFit& o : fits)
+    if (&o != &*best && o.p < 1e-4 && o.removed >= kSmoothAlsoShare * best->removed) f.also_in.push_back(o.var);
+  const std::string unit = f.coordinate[0] == 'd' ? "m" : f.coordinate[0] == 'v' ? "m/s" : f.coordinate[0] == 'a' ? "m/s^2" : "s";
+  std::ostringstream os;
+  os.precision(3);
+  os << "axis " << i + 1 << ": a force that follows " << f.coordinate << " (" << f.shape;
+  if (f.shape == "linear") os << ", " << f.slope << " N per " << unit;
+  os << ", RMS " << size << " N over " << f.coordinate << " in [" << f.lo << ", " << f.hi << "] " << unit << ")";
+  if (!f.also_in.empty()) {
+    os << "; seen alike in";
+    for (const auto& v : f.also_in) os << " " << v;
+  }
+  f.text = os.str();
+  return f;
+}
+
 // Stroke covered by each axis (m).
 std::vector<double> spans(const MotionProblem& P) {
   std::vector<double> span(3);
@@ -253,6 +360,30 @@ void add(std::vector<StructureFinding>& out, std::optional<StructureFinding> f) 
 
 }  // namespace
 
+double state_variable(const MotionProblem& P, int r, const std::string& name) {
+  if (name == "t") return P.t[static_cast<std::size_t>(r)];
+  const int j = name.size() == 2 ? name[1] - '1' : -1;
+  if (j < 0 || j > 2) throw Error("unknown state variable '" + name + "' (d1..d3, v1..v3, a1..a3, t)");
+  const auto rr = static_cast<std::size_t>(r);
+  switch (name[0]) {
+    case 'd': return P.d[rr][j];
+    case 'v': return P.v[rr][j];
+    case 'a': return P.a_columns[rr][j];
+    default: throw Error("unknown state variable '" + name + "' (d1..d3, v1..v3, a1..a3, t)");
+  }
+}
+
+void legendre_row(double x, double lo, double hi, double* out) {
+  const double u = std::clamp(hi > lo ? 2.0 * (x - lo) / (hi - lo) - 1.0 : 0.0, -1.0, 1.0);
+  double pm = 1.0, p = u;  // P_0, P_1
+  for (int n = 1; n <= kSmoothDegree; ++n) {
+    out[n - 1] = p;
+    const double next = ((2.0 * n + 1.0) * u * p - n * pm) / (n + 1.0);
+    pm = p;
+    p = next;
+  }
+}
+
 std::vector<StructureFinding> find_motion_structure(const MotionProblem& P,
                                                     const Eigen::VectorXd& residual,
                                                     const Vec3& axis_noise) {
@@ -267,6 +398,7 @@ std::vector<StructureFinding> find_motion_structure(const MotionProblem& P,
     for (int j = 0; j < 3; ++j) add(out, periodic_in_position(P, *A, j, span[j]));
     add(out, periodic_in_time(tvec, *A));
     add(out, trend_in_time(tvec, *A));
+    add(out, smooth_finding(P, *A));
     if (span[i] < 0.005) continue;
     const AlongPosition o = along_position(P, *A);
     std::optional<StructureFinding> step = step_finding(P, *A, o);

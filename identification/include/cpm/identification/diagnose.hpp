@@ -89,7 +89,17 @@ struct StructureFinding {
   double size = 0.0;        // amplitude in data units
   double z = 0.0;           // significance in standard errors
   std::string text;         // one sentence for people
-  double lo = 0.0, hi = 0.0;  // bump: the coordinate range it covers (SI)
+  double lo = 0.0, hi = 0.0;  // bump: the coordinate range it covers; smooth: the variable's range (SI)
+  // kind "smooth": a force on `axis` that follows one variable of the state
+  // (`coordinate`: d1..d3, v1..v3, a1..a3 or t), fitted by Legendre
+  // polynomials of degree 1..kSmoothDegree over [lo, hi]; `size` is the RMS of
+  // the fitted force over the log (N).
+  std::vector<double> nodes{}, values{};  // the fitted force (N) at a few values of the variable (SI)
+  std::string shape{};                // "linear", "odd", "even" or "mixed"
+  double slope = 0.0;                 // N per SI unit of the variable (the linear part)
+  // Other variables where the same structure is seen (explaining at least
+  // 80 % of what `coordinate` does): the data cannot tell them apart.
+  std::vector<std::string> also_in{};
 };
 
 struct DiagnoseOptions {
@@ -112,7 +122,17 @@ struct Diagnosis {
   Vec3 baseline_axis_rms = Vec3::Zero();
   double base_refit_rms = 0.0;
   double noise_floor = 0.0;         // estimated from second differences (data units)
-  Vec3 axis_noise = Vec3::Zero();
+  Vec3 axis_noise = Vec3::Zero();   // per axis: the weights of the fits (N)
+  // The honest floor (motion logs): per axis the white part of the final
+  // residual, from its high band (second differences along time, corrected
+  // for the filter), which the smooth effects and structures do not reach;
+  // never the residual's RMS. Said with its source.
+  Vec3 axis_floor = Vec3::Zero();   // N
+  Vec3 axis_residual_rms = Vec3::Zero();  // N: the final residual per axis
+  std::string noise_floor_source;
+  // Library effects that explained part of an outside-the-library structure
+  // (chosen before it was fitted, not beside it): labels.
+  std::vector<std::string> partial;
   std::vector<CandidateResult> candidates;  // ranked, best first
   int verdict = -1;                 // index in candidates, -1: none missing
   bool ambiguous = false;           // the verdict cannot be told apart from another candidate

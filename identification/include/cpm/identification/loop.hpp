@@ -21,6 +21,22 @@ struct LoopStep {
   std::string verdict;       // what the diagnosis of that model said
 };
 
+// The outside finding offered as an effect a user adds to the model file
+// (`user_effects:`, docs/model-file.md): a force on one axis, the drive's
+// force beyond the model as the library's effect forces are (N).
+struct SuggestedUserEffect {
+  std::string kind;                   // "expression" or "table"
+  int axis = -1;                      // 0..2
+  std::string input;                  // table: the variable it is a function of (d1..d3, v1..v3, a1..a3, t)
+  std::vector<double> nodes, values;  // table: SI values of the input, N
+  std::string formula;                // expression: e.g. "c*v1"
+  std::vector<std::pair<std::string, double>> params;  // expression: its parameters fitted (SI)
+  std::string text;                   // for people
+};
+// The suggestion for a finding, or kind "" when a table or expression would
+// not describe it better than a library effect (periodic, direction, trend).
+SuggestedUserEffect suggest_user_effect(const StructureFinding& f);
+
 struct LoopResult {
   std::string kind;                          // "motion", "ballbar", "position"
   std::string units;                         // "N" or "m"
@@ -31,6 +47,7 @@ struct LoopResult {
   std::vector<LoopStep> steps;               // the waterfall: steps[0] is the model as given
   std::string stop;                          // why the loop stopped, for people
   bool outside_library = false;              // it stopped at something no library effect describes
+  SuggestedUserEffect suggestion;            // then: that finding as a user effect (kind "" if none)
 };
 
 LoopResult run_loop(const io::DataSet& data, const ctl::MachineModel& model, const DiagnoseOptions& options = {},
