@@ -351,9 +351,24 @@ void evaluate_candidates(Diagnosis& D, const Engine& E, const ctl::MachineModel&
 }
 
 // Stage "selection" (select.cpp), then each effect chosen refitted on what the others leave.
+// An effect whose refit beside the others goes to 0 (its bound) explains
+// nothing there and is never named: it is held at 0, which keeps it out of the
+// selection (selection_terms), and the selection is run again without it
+// (Coulomb and Stribeck friction on z behind a delay: Stribeck and viscous
+// friction had been named "missing" with the value 0).
 void select_effects(Diagnosis& D, const Engine& E, const ctl::MachineModel& model, const DiagnoseOptions& opt) {
-  detail::select_motion_effects(D, E, opt);
-  refine_chosen(D, E, D.motion, model, opt);
+  for (int pass = 0; pass < 4; ++pass) {
+    detail::select_motion_effects(D, E, opt);
+    refine_chosen(D, E, D.motion, model, opt);
+    bool zero = false;
+    for (int j : D.found()) {
+      CandidateResult& c = D.candidates[static_cast<std::size_t>(j)];
+      if (c.params.empty() || detail::is_alignment(c.effect) || c.params[0].value != 0.0) continue;
+      c.params[0].at_bound = true;
+      zero = true;
+    }
+    if (!zero) break;
+  }
   detail::verdict_text_motion(D);
 }
 
@@ -366,6 +381,13 @@ void look_outside_library(Diagnosis& D, const Engine& E, const ctl::MachineModel
   std::vector<std::string> before;  // the effects named before any structure was fitted beside them
   for (int j : D.found()) before.push_back(D.candidates[static_cast<std::size_t>(j)].label());
   std::optional<Engine> Es;
+  // Structure in what the model as given leaves that beats the library effects on its axis.
+  if (std::vector<StructureFinding> early = detail::structure_that_beats_library(D, E, opt); !early.empty()) {
+    D.outside_library = std::move(early);
+    Es.emplace(detail::with_structure(E.problem(), D.outside_library, D.motion));
+    for (auto& c : D.candidates) c.alternatives.clear();
+    select_effects(D, *Es, model, opt);
+  }
   for (int round = 0; round < 3; ++round) {
     const std::vector<StructureFinding> more = detail::strong_structure(D, D.motion, opt);
     if (more.empty()) break;
@@ -427,6 +449,8 @@ void measure_noise_floor(Diagnosis& D) {
     D.axis_floor[i] = std::sqrt(v);
     D.axis_residual_rms[i] = std::sqrt(ss / R);
   }
+  // The floor the verdict and the loop compare against (the weights keep axis_noise).
+  D.noise_floor = std::sqrt(D.axis_floor.squaredNorm() / 3.0);
   D.noise_floor_source = "the residual's high band: second differences of each axis' residual along time at lags " +
                          std::to_string(L0) + " and " + std::to_string(L0 + 1) +
                          " rows (1.4826 MAD / sqrt 6), beyond the correlation of the rows' filter";

@@ -93,7 +93,7 @@ OpenWorldResult run_open_world(const OpenWorldOptions& o) {
             for (double m : o.multiples) {
               OpenWorldLog L{timing, noise, rate, seed};
               L.kind = outside_kind_name(o.kinds[k]);
-              L.axis = static_cast<int>((static_cast<std::size_t>(seed) + k) % 3);
+              L.axis = (seed + static_cast<int>(o.kinds[k])) % 3;
               L.from_axis = (L.axis + 1 + seed % 2) % 3;
               L.multiple = m;
               const int i = L.axis;

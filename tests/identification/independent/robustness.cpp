@@ -115,6 +115,7 @@ struct Flags {
   bool check = false, estimate = false, quiet = false;
   bool multiples_given = false;
   bool outside = false;  // the open-world matrix (open_world.hpp) instead
+  std::vector<std::string> outside_kinds;  // its kinds (empty: all)
 };
 
 // The presets: options given after them override them.
@@ -186,6 +187,8 @@ void add_run_options(CLI::App& app, Flags& f, MatrixOptions& o) {
                         "cable carrier c v_j, a local bump, a cubic along the travel) at --multiples of the floor; "
                         "default cells zoh and delay1, plant and command, 1000 Hz")
       ->trigger_on_parse();
+  app.add_option("--outside-kinds", f.outside_kinds, "with --outside: the kinds planted (cross_velocity, bump, cubic)")
+      ->delimiter(',');
   app.add_flag_callback("--quick-outside", [&] {
         f.outside = true;
         o.seeds = 1;
@@ -300,6 +303,15 @@ int main(int argc, char** argv) {
       w.duration = o.duration;
       if (!o.multiples.empty()) w.multiples = o.multiples;
       w.diagnose = o.diagnose;
+      if (!f.outside_kinds.empty()) {
+        w.kinds.clear();
+        for (const std::string& k : f.outside_kinds) {
+          if (k == "cross_velocity") w.kinds.push_back(OutsideForce::Kind::cross_velocity);
+          else if (k == "bump") w.kinds.push_back(OutsideForce::Kind::bump);
+          else if (k == "cubic") w.kinds.push_back(OutsideForce::Kind::cubic);
+          else throw cpm::Error("--outside-kinds: unknown kind '" + k + "' (cross_velocity, bump, cubic)");
+        }
+      }
       const OpenWorldResult r = run_open_world(w);
       std::printf("%s", open_world_table(r).c_str());
       const auto fails = open_world_failures(r);

@@ -71,12 +71,30 @@ TEST(OpenWorld, CableCarrierIsOutsideTheLibraryOnItsAxisAndVariable) {
   s.outside = {{OutsideForce::Kind::cross_velocity, 1, 0, c, 0.0, 1.0}};
   const ident::Diagnosis D = diagnose(generate(s));
   std::printf("verdict: %s\n", D.verdict_text.c_str());
+  for (const auto& f : D.structure) std::printf("  structure left: %s (%.1f sigma)\n", f.text.c_str(), f.z);
   ASSERT_FALSE(D.outside_library.empty());
   const ident::StructureFinding& f = D.outside_library.front();
   EXPECT_EQ(f.axis, 1);
   EXPECT_EQ(f.coordinate, "v1");
   EXPECT_EQ(f.shape, "linear");
   EXPECT_NEAR(f.slope, c, 0.15 * c);
+  EXPECT_EQ(D.verdict, -1) << D.candidates[0].label();
+}
+
+// A tight spot over a short stretch of axis 3 (a Gaussian bump, 1/30 of the
+// travel wide, 10x the floor at its peak): outside_library on axis 3 around
+// the bump's place, no library effect named.
+TEST(OpenWorld, LocalBumpLeadsOnItsAxisAndPlace) {
+  GeneratorSpec s = spec(Timing::zoh, NoisePlacement::plant, 8);
+  const GeneratedLog g0 = generate(s);
+  const ident::Diagnosis D0 = diagnose(g0);
+  const double lo = g0.d_min[2], hi = g0.d_max[2], centre = lo + (hi - lo) / 3.0;
+  s.outside = {{OutsideForce::Kind::bump, 2, -1, 10.0 * D0.axis_floor[2], centre, (hi - lo) / 30.0}};
+  const ident::Diagnosis D = diagnose(generate(s));
+  std::printf("bump at %.1f mm: %s\n", centre * 1e3, D.verdict_text.c_str());
+  for (const auto& f : D.structure) std::printf("  structure left: %s (%.1f sigma)\n", f.text.c_str(), f.z);
+  ASSERT_FALSE(D.outside_library.empty());
+  EXPECT_EQ(D.outside_library.front().axis, 2);
   EXPECT_EQ(D.verdict, -1) << D.candidates[0].label();
 }
 

@@ -25,6 +25,15 @@ double state_variable(const MotionProblem& P, int r, const std::string& name);
 // P_1..P_kSmoothDegree of x mapped from [lo, hi] to [-1, 1] (clamped): the columns of a smooth finding.
 void legendre_row(double x, double lo, double hi, double* out);
 
+// The columns of a smooth force on `axis` following `var` over [lo, hi]:
+// P_1..P_kSmoothDegree and a constant, 3R rows (zero off the axis). Of a
+// position, velocity or time: the polynomial of each sample's value through
+// the rows' own filter, as the library's effect columns are built (a
+// polynomial of the row's filtered state differs from it by a term in the
+// acceleration, which a spring at its stiffness bound took up); of an
+// acceleration: at the row.
+Eigen::MatrixXd smooth_columns(const MotionProblem& P, int axis, const std::string& var, double lo, double hi);
+
 std::vector<StructureFinding> find_motion_structure(const MotionProblem& P,
                                                     const Eigen::VectorXd& residual,
                                                     const Vec3& axis_noise);
