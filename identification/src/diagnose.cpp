@@ -61,6 +61,11 @@ std::vector<double> kernel_autocorrelation(const SgKernel& kernel) {
   return rho;
 }
 
+// An axis whose residual stays above this multiple of its floor after the
+// effects named is not explained (a note; null logs of the independent
+// generator sit at 0.97-1.01).
+constexpr double kExplainedRatio = 1.25;
+
 // Below this the rows' noise counts as uncorrelated (the honest floor's lags).
 constexpr double kWhiteCorrelation = 0.05;
 
@@ -351,6 +356,48 @@ void evaluate_candidates(Diagnosis& D, const Engine& E, const ctl::MachineModel&
 }
 
 // Stage "selection" (select.cpp), then each effect chosen refitted on what the others leave.
+// The honest floor: per axis the white part of the final residual, from its
+// high band: second differences of the rows along time, at lags where the
+// filter that made the rows no longer correlates their noise (neighbouring
+// rows share part of their window: at lag 1 the kernel's own correction
+// assumes the force and the acceleration share one filter, and left the floor
+// 8-10 % low on null logs of the independent generator). A smooth force, an
+// effect or a structure barely reaches these differences; the floor is never
+// the residual's own RMS.
+void measure_noise_floor(Diagnosis& D) {
+  const MotionProblem& P = D.motion;
+  const int R = P.rows();
+  if (R < 20 || D.residual_final.size() != 3 * R) return;
+  const std::vector<double> rho = kernel_autocorrelation(P.accel_kernel);
+  auto rho_at = [&](int lag) { return lag < static_cast<int>(rho.size()) ? rho[static_cast<std::size_t>(lag)] : 0.0; };
+  int L0 = 1;
+  while (L0 < 8 && std::fabs(rho_at(L0 * P.stride)) > kWhiteCorrelation) ++L0;
+  for (int i = 0; i < 3; ++i) {
+    std::vector<double> s(static_cast<std::size_t>(R));
+    double ss = 0.0;
+    for (int r = 0; r < R; ++r) {
+      s[static_cast<std::size_t>(r)] = D.residual_final(3 * r + i);
+      ss += s[static_cast<std::size_t>(r)] * s[static_cast<std::size_t>(r)];
+    }
+    // Two lags beyond the correlation, their variances averaged, each
+    // corrected for what correlation is left at its lag.
+    double v = 0.0;
+    for (int L = L0; L <= L0 + 1; ++L) {
+      const double f = (6.0 - 8.0 * rho_at(L * P.stride) + 2.0 * rho_at(2 * L * P.stride)) / 6.0;
+      const double n = noise_from_differences(s, L);
+      v += 0.5 * n * n / std::max(f, 0.1);
+    }
+    D.axis_floor[i] = std::sqrt(v);
+    D.axis_residual_rms[i] = std::sqrt(ss / R);
+  }
+  // The floor the verdict and the loop compare against (the weights keep axis_noise).
+  D.noise_floor = std::sqrt(D.axis_floor.squaredNorm() / 3.0);
+
+  D.noise_floor_source = "the residual's high band: second differences of each axis' residual along time at lags " +
+                         std::to_string(L0) + " and " + std::to_string(L0 + 1) +
+                         " rows (1.4826 MAD / sqrt 6), beyond the correlation of the rows' filter";
+}
+
 // An effect whose refit beside the others goes to 0 (its bound) explains
 // nothing there and is never named: it is held at 0, which keeps it out of the
 // selection (selection_terms), and the selection is run again without it
@@ -369,6 +416,7 @@ void select_effects(Diagnosis& D, const Engine& E, const ctl::MachineModel& mode
     }
     if (!zero) break;
   }
+  measure_noise_floor(D);  // of what the effects chosen leave: the floor the verdict states
   detail::verdict_text_motion(D);
 }
 
@@ -415,45 +463,19 @@ void look_outside_library(Diagnosis& D, const Engine& E, const ctl::MachineModel
   detail::lead_with_outside_library(D);
 }
 
-// The honest floor: per axis the white part of the final residual, from its
-// high band: second differences of the rows along time, at lags where the
-// filter that made the rows no longer correlates their noise (neighbouring
-// rows share part of their window: at lag 1 the kernel's own correction
-// assumes the force and the acceleration share one filter, and left the floor
-// 8-10 % low on null logs of the independent generator). A smooth force, an
-// effect or a structure barely reaches these differences; the floor is never
-// the residual's own RMS.
-void measure_noise_floor(Diagnosis& D) {
-  const MotionProblem& P = D.motion;
-  const int R = P.rows();
-  if (R < 20 || D.residual_final.size() != 3 * R) return;
-  const std::vector<double> rho = kernel_autocorrelation(P.accel_kernel);
-  auto rho_at = [&](int lag) { return lag < static_cast<int>(rho.size()) ? rho[static_cast<std::size_t>(lag)] : 0.0; };
-  int L0 = 1;
-  while (L0 < 8 && std::fabs(rho_at(L0 * P.stride)) > kWhiteCorrelation) ++L0;
-  for (int i = 0; i < 3; ++i) {
-    std::vector<double> s(static_cast<std::size_t>(R));
-    double ss = 0.0;
-    for (int r = 0; r < R; ++r) {
-      s[static_cast<std::size_t>(r)] = D.residual_final(3 * r + i);
-      ss += s[static_cast<std::size_t>(r)] * s[static_cast<std::size_t>(r)];
-    }
-    // Two lags beyond the correlation, their variances averaged, each
-    // corrected for what correlation is left at its lag.
-    double v = 0.0;
-    for (int L = L0; L <= L0 + 1; ++L) {
-      const double f = (6.0 - 8.0 * rho_at(L * P.stride) + 2.0 * rho_at(2 * L * P.stride)) / 6.0;
-      const double n = noise_from_differences(s, L);
-      v += 0.5 * n * n / std::max(f, 0.1);
-    }
-    D.axis_floor[i] = std::sqrt(v);
-    D.axis_residual_rms[i] = std::sqrt(ss / R);
-  }
-  // The floor the verdict and the loop compare against (the weights keep axis_noise).
-  D.noise_floor = std::sqrt(D.axis_floor.squaredNorm() / 3.0);
-  D.noise_floor_source = "the residual's high band: second differences of each axis' residual along time at lags " +
-                         std::to_string(L0) + " and " + std::to_string(L0 + 1) +
-                         " rows (1.4826 MAD / sqrt 6), beyond the correlation of the rows' filter";
+// Effects named that leave an axis well above its floor have not explained it: a note.
+void note_unexplained_axes(Diagnosis& D) {
+  // Effects named that leave an axis well above its floor have not explained it.
+  if (!D.found().empty() && D.outside_library.empty())
+    for (int i = 0; i < 3; ++i)
+      if (D.axis_floor[i] > 0.0 && D.axis_residual_rms[i] > kExplainedRatio * D.axis_floor[i]) {
+        std::ostringstream os;
+        os.precision(3);
+        os << "axis " << i + 1 << ": the residual stays " << D.axis_residual_rms[i] / D.axis_floor[i]
+           << " x its noise floor after the effects named: they do not explain all of it, and the scan locates "
+              "no structure in the rest";
+        D.notes.push_back(os.str());
+      }
 }
 
 bool steady_on_one_way_axis(const std::string& effect) {
@@ -516,7 +538,7 @@ Diagnosis diagnose_aligned(const io::MotionData& data, const ctl::Machine& model
   note_unidentifiable_base(D, E);
   name_missing_delay(D, E, opt);
   if (opt.structure_search) D.structure = find_motion_structure(D.motion, D.residual_final, D.axis_noise);
-  measure_noise_floor(D);
+  note_unexplained_axes(D);
   return D;
 }
 

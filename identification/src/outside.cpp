@@ -157,8 +157,13 @@ std::vector<StructureFinding> structure_that_beats_library(const Diagnosis& D, c
   probe.axis_noise = D.axis_noise;
   probe.residual_final = E.fit(Eigen::MatrixXd(E.rows(), 0), false).residual;
   std::vector<StructureFinding> early;
-  for (const auto& f : strong_structure(probe, D.motion, opt))
-    if (f.kind == "bump" || f.kind == "step" || f.kind == "smooth") early.push_back(f);
+  // Every finding of the scan (|z| > 6 for a bump or a step, p < 1e-4 after
+  // the look-elsewhere for a smooth force), not only the strong ones: the
+  // comparison by BIC below, against the effects it would replace, is the test.
+  for (const auto& f : find_motion_structure(D.motion, probe.residual_final, D.axis_noise, true))
+    if ((f.kind == "bump" || f.kind == "step" || f.kind == "smooth") && f.axis >= 0 &&
+        std::fabs(f.size) >= 0.5 * D.axis_noise[f.axis])
+      early.push_back(f);
   if (early.empty()) return out;
   // The fit of the effects chosen; and without those on the finding's axis, the finding in their place.
   const std::vector<int> found = D.found();

@@ -322,7 +322,9 @@ SmoothFit smooth_fit(const MotionProblem& P, const AxisResidual& A, const std::s
 std::optional<StructureFinding> smooth_finding(const MotionProblem& P, const AxisResidual& A) {
   const int R = P.rows(), i = A.axis;
   std::vector<SmoothFit> fits;
-  for (const char* v : kSmoothVariables) fits.push_back(smooth_fit(P, A, v));
+  const bool has_a = P.a_columns.size() >= static_cast<std::size_t>(R) || P.a.size() >= static_cast<std::size_t>(R);
+  for (const char* v : kSmoothVariables)
+    if (v[0] != 'a' || has_a) fits.push_back(smooth_fit(P, A, v));
   const auto best = std::max_element(fits.begin(), fits.end(),
                                      [](const SmoothFit& a, const SmoothFit& b) { return a.removed < b.removed; });
   if (best->coef.size() == 0 || !(best->p < 1e-4)) return std::nullopt;
@@ -391,7 +393,8 @@ double state_variable(const MotionProblem& P, int r, const std::string& name) {
   switch (name[0]) {
     case 'd': return P.d[rr][j];
     case 'v': return P.v[rr][j];
-    case 'a': return P.a_columns[rr][j];
+    // The columns' long-kernel estimate; a problem made without it (tests) has the row's own.
+    case 'a': return rr < P.a_columns.size() ? P.a_columns[rr][j] : P.a[rr][j];
     default: throw Error("unknown state variable '" + name + "' (d1..d3, v1..v3, a1..a3, t)");
   }
 }
@@ -435,7 +438,7 @@ Eigen::MatrixXd smooth_columns(const MotionProblem& P, int axis, const std::stri
 
 std::vector<StructureFinding> find_motion_structure(const MotionProblem& P,
                                                     const Eigen::VectorXd& residual,
-                                                    const Vec3& axis_noise) {
+                                                    const Vec3& axis_noise, bool bump_beside_step) {
   std::vector<StructureFinding> out;
   const int R = P.rows();
   if (R < 20) return out;
@@ -452,7 +455,7 @@ std::vector<StructureFinding> find_motion_structure(const MotionProblem& P,
     const AlongPosition o = along_position(P, *A);
     std::optional<StructureFinding> step = step_finding(P, *A, o);
     // A bump is not reported beside a step on the same axis.
-    std::optional<StructureFinding> bump = step ? std::nullopt : bump_finding(P, *A, o);
+    std::optional<StructureFinding> bump = step && !bump_beside_step ? std::nullopt : bump_finding(P, *A, o);
     add(out, std::move(step));
     add(out, std::move(bump));
   }

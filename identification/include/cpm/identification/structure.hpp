@@ -34,9 +34,11 @@ void legendre_row(double x, double lo, double hi, double* out);
 // acceleration: at the row.
 Eigen::MatrixXd smooth_columns(const MotionProblem& P, int axis, const std::string& var, double lo, double hi);
 
+// bump_beside_step: also a bump on an axis where a step was found (by
+// default not: one of the two describes the axis).
 std::vector<StructureFinding> find_motion_structure(const MotionProblem& P,
                                                     const Eigen::VectorXd& residual,
-                                                    const Vec3& axis_noise);
+                                                    const Vec3& axis_noise, bool bump_beside_step = false);
 
 // Periodogram of y against coordinate x for wavelengths in [lmin, lmax]:
 // the least-squares power of a sine/cosine pair (weighted sum of squares
