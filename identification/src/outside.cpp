@@ -149,6 +149,27 @@ std::vector<StructureFinding> confirmed_outside_library(const Diagnosis& D, cons
   return kept;
 }
 
+namespace {
+
+// The measurement that would show the finding for what it is.
+std::string settle_outside(const StructureFinding& f) {
+  const std::string ax = std::to_string(f.axis + 1);
+  const int j = f.coordinate.size() == 2 && f.coordinate[0] != 't' ? f.coordinate[1] - '1' : -1;
+  if (f.kind == "bump" || f.kind == "step")
+    return "pass " + f.coordinate + " slowly in both directions and at another feed: a force of position comes back "
+           "at the same place";
+  if (f.coordinate == "t") return "repeat the log: a force of time does not repeat with the motion";
+  if (j >= 0 && j != f.axis)
+    return "move axis " + std::to_string(j + 1) + " alone while axis " + ax + " holds still: a force that follows axis " +
+           std::to_string(j + 1) + " then shows on axis " + ax + " at rest";
+  if (f.coordinate[0] == 'v') return "run axis " + ax + " at several constant feeds in both directions";
+  if (f.coordinate[0] == 'a') return "run axis " + ax + " with other accelerations at the same speeds";
+  return "cover the stroke of axis " + ax + " at several speeds in both directions: a force of position repeats at "
+         "every pass";
+}
+
+}  // namespace
+
 std::vector<StructureFinding> structure_that_beats_library(const Diagnosis& D, const Engine& E,
                                                            const DiagnoseOptions& opt) {
   std::vector<StructureFinding> out;
@@ -204,6 +225,18 @@ void lead_with_outside_library(Diagnosis& D) {
   os << "missing: something no library effect describes: ";
   for (std::size_t k = 0; k < D.outside_library.size(); ++k)
     os << (k ? "; " : "") << D.outside_library[k].text << " (" << std::lround(std::fabs(D.outside_library[k].z)) << " σ)";
+  const StructureFinding& lead = D.outside_library.front();
+  if (!lead.also_in.empty()) {
+    os << ". These data cannot tell " << lead.coordinate;
+    for (const auto& v : lead.also_in) os << " from " << v;
+    os << " apart";
+  }
+  if (!D.partial.empty()) {
+    os << ". Partly explained by";
+    for (std::size_t k = 0; k < D.partial.size(); ++k) os << (k ? "," : "") << " " << D.partial[k];
+    os << " (named before the structure was fitted, not beside it)";
+  }
+  os << ". To settle it: " << settle_outside(lead);
   if (D.verdict >= 0) os << ". Beside it, " << D.verdict_text;
   else os << ". No library effect is missing beside it";
   D.verdict_text = os.str();

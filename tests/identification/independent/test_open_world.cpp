@@ -95,7 +95,10 @@ TEST(OpenWorld, LocalBumpLeadsOnItsAxisAndPlace) {
   for (const auto& f : D.structure) std::printf("  structure left: %s (%.1f sigma)\n", f.text.c_str(), f.z);
   ASSERT_FALSE(D.outside_library.empty());
   EXPECT_EQ(D.outside_library.front().axis, 2);
+  EXPECT_NEAR(D.outside_library.front().location, centre, (hi - lo) / 15.0);
   EXPECT_EQ(D.verdict, -1) << D.candidates[0].label();
+  // What the library made of it before the bump was fitted is said as partial.
+  EXPECT_FALSE(D.partial.empty());
 }
 
 // Defect (a): Coulomb and Stribeck friction together on the vertical axis
