@@ -109,6 +109,13 @@ std::string implausible(const CandidateResult& c);
 std::vector<StructureFinding> strong_structure(const Diagnosis& D, const MotionProblem& P, const DiagnoseOptions& opt);
 LinearProblem with_structure(const LinearProblem& L, const std::vector<StructureFinding>& S, const MotionProblem& P);
 void lead_with_outside_library(Diagnosis& D);
+// Structure in what the model as given leaves (a bump, a step, a smooth force:
+// local or smooth shapes no library effect has) that explains the data better,
+// by BIC, than the library effects the selection chose on its axis: the
+// selection takes library effects first, and cogging plus a spring and a drive
+// gain imitate a bump well enough that nothing is left for the scan after them.
+std::vector<StructureFinding> structure_that_beats_library(const Diagnosis& D, const Engine& E,
+                                                           const DiagnoseOptions& opt);
 // Of D.outside_library, the findings that the scan still finds strong when the
 // others are fitted beside the effects chosen: a large finding leaks into the
 // nuisance fit (a bump on z tilts the planes) and shows as structure

@@ -260,6 +260,7 @@ constexpr double kClearlyBetter = 2.0;
 
 SuggestedUserEffect fit_pitch_table(const KinematicProblem& P, const Engine& E, int axis, int n) {
   SuggestedUserEffect T;
+  T.kind = "pitch_table";
   T.axis = axis;
   const KinematicSpan sp = span_of(P);
   const double lo = sp.lo[axis], hi = sp.hi[axis];
@@ -442,7 +443,8 @@ void kinematic_outside_library(const KinematicProblem& P, const Engine& E, const
   }
   D.verdict = kept.empty() ? -1 : kept.front();
   D.also.assign(kept.size() > 1 ? kept.begin() + 1 : kept.end(), kept.end());
-  D.partial = partial;
+  D.partial.clear();
+  for (int j : partial) D.partial.push_back(D.candidates[static_cast<std::size_t>(j)].label());
   D.outside_library = {f};
   const JointFit joint = Es.fit(XK);
   D.residual_final = joint.residual;

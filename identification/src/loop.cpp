@@ -44,15 +44,21 @@ bool has(const std::vector<FitRequest>& v, const FitRequest& r) {
 // Why the loop stops at this diagnosis (empty: go on and add one of `next`,
 // the effects it names that the model does not have yet, best first).
 std::string why_stop(const Diagnosis& D, const LoopResult& R, std::vector<FitRequest>& next) {
-  if (!D.outside_library.empty())
-    return "something no library effect describes remains: " + D.outside_library.front().text;
   const std::vector<int> found = D.found();
-  if (found.empty()) return "nothing is missing: the diagnosis finds no significant effect";
   next.clear();
   for (int j : found) {
     const CandidateResult& c = D.candidates[static_cast<std::size_t>(j)];
     if (!has(R.added, {c.effect, c.axis})) next.push_back({c.effect, c.axis});
   }
+  // The library effects named beside an outside finding are added first: the
+  // finding stops the loop only once nothing of the library is left to add (a
+  // structure far smaller than what the effects explain, or under the floor,
+  // is reported but must not keep them out of the model).
+  if (!D.outside_library.empty()) {
+    if (!next.empty()) return {};
+    return "something no library effect describes remains: " + D.outside_library.front().text;
+  }
+  if (found.empty()) return "nothing is missing: the diagnosis finds no significant effect";
   if (next.empty())
     return "the diagnosis names " + D.candidates[static_cast<std::size_t>(found.front())].label() +
            " again after it was fitted: the data cannot settle it";
@@ -131,6 +137,51 @@ std::optional<Refit> first_that_lowers(const io::DataSet& data, const ctl::Machi
 
 }  // namespace
 
+SuggestedUserEffect suggest_user_effect(const StructureFinding& f) {
+  SuggestedUserEffect s;
+  s.axis = f.axis;
+  std::ostringstream os;
+  os.precision(4);
+  const std::string ax = std::to_string(f.axis + 1);
+  if (f.kind == "smooth" && f.shape == "linear") {
+    s.kind = "expression";
+    s.formula = "c*" + f.coordinate;
+    s.params = {{"c", f.slope}};
+    os << "add to axis " << ax << " the expression effect c*" << f.coordinate << " with c = " << f.slope
+       << " (N per SI unit of " << f.coordinate << ")";
+  } else if (f.kind == "smooth") {
+    s.kind = "table";
+    s.input = f.coordinate;
+    s.nodes = f.nodes;
+    s.values = f.values;
+  } else if (f.kind == "bump" || f.kind == "step") {
+    // Linear interpolation between nodes: zero outside, the excess over the stretch found.
+    const double w = std::max(f.hi - f.lo, 1e-4);
+    s.kind = "table";
+    s.input = f.coordinate;
+    if (f.kind == "bump") {
+      s.nodes = {f.lo - w, f.lo, f.hi, f.hi + w};
+      s.values = {0.0, f.size, f.size, 0.0};
+    } else {
+      s.nodes = {f.location - 1e-3, f.location + 1e-3};
+      s.values = {0.0, f.size};
+    }
+  } else {
+    os << "no table or expression suggested: a " << f.kind << " structure is what a library effect describes "
+       << "(cogging, friction) once its cause is known";
+    s.text = os.str();
+    return s;
+  }
+  if (s.kind == "table") {
+    os << "add to axis " << ax << " a table effect over " << s.input << ": nodes";
+    for (double x : s.nodes) os << " " << x;
+    os << ", values (N)";
+    for (double v : s.values) os << " " << v;
+  }
+  s.text = os.str();
+  return s;
+}
+
 LoopResult run_loop(const io::DataSet& data, const ctl::MachineModel& model, const DiagnoseOptions& o, int max_steps) {
   LoopResult R;
   R.model = model;
@@ -141,6 +192,7 @@ LoopResult run_loop(const io::DataSet& data, const ctl::MachineModel& model, con
     R.stop = why_stop(D, R, named);
     if (!R.stop.empty()) {
       R.outside_library = !D.outside_library.empty();
+      if (R.outside_library) R.suggestion = suggest_user_effect(D.outside_library.front());
       return R;
     }
     std::string label;
@@ -175,6 +227,7 @@ std::string loop_text(const LoopResult& R) {
       << " " << u << ")\n";
   }
   o << "stop: " << R.stop << "\n";
+  if (!R.suggestion.text.empty()) o << "suggested user effect: " << R.suggestion.text << "\n";
   if (!R.steps.empty()) o << "last diagnosis: " << R.steps.back().verdict << "\n";
   return o.str();
 }
@@ -193,9 +246,28 @@ std::string loop_json(const LoopResult& R, const std::string& data_file, const s
     for (const auto& p : c.params) params[p.name] = p.value;
     effects.push_back({{"effect", c.effect}, {"axis", c.axis >= 0 ? Json(c.axis + 1) : Json()}, {"params", params}});
   }
-  const Json o = {{"kind", R.kind}, {"units", R.units}, {"data_file", data_file}, {"out", out_file},
-                  {"waterfall", waterfall}, {"effects", effects}, {"outside_library", R.outside_library},
-                  {"stop", R.stop}};
+  Json o = {{"kind", R.kind}, {"units", R.units}, {"data_file", data_file}, {"out", out_file},
+            {"waterfall", waterfall}, {"effects", effects}, {"outside_library", R.outside_library},
+            {"stop", R.stop}};
+  // The outside finding as a user effect for the model file's `user_effects:` list.
+  const SuggestedUserEffect& s = R.suggestion;
+  if (!s.kind.empty()) {
+    Json u = {{"kind", s.kind}, {"axis", s.axis + 1}};
+    if (s.kind == "table") {
+      u["input"] = s.input;
+      u["nodes"] = s.nodes;
+      u["values"] = s.values;
+    } else {
+      u["formula"] = s.formula;
+      Json params = Json::object();
+      for (const auto& [name, value] : s.params) params[name] = value;
+      u["params"] = params;
+    }
+    u["text"] = s.text;
+    o["suggested_user_effect"] = u;
+  } else {
+    o["suggested_user_effect"] = nullptr;
+  }
   return o.dump(2, ' ', false, Json::error_handler_t::replace) + "\n";
 }
 

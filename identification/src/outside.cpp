@@ -22,25 +22,46 @@ constexpr double kStrongZ = 8.0;
 
 // Columns that describe a finding on its axis' rows.
 Eigen::MatrixXd structure_columns(const StructureFinding& f, const MotionProblem& P) {
+  if (f.kind == "smooth") return smooth_columns(P, f.axis, f.coordinate, f.lo, f.hi);
   const int R = P.rows(), i = f.axis;
   const double tp = 2.0 * std::numbers::pi;
   const int j = f.coordinate.size() == 2 && f.coordinate[0] == 'd' ? f.coordinate[1] - '1' : -1;
   const bool two = f.kind == "periodic" || f.kind == "periodic_time";
-  // A bump: its local profile, six sub-bins over twice the bin the scan found
-  // (one bin's mean leaves the shape of a narrow excess for other columns to take).
-  constexpr int kBumpBins = 6;
+  // A bump: its local profile, sixteen sub-bins over three times the bin the
+  // scan found, each the indicator of the sample's position through the rows'
+  // filter as the effect columns are (six sub-bins over twice the bin, of the
+  // row's position, left enough of a Gaussian tight spot for cogging and a
+  // spring to be named beside it), and a constant on the axis: the bump's
+  // mean over the log, which the model as given has nowhere else to put (on z
+  // a spring with its rest position at the bound and a drive gain took it).
+  constexpr int kBumpBins = 16;
+  constexpr double kBumpSpan = 3.0;
   const bool bump = f.kind == "bump";
-  Eigen::MatrixXd X = Eigen::MatrixXd::Zero(3 * R, bump ? kBumpBins : (two ? 2 : 1));
-  const double w = std::max(f.hi - f.lo, 1e-6), x0 = f.location - w;
+  if (bump) {
+    // The scan's bin holds one twentieth of the rows: where the axis dwells it
+    // is narrower than the bump; the profile spans a fifth of the stroke at least.
+    double mn = 1e300, mx = -1e300;
+    for (int r = 0; r < R; ++r) {
+      mn = std::min(mn, P.d[static_cast<std::size_t>(r)][i]);
+      mx = std::max(mx, P.d[static_cast<std::size_t>(r)][i]);
+    }
+    const double wb = std::max({f.hi - f.lo, 0.2 * (mx - mn) / kBumpSpan, 1e-6});
+    const double xb = f.location - 0.5 * kBumpSpan * wb;
+    Eigen::MatrixXd B = Eigen::MatrixXd::Zero(3 * R, kBumpBins + 1);
+    for (int r = 0; r < R; ++r) B(3 * r + i, kBumpBins) = 1.0;
+    for (int b = 0; b < kBumpBins; ++b)
+      B.col(b) = P.filter_axis(i, [&](int s, int) {
+        const double u = (P.d_hat[static_cast<std::size_t>(s)][i] - xb) / (kBumpSpan * wb) * kBumpBins;
+        return u >= b && u < b + 1 ? 1.0 : 0.0;
+      });
+    return B;
+  }
+  Eigen::MatrixXd X = Eigen::MatrixXd::Zero(3 * R, two ? 2 : 1);
   double tm = 0.0;
   for (int r = 0; r < R; ++r) tm += P.t[r] / R;
   for (int r = 0; r < R; ++r) {
     const int row = 3 * r + i;
-    if (bump) {
-      const int b = static_cast<int>(std::floor((P.d[r][i] - x0) / (2.0 * w) * kBumpBins));
-      if (b >= 0 && b < kBumpBins) X(row, b) = 1.0;
-    }
-    else if (f.kind == "step") X(row, 0) = P.d[r][i] > f.location ? 1.0 : 0.0;
+    if (f.kind == "step") X(row, 0) = P.d[r][i] > f.location ? 1.0 : 0.0;
     else if (f.kind == "trend") X(row, 0) = P.t[r] - tm;
     else if (f.kind == "direction") X(row, 0) = P.v[r][i] > 0.0 ? 1.0 : (P.v[r][i] < 0.0 ? -1.0 : 0.0);
     else if (f.kind == "periodic" && j >= 0) {
@@ -90,6 +111,7 @@ bool same_finding(const StructureFinding& a, const StructureFinding& b) {
   if (a.axis != b.axis || a.kind != b.kind || a.coordinate != b.coordinate) return false;
   const double width = std::max({a.hi - a.lo, b.hi - b.lo, 1e-3});
   if (a.kind == "bump" || a.kind == "step") return std::fabs(a.location - b.location) <= width;
+  if (a.kind == "smooth") return true;  // same axis and variable
   if (a.kind == "periodic" || a.kind == "periodic_time")
     return std::fabs(a.location - b.location) <= 0.1 * std::max(std::fabs(a.location), std::fabs(b.location));
   return true;
@@ -127,12 +149,94 @@ std::vector<StructureFinding> confirmed_outside_library(const Diagnosis& D, cons
   return kept;
 }
 
+namespace {
+
+// The measurement that would show the finding for what it is.
+std::string settle_outside(const StructureFinding& f) {
+  const std::string ax = std::to_string(f.axis + 1);
+  const int j = f.coordinate.size() == 2 && f.coordinate[0] != 't' ? f.coordinate[1] - '1' : -1;
+  if (f.kind == "bump" || f.kind == "step")
+    return "pass " + f.coordinate + " slowly in both directions and at another feed: a force of position comes back "
+           "at the same place";
+  if (f.coordinate == "t") return "repeat the log: a force of time does not repeat with the motion";
+  if (j >= 0 && j != f.axis)
+    return "move axis " + std::to_string(j + 1) + " alone while axis " + ax + " holds still: a force that follows axis " +
+           std::to_string(j + 1) + " then shows on axis " + ax + " at rest";
+  if (f.coordinate[0] == 'v') return "run axis " + ax + " at several constant feeds in both directions";
+  if (f.coordinate[0] == 'a') return "run axis " + ax + " with other accelerations at the same speeds";
+  return "cover the stroke of axis " + ax + " at several speeds in both directions: a force of position repeats at "
+         "every pass";
+}
+
+}  // namespace
+
+std::vector<StructureFinding> structure_that_beats_library(const Diagnosis& D, const Engine& E,
+                                                           const DiagnoseOptions& opt) {
+  std::vector<StructureFinding> out;
+  if (!opt.structure_search) return out;
+  Diagnosis probe;
+  probe.axis_noise = D.axis_noise;
+  probe.residual_final = E.fit(Eigen::MatrixXd(E.rows(), 0), false).residual;
+  std::vector<StructureFinding> early;
+  // Every finding of the scan (|z| > 6 for a bump or a step, p < 1e-4 after
+  // the look-elsewhere for a smooth force), not only the strong ones: the
+  // comparison by BIC below, against the effects it would replace, is the test.
+  for (const auto& f : find_motion_structure(D.motion, probe.residual_final, D.axis_noise, true))
+    if ((f.kind == "bump" || f.kind == "step" || f.kind == "smooth") && f.axis >= 0 &&
+        std::fabs(f.size) >= 0.5 * D.axis_noise[f.axis])
+      early.push_back(f);
+  if (early.empty()) return out;
+  // The fit of the effects chosen; and without those on the finding's axis, the finding in their place.
+  const std::vector<int> found = D.found();
+  bool base_in = false;
+  for (int j : found) base_in |= is_base_refit(D.candidates[static_cast<std::size_t>(j)].effect);
+  auto columns_except = [&](int axis, int& k) {
+    Eigen::MatrixXd X(E.rows(), 0);
+    k = 0;
+    for (int j : found) {
+      const CandidateResult& c = D.candidates[static_cast<std::size_t>(j)];
+      if (is_base_refit(c.effect) || is_alignment(c.effect) || c.columns.rows() != E.rows()) continue;
+      if (axis >= 0 && c.axis == axis) continue;
+      X = hstack(X, c.columns);
+      k += std::max(static_cast<int>(c.columns.cols()), c.n_params);
+    }
+    return X;
+  };
+  int kA = 0;
+  const JointFit A = E.fit(columns_except(-1, kA), base_in);
+  const double n = std::max(10.0, A.n_eff), fr = E.floor_rss();
+  for (const StructureFinding& f : early) {
+    int kB = 0;
+    const Eigen::MatrixXd XB = hstack(columns_except(f.axis, kB), structure_columns(f, D.motion));
+    kB += static_cast<int>(structure_columns(f, D.motion).cols());
+    const JointFit B = E.fit(XB, base_in);
+    if (!B.full_rank) continue;
+    if (bic_change(n, B.rss, A.rss, fr, kB - kA) < 0.0) out.push_back(f);
+  }
+  return out;
+}
+
 void lead_with_outside_library(Diagnosis& D) {
   if (D.outside_library.empty()) return;
+  // The strongest finding leads.
+  std::stable_sort(D.outside_library.begin(), D.outside_library.end(),
+                   [](const StructureFinding& a, const StructureFinding& b) { return std::fabs(a.z) > std::fabs(b.z); });
   std::ostringstream os;
   os << "missing: something no library effect describes: ";
   for (std::size_t k = 0; k < D.outside_library.size(); ++k)
     os << (k ? "; " : "") << D.outside_library[k].text << " (" << std::lround(std::fabs(D.outside_library[k].z)) << " σ)";
+  const StructureFinding& lead = D.outside_library.front();
+  if (!lead.also_in.empty()) {
+    os << ". These data cannot tell " << lead.coordinate;
+    for (const auto& v : lead.also_in) os << " from " << v;
+    os << " apart";
+  }
+  if (!D.partial.empty()) {
+    os << ". Partly explained by";
+    for (std::size_t k = 0; k < D.partial.size(); ++k) os << (k ? "," : "") << " " << D.partial[k];
+    os << " (named before the structure was fitted, not beside it)";
+  }
+  os << ". To settle it: " << settle_outside(lead);
   if (D.verdict >= 0) os << ". Beside it, " << D.verdict_text;
   else os << ". No library effect is missing beside it";
   D.verdict_text = os.str();

@@ -87,14 +87,19 @@ Json named_effect_json(const CandidateResult& c) {
 
 Json structure_json(const std::vector<StructureFinding>& items) {
   Json a = Json::array();
-  for (const auto& f : items)
-    a.push_back({{"kind", f.kind},
-                 {"axis", axis_json(f.axis)},
-                 {"coordinate", f.coordinate},
-                 {"location", f.location},
-                 {"size", f.size},
-                 {"z", f.z},
-                 {"text", f.text}});
+  for (const auto& f : items) {
+    Json j = {{"kind", f.kind},
+              {"axis", axis_json(f.axis)},
+              {"coordinate", f.coordinate},
+              {"location", f.location},
+              {"size", f.size},
+              {"z", f.z},
+              {"text", f.text}};
+    if (f.kind == "smooth")
+      j["smooth"] = {{"range", {f.lo, f.hi}}, {"shape", f.shape}, {"slope", f.slope},
+                     {"nodes", f.nodes}, {"values", f.values}, {"also_in", f.also_in}};
+    a.push_back(std::move(j));
+  }
   return a;
 }
 
@@ -122,18 +127,24 @@ Json verdict_json(const Diagnosis& D) {
   v["effects"] = std::move(effects);
   // Structure no library effect describes that leads the verdict (missing = "outside_library").
   v["outside_library"] = structure_json(D.outside_library);
-  // Library effects that explain part of the outside finding, not named.
-  Json partial = Json::array();
-  for (int j : D.partial) {
-    const auto& c = D.candidates[static_cast<std::size_t>(j)];
-    partial.push_back({{"effect", c.effect}, {"axis", axis_json(c.axis)}});
-  }
-  v["partial"] = std::move(partial);
+  // Library effects that explain part of the outside finding, not named beside it (labels).
+  v["partial"] = D.partial;
   // User effects that would describe it, as model-file data (user_effects:).
   Json user = Json::array();
-  for (const auto& u : D.suggested_user_effects)
-    user.push_back({{"kind", u.kind}, {"axis", axis_json(u.axis)}, {"nodes", u.nodes}, {"values", u.values},
-                    {"rms_after", u.rms_after}, {"text", u.text}});
+  for (const auto& u : D.suggested_user_effects) {
+    Json j = {{"kind", u.kind}, {"axis", axis_json(u.axis)}, {"rms_after", u.rms_after}, {"text", u.text}};
+    if (u.kind == "expression") {
+      j["formula"] = u.formula;
+      Json params = Json::object();
+      for (const auto& [name, value] : u.params) params[name] = value;
+      j["params"] = std::move(params);
+    } else {
+      if (!u.input.empty()) j["input"] = u.input;
+      j["nodes"] = u.nodes;
+      j["values"] = u.values;
+    }
+    user.push_back(std::move(j));
+  }
   v["suggested_user_effects"] = std::move(user);
   v["text"] = D.verdict_text;
   return v;
@@ -191,9 +202,12 @@ std::string diagnosis_json(const Diagnosis& D) {
   o["baseline"] = {{"rms", D.baseline_rms}, {"max", D.baseline_max}, {"axis_rms", vec_json(D.baseline_axis_rms)}};
   o["base_refit"] = {{"rms", D.base_refit_rms}};
   o["noise_floor"] = D.noise_floor;
-  if (D.kind != "motion") {  // kinematic data: where it comes from (repeated poses, the bar's high band, ...)
-    o["noise_floor_source"] = D.noise_floor_source;
-    o["noise_floor_upper_bound"] = D.noise_floor_upper_bound;
+  // Where the floor comes from (repeated poses, the bar's high band, the residual's high band, ...).
+  o["noise_floor_source"] = D.noise_floor_source;
+  o["noise_floor_upper_bound"] = D.noise_floor_upper_bound;
+  if (D.kind == "motion") {
+    o["axis_noise_floor"] = vec_json(D.axis_floor);
+    o["axis_residual_rms"] = vec_json(D.axis_residual_rms);
   }
   Json candidates = Json::array();
   for (const auto& c : D.candidates) candidates.push_back(candidate_json(c));

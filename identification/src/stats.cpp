@@ -83,10 +83,11 @@ double median(std::vector<double> x) {
   return *mid;
 }
 
-double noise_from_differences(const std::vector<double>& x) {
-  if (x.size() < 5) return 0.0;
-  std::vector<double> d2(x.size() - 2);
-  for (std::size_t k = 0; k + 2 < x.size(); ++k) d2[k] = std::fabs(x[k + 2] - 2.0 * x[k + 1] + x[k]);
+double noise_from_differences(const std::vector<double>& x, int lag) {
+  const auto L = static_cast<std::size_t>(std::max(1, lag));
+  if (x.size() < 2 * L + 3) return 0.0;
+  std::vector<double> d2(x.size() - 2 * L);
+  for (std::size_t k = 0; k + 2 * L < x.size(); ++k) d2[k] = std::fabs(x[k + 2 * L] - 2.0 * x[k + L] + x[k]);
   return 1.4826 * median(std::move(d2)) / std::sqrt(6.0);
 }
 

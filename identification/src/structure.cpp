@@ -217,6 +217,7 @@ std::optional<StructureFinding> step_finding(const MotionProblem& P, const AxisR
 std::optional<StructureFinding> bump_finding(const MotionProblem& P, const AxisResidual& A, const AlongPosition& o) {
   const int R = P.rows(), i = A.axis, B = 20;
   double bz = 0.0, bmean = 0.0, bx = 0.0, blo = 0.0, bhi = 0.0;
+  int b0 = 0, b1 = 0;  // the bin's first and one-past-last rows in position order
   for (int b = 0; b < B; ++b) {
     const int a0 = b * R / B, a1 = (b + 1) * R / B;
     if (a1 - a0 < 5) continue;
@@ -225,15 +226,146 @@ std::optional<StructureFinding> bump_finding(const MotionProblem& P, const AxisR
     if (std::fabs(z) > std::fabs(bz)) {
       bz = z;
       bmean = m;
+      b0 = a0;
+      b1 = a1;
       bx = P.d[o.idx[(a0 + a1) / 2]][i];
       blo = P.d[o.idx[a0]][i];
       bhi = P.d[o.idx[a1 - 1]][i];
     }
   }
+  // Its z against what is left with the excess taken out: the residual's own
+  // spread and autocorrelation hold the bump itself (a 1.1 N bump on z stood
+  // at 6 sigma behind them).
+  if (std::fabs(bmean) > A.tiny) {
+    std::vector<double> left = A.y;
+    for (int q = b0; q < b1; ++q) left[static_cast<std::size_t>(o.idx[static_cast<std::size_t>(q)])] -= bmean;
+    double m = 0.0, v = 0.0;
+    for (double x : left) m += x / R;
+    for (double x : left) v += (x - m) * (x - m) / R;
+    const double infl = static_cast<double>(R) / std::max(2.0, effective_samples({left}));
+    const double z_left = bmean / std::sqrt(v * infl / static_cast<double>(std::max(1, b1 - b0)));
+    if (std::fabs(z_left) > std::fabs(bz)) bz = z_left;
+  }
   if (!(std::fabs(bz) > 6.0 && std::fabs(bmean) > A.tiny)) return std::nullopt;
   return StructureFinding{"bump", i, cat("d", i + 1), bx, bmean, bz,
                           cat("axis ", i + 1, ": a local excess of ", bmean, " N around d", i + 1, " = ", bx * 1e3, " mm"),
                           blo, bhi};
+}
+
+// 6. A smooth force that follows one variable of the state: for each of d1..d3,
+// v1..v3, a1..a3 and t, Legendre polynomials of degree 1..kSmoothDegree fitted
+// to the axis' residual; the removed sum of squares, in units of the
+// residual's variance inflated by its autocorrelation, is ~ chi^2 with
+// kSmoothDegree dof under noise. Look-elsewhere over every (axis, variable)
+// pair. The variable that removes most is reported, with those that remove at
+// least 80 % as much (v_j and a_j of one sine, d_j and a_j).
+constexpr double kSmoothAlsoShare = 0.8;
+const char* const kSmoothVariables[] = {"d1", "d2", "d3", "v1", "v2", "v3", "a1", "a2", "a3", "t"};
+constexpr int kSmoothPairs = 3 * 10;
+
+struct SmoothFit {
+  std::string var;
+  double lo = 0.0, hi = 0.0;
+  double removed = 0.0, chi = 0.0, p = 1.0;
+  Eigen::VectorXd coef;       // on the Legendre columns (after the mean)
+  double linear_share = 0.0, odd_share = 0.0;
+};
+
+SmoothFit smooth_fit(const MotionProblem& P, const AxisResidual& A, const std::string& var) {
+  constexpr int K = kSmoothDegree;
+  const int R = P.rows();
+  SmoothFit s;
+  s.var = var;
+  std::vector<double> x(R);
+  for (int r = 0; r < R; ++r) x[r] = state_variable(P, r, var);
+  const auto [mn, mx] = std::minmax_element(x.begin(), x.end());
+  s.lo = *mn;
+  s.hi = *mx;
+  if (!(s.hi > s.lo)) return s;
+  Eigen::MatrixXd X(R, K);
+  double row[K];
+  for (int r = 0; r < R; ++r) {
+    legendre_row(x[r], s.lo, s.hi, row);
+    for (int k = 0; k < K; ++k) X(r, k) = row[k];
+  }
+  X.rowwise() -= X.colwise().mean();
+  Eigen::VectorXd y(R);
+  for (int r = 0; r < R; ++r) y(r) = A.y[r] - A.mean;
+  const Eigen::MatrixXd G = X.transpose() * X;
+  const Eigen::VectorXd b = X.transpose() * y;
+  const Eigen::LDLT<Eigen::MatrixXd> ldlt(G);
+  if (ldlt.info() != Eigen::Success) return s;
+  s.coef = ldlt.solve(b);
+  s.removed = std::max(0.0, s.coef.dot(b));
+  // The F-test's denominator: what the fit leaves, its variance inflated by
+  // its own autocorrelation (the residual's variance before the fit holds the
+  // structure itself, and a strong one hid behind it at 7 sigma).
+  const Eigen::VectorXd left = y - X * s.coef;
+  const std::vector<double> left_v(left.data(), left.data() + R);
+  const double var_left = left.squaredNorm() / std::max(1, R - K - 1);
+  const double infl_left = static_cast<double>(R) / std::max(2.0, effective_samples({left_v}));
+  s.chi = var_left > 0.0 ? s.removed / (var_left * infl_left) : 0.0;
+  s.p = std::min(1.0, f_tail(s.chi / K, K, 1e7) * kSmoothPairs);
+  // Shares of the fitted curve: its linear part and its odd part (P1, P3, P5).
+  const Eigen::VectorXd fit = X * s.coef;
+  const double ff = fit.squaredNorm();
+  if (ff > 0.0) {
+    const double x0f = X.col(0).dot(fit), x0x0 = X.col(0).squaredNorm();
+    s.linear_share = x0x0 > 0.0 ? x0f * x0f / (x0x0 * ff) : 0.0;
+    Eigen::VectorXd odd = Eigen::VectorXd::Zero(R);
+    for (int k = 0; k < K; k += 2) odd += X.col(k) * s.coef(k);
+    s.odd_share = odd.squaredNorm() / ff;
+  }
+  return s;
+}
+
+std::optional<StructureFinding> smooth_finding(const MotionProblem& P, const AxisResidual& A) {
+  const int R = P.rows(), i = A.axis;
+  std::vector<SmoothFit> fits;
+  const bool has_a = P.a_columns.size() >= static_cast<std::size_t>(R) || P.a.size() >= static_cast<std::size_t>(R);
+  for (const char* v : kSmoothVariables)
+    if (v[0] != 'a' || has_a) fits.push_back(smooth_fit(P, A, v));
+  const auto best = std::max_element(fits.begin(), fits.end(),
+                                     [](const SmoothFit& a, const SmoothFit& b) { return a.removed < b.removed; });
+  if (best->coef.size() == 0 || !(best->p < 1e-4)) return std::nullopt;
+  const double size = std::sqrt(best->removed / R);
+  if (!(size > A.tiny)) return std::nullopt;
+  StructureFinding f;
+  f.kind = "smooth";
+  f.axis = i;
+  f.coordinate = best->var;
+  f.size = size;
+  f.z = std::sqrt(best->chi);
+  f.lo = best->lo;
+  f.hi = best->hi;
+  f.shape = best->linear_share > 0.9 ? "linear" : best->odd_share > 0.9 ? "odd" : best->odd_share < 0.1 ? "even" : "mixed";
+  // The curve at 7 values across the range, less its value at the middle (the mean goes with the base).
+  double row[kSmoothDegree], mid[kSmoothDegree];
+  legendre_row(0.5 * (f.lo + f.hi), f.lo, f.hi, mid);
+  for (int q = 0; q < 7; ++q) {
+    const double x = f.lo + (f.hi - f.lo) * q / 6.0;
+    legendre_row(x, f.lo, f.hi, row);
+    double v = 0.0;
+    for (int k = 0; k < kSmoothDegree; ++k) v += (row[k] - mid[k]) * best->coef(k);
+    f.nodes.push_back(x);
+    f.values.push_back(v);
+  }
+  // The linear part per unit of the variable: P1 = 2 (x - mid) / (hi - lo).
+  f.slope = 2.0 * best->coef(0) / (f.hi - f.lo);
+  for (const SmoothFit& o : fits)
+    if (&o != &*best && o.p < 1e-4 && o.removed >= kSmoothAlsoShare * best->removed) f.also_in.push_back(o.var);
+  const std::string unit = f.coordinate[0] == 'd' ? "m" : f.coordinate[0] == 'v' ? "m/s" : f.coordinate[0] == 'a' ? "m/s^2" : "s";
+  std::ostringstream os;
+  os.precision(3);
+  os << "axis " << i + 1 << ": a force that follows " << f.coordinate << " (" << f.shape;
+  if (f.shape == "linear") os << ", " << f.slope << " N per " << unit;
+  os << ", RMS " << size << " N over " << f.coordinate << " in [" << f.lo << ", " << f.hi << "] " << unit << ")";
+  if (!f.also_in.empty()) {
+    os << "; seen alike in";
+    for (const auto& v : f.also_in) os << " " << v;
+  }
+  f.text = os.str();
+  return f;
 }
 
 // Stroke covered by each axis (m).
@@ -253,9 +385,60 @@ void add(std::vector<StructureFinding>& out, std::optional<StructureFinding> f) 
 
 }  // namespace
 
+double state_variable(const MotionProblem& P, int r, const std::string& name) {
+  if (name == "t") return P.t[static_cast<std::size_t>(r)];
+  const int j = name.size() == 2 ? name[1] - '1' : -1;
+  if (j < 0 || j > 2) throw Error("unknown state variable '" + name + "' (d1..d3, v1..v3, a1..a3, t)");
+  const auto rr = static_cast<std::size_t>(r);
+  switch (name[0]) {
+    case 'd': return P.d[rr][j];
+    case 'v': return P.v[rr][j];
+    // The columns' long-kernel estimate; a problem made without it (tests) has the row's own.
+    case 'a': return rr < P.a_columns.size() ? P.a_columns[rr][j] : P.a[rr][j];
+    default: throw Error("unknown state variable '" + name + "' (d1..d3, v1..v3, a1..a3, t)");
+  }
+}
+
+void legendre_row(double x, double lo, double hi, double* out) {
+  const double u = std::clamp(hi > lo ? 2.0 * (x - lo) / (hi - lo) - 1.0 : 0.0, -1.0, 1.0);
+  double pm = 1.0, p = u;  // P_0, P_1
+  for (int n = 1; n <= kSmoothDegree; ++n) {
+    out[n - 1] = p;
+    const double next = ((2.0 * n + 1.0) * u * p - n * pm) / (n + 1.0);
+    pm = p;
+    p = next;
+  }
+}
+
+Eigen::MatrixXd smooth_columns(const MotionProblem& P, int axis, const std::string& var, double lo, double hi) {
+  const int R = P.rows();
+  Eigen::MatrixXd X = Eigen::MatrixXd::Zero(3 * R, kSmoothDegree + 1);
+  double row[kSmoothDegree];
+  for (int r = 0; r < R; ++r) X(3 * r + axis, kSmoothDegree) = 1.0;
+  if (var.size() == 2 && var[0] == 'a') {
+    for (int r = 0; r < R; ++r) {
+      legendre_row(state_variable(P, r, var), lo, hi, row);
+      for (int k = 0; k < kSmoothDegree; ++k) X(3 * r + axis, k) = row[k];
+    }
+    return X;
+  }
+  const int j = var == "t" ? -1 : var[1] - '1';
+  const bool position = var[0] == 'd';
+  auto at_sample = [&](int s) {
+    const auto ss = static_cast<std::size_t>(s);
+    return j < 0 ? P.t_sample[ss] : position ? P.d_hat[ss][j] : P.v_hat[ss][j];
+  };
+  for (int k = 0; k < kSmoothDegree; ++k)
+    X.col(k) = P.filter_axis(axis, [&](int s, int) {
+      legendre_row(at_sample(s), lo, hi, row);
+      return row[k];
+    });
+  return X;
+}
+
 std::vector<StructureFinding> find_motion_structure(const MotionProblem& P,
                                                     const Eigen::VectorXd& residual,
-                                                    const Vec3& axis_noise) {
+                                                    const Vec3& axis_noise, bool bump_beside_step) {
   std::vector<StructureFinding> out;
   const int R = P.rows();
   if (R < 20) return out;
@@ -267,11 +450,12 @@ std::vector<StructureFinding> find_motion_structure(const MotionProblem& P,
     for (int j = 0; j < 3; ++j) add(out, periodic_in_position(P, *A, j, span[j]));
     add(out, periodic_in_time(tvec, *A));
     add(out, trend_in_time(tvec, *A));
+    add(out, smooth_finding(P, *A));
     if (span[i] < 0.005) continue;
     const AlongPosition o = along_position(P, *A);
     std::optional<StructureFinding> step = step_finding(P, *A, o);
     // A bump is not reported beside a step on the same axis.
-    std::optional<StructureFinding> bump = step ? std::nullopt : bump_finding(P, *A, o);
+    std::optional<StructureFinding> bump = step && !bump_beside_step ? std::nullopt : bump_finding(P, *A, o);
     add(out, std::move(step));
     add(out, std::move(bump));
   }

@@ -119,6 +119,27 @@ Reference Excitation::operator()(double t) const noexcept {
   return r;
 }
 
+const char* outside_kind_name(OutsideForce::Kind k) noexcept {
+  switch (k) {
+    case OutsideForce::Kind::cross_velocity: return "cross_velocity";
+    case OutsideForce::Kind::bump: return "bump";
+    default: return "cubic";
+  }
+}
+
+Vec3 outside_forces(const std::vector<OutsideForce>& forces, const Vec3& d, const Vec3& v) {
+  Vec3 f = Vec3::Zero();
+  for (const OutsideForce& o : forces) {
+    const double u = (d[o.axis] - o.centre) / o.width;
+    switch (o.kind) {
+      case OutsideForce::Kind::cross_velocity: f[o.axis] += o.size * v[o.from_axis]; break;
+      case OutsideForce::Kind::bump: f[o.axis] += o.size * std::exp(-0.5 * u * u); break;
+      case OutsideForce::Kind::cubic: f[o.axis] += o.size * u * u * u; break;
+    }
+  }
+  return f;
+}
+
 ctl::MachineModel true_model(const std::vector<PlantedEffect>& effects) {
   ctl::MachineModel m = ctl::MachineModel::elkady();
   for (const PlantedEffect& e : effects) ctl::add_effect(m, e.name, e.axis, e.values);
@@ -187,7 +208,8 @@ GeneratedLog generate(const GeneratorSpec& spec) {
     ctl::RigidBodyTerms rb;
     check(truth.rigid_body(p, p_dot, rb), "plant dynamics", t);
     const Mat3 Ma = Jt.transpose() * rb.M * Jt + Mat3(rotor.asDiagonal());
-    const Vec3 rhs = gain.cwiseProduct(u) + w - truth.effect_forces(d, v) - Jt.transpose() * (rb.Gv + rb.K);
+    const Vec3 rhs = gain.cwiseProduct(u) + w - truth.effect_forces(d, v) - outside_forces(spec.outside, d, v) -
+                     Jt.transpose() * (rb.Gv + rb.K);
     return Vec3(Ma.ldlt().solve(rhs));
   };
 

@@ -57,6 +57,28 @@ struct PlantedEffect {
   std::vector<double> values;   // in the order and units of docs/effects.md
 };
 
+// A force on the true machine that no effect of docs/effects.md describes
+// (the open world), resisting like the library's effect forces (subtracted
+// from the drive's force on its axis):
+//   cross_velocity: size * v_from (size in N s/m): a cable carrier or a
+//                   bellows dragged along by another axis' carriage;
+//   bump:           size * exp(-((d_axis - centre) / width)^2 / 2) (N): a tight
+//                   spot over a short stretch of one guide;
+//   cubic:          size * ((d_axis - centre) / width)^3 (N): a force that grows
+//                   along the travel (a guide that narrows, a cable's pull).
+struct OutsideForce {
+  enum class Kind { cross_velocity, bump, cubic };
+  Kind kind = Kind::cubic;
+  int axis = 0;          // 0..2: the axis the force acts on
+  int from_axis = -1;    // cross_velocity: the axis whose velocity it follows
+  double size = 0.0;     // N s/m (cross_velocity) or N
+  double centre = 0.0;   // m (bump, cubic)
+  double width = 1.0;    // m (bump, cubic)
+};
+const char* outside_kind_name(OutsideForce::Kind k) noexcept;  // "cross_velocity", "bump", "cubic"
+// Their sum per axis at the actuator state (d, v) (N).
+Vec3 outside_forces(const std::vector<OutsideForce>& forces, const Vec3& d, const Vec3& v);
+
 struct GeneratorSpec {
   Timing timing = Timing::zoh;
   NoisePlacement noise = NoisePlacement::plant;
@@ -68,6 +90,7 @@ struct GeneratorSpec {
   // (table:..., expression:...): the generator's plant takes the effect
   // forces at the state, so a formula may not read a1..a3 and sees t = 0.
   std::vector<std::string> user_effects;
+  std::vector<OutsideForce> outside;   // on the true machine, beyond the library
   double disturbance_sigma = 0.3;      // N per axis, per sample period (plant noise)
   double force_noise_sigma = 0.3;      // N per axis, white on the logged force (command noise)
   double position_noise = 1e-6;        // m, white on logged d

@@ -43,6 +43,7 @@
 #include <CLI/CLI.hpp>
 
 #include "matrix.hpp"
+#include "open_world.hpp"
 
 namespace {
 
@@ -113,6 +114,8 @@ struct Flags {
   std::string json_path;
   bool check = false, estimate = false, quiet = false;
   bool multiples_given = false;
+  bool outside = false;  // the open-world matrix (open_world.hpp) instead
+  std::vector<std::string> outside_kinds;  // its kinds (empty: all)
 };
 
 // The presets: options given after them override them.
@@ -178,7 +181,22 @@ void add_matrix_options(CLI::App& app, MatrixOptions& o, Flags& f) {
 }
 
 // What to do with the matrix.
-void add_run_options(CLI::App& app, Flags& f) {
+void add_run_options(CLI::App& app, Flags& f, MatrixOptions& o) {
+  app.add_flag_callback("--outside", [&] { f.outside = true; },
+                        "the open-world matrix instead: null logs and logs with a force outside the library (a "
+                        "cable carrier c v_j, a local bump, a cubic along the travel) at --multiples of the floor; "
+                        "default cells zoh and delay1, plant and command, 1000 Hz")
+      ->trigger_on_parse();
+  app.add_option("--outside-kinds", f.outside_kinds, "with --outside: the kinds planted (cross_velocity, bump, cubic)")
+      ->delimiter(',');
+  app.add_flag_callback("--quick-outside", [&] {
+        f.outside = true;
+        o.seeds = 1;
+        o.rates = {1000.0};
+        o.timings = {Timing::zoh, Timing::delay1};
+        o.duration = 15.0;
+      }, "the reduced open-world matrix of the ctest identification.robustness_outside_quick")
+      ->trigger_on_parse();
   app.add_option("--json", f.json_path, "write every log's result and the cells as JSON to FILE")->type_name("FILE");
   app.add_flag("--check", f.check,
                "exit 1 unless every cell meets the thresholds (planted named, null clean, phantoms <= 1 in 50; "
@@ -262,7 +280,7 @@ int main(int argc, char** argv) {
   CLI::App app("cpm_robustness: the robustness matrix of `cpm diagnose` on motion logs from the independent "
                "generator; prints a markdown table (one row per cell)");
   add_matrix_options(app, o, f);
-  add_run_options(app, f);
+  add_run_options(app, f, o);
   try {
     try {
       app.parse(argc, argv);
@@ -274,6 +292,31 @@ int main(int argc, char** argv) {
     if (const std::string bad = finish_options(o, f); !bad.empty()) {
       std::fprintf(stderr, "cpm_robustness: %s\n", bad.c_str());
       return 2;
+    }
+    if (f.outside) {
+      OpenWorldOptions w;
+      w.seeds = o.seeds;
+      w.first_seed = o.first_seed;
+      w.rates = o.rates;
+      w.timings = o.timings;
+      w.noises = o.noises;
+      w.duration = o.duration;
+      if (!o.multiples.empty()) w.multiples = o.multiples;
+      w.diagnose = o.diagnose;
+      if (!f.outside_kinds.empty()) {
+        w.kinds.clear();
+        for (const std::string& k : f.outside_kinds) {
+          if (k == "cross_velocity") w.kinds.push_back(OutsideForce::Kind::cross_velocity);
+          else if (k == "bump") w.kinds.push_back(OutsideForce::Kind::bump);
+          else if (k == "cubic") w.kinds.push_back(OutsideForce::Kind::cubic);
+          else throw cpm::Error("--outside-kinds: unknown kind '" + k + "' (cross_velocity, bump, cubic)");
+        }
+      }
+      const OpenWorldResult r = run_open_world(w);
+      std::printf("%s", open_world_table(r).c_str());
+      const auto fails = open_world_failures(r);
+      for (const std::string& s : fails) std::printf("%s\n", s.c_str());
+      return f.check && !fails.empty() ? 1 : 0;
     }
     if (f.estimate) {
       estimate(o);

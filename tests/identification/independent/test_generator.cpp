@@ -92,6 +92,38 @@ TEST(IndependentGenerator, RotorInertiaOfTheGeneratorAgreesWithTheMachines) {
   EXPECT_GT(ignored, 50 * held);
 }
 
+// The forces beyond the library act as stated: on a noise-free zoh log the
+// needed force less the held command is c v_j on the cable-carrier axis, the
+// bump's Gaussian on its axis and the cubic on its own, each written out here.
+TEST(IndependentGenerator, OutsideForcesAreWhatTheyStateOnTheirAxis) {
+  GeneratorSpec s = quiet(Timing::zoh);
+  s.effects.clear();
+  // Centres within the travel the same path covers without them.
+  const GeneratedLog g0 = generate(s);
+  const double x0 = 0.5 * (g0.d_min[0] + g0.d_max[0]), xc = 0.5 * (g0.d_min[2] + g0.d_max[2]);
+  const double half = 0.5 * (g0.d_max[2] - g0.d_min[2]);
+  const double c = 4.0, bump = 2.0, w = 0.004, cube = 1.5;
+  s.outside = {{OutsideForce::Kind::cross_velocity, 1, 0, c, 0.0, 1.0},
+               {OutsideForce::Kind::bump, 0, -1, bump, x0, w},
+               {OutsideForce::Kind::cubic, 2, -1, cube, xc, half}};
+  const GeneratedLog g = generate(s);
+  const ctl::Machine truth(true_model({}));
+  const auto need = needed_force(g, truth);
+  const auto& L = g.log;
+  double worst_left = 0.0, largest = 0.0;
+  for (std::size_t k = 2; k < need.size(); ++k) {
+    const Vec3 dm = 0.5 * (L.d[k] + L.d[k + 1]), vm = 0.5 * (L.v[k] + L.v[k + 1]);
+    const double u0 = (dm[0] - x0) / w, u2 = (dm[2] - xc) / half;
+    const Vec3 outside(bump * std::exp(-0.5 * u0 * u0), c * vm[0], cube * u2 * u2 * u2);
+    const Vec3 extra = L.f[k] - need[k];  // what the drive spent beyond the rigid body
+    worst_left = std::max(worst_left, (extra - outside).cwiseAbs().maxCoeff());
+    largest = std::max(largest, outside.cwiseAbs().maxCoeff());
+  }
+  std::printf("outside forces: largest %.3g N, |f - needed - outside| <= %.3g N\n", largest, worst_left);
+  EXPECT_GT(largest, 0.5);
+  EXPECT_LT(worst_left, 2e-3);
+}
+
 TEST(IndependentGenerator, Delay1IsZohWithTheAppliedForceShiftedByOneSample) {
   const GeneratorSpec s = quiet(Timing::delay1);
   const GeneratedLog g = generate(s);

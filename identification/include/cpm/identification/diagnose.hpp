@@ -89,18 +89,34 @@ struct StructureFinding {
   double size = 0.0;        // amplitude in data units
   double z = 0.0;           // significance in standard errors
   std::string text;         // one sentence for people
-  double lo = 0.0, hi = 0.0;  // bump: the coordinate range it covers (SI)
+  double lo = 0.0, hi = 0.0;  // bump: the coordinate range it covers; smooth: the variable's range (SI)
+  // kind "smooth": a force on `axis` that follows one variable of the state
+  // (`coordinate`: d1..d3, v1..v3, a1..a3 or t), fitted by Legendre
+  // polynomials of degree 1..kSmoothDegree over [lo, hi]; `size` is the RMS of
+  // the fitted force over the log (N).
+  std::vector<double> nodes{}, values{};  // the fitted force (N) at a few values of the variable (SI)
+  std::string shape{};                // "linear", "odd", "even" or "mixed"
+  double slope = 0.0;                 // N per SI unit of the variable (the linear part)
+  // Other variables where the same structure is seen (explaining at least
+  // 80 % of what `coordinate` does): the data cannot tell them apart.
+  std::vector<std::string> also_in{};
 };
 
 // A user effect that would describe structure no library effect describes,
 // as data ready for the model file's `user_effects:` list (docs/model-file.md).
 struct SuggestedUserEffect {
-  std::string kind = "pitch_table";  // an error of axis `axis`' effective displacement against its reading
-  int axis = -1;                     // 0..2 (the file says 1..3)
-  std::vector<double> nodes;         // encoder readings covered (m), increasing
-  std::vector<double> values;        // error at each node (m): d~ = d + value, linear between nodes
-  double rms_after = 0.0;            // residual with the base refitted beside it (data units)
-  std::string text;                  // one sentence for people
+  // "pitch_table": an error of axis `axis`' effective displacement against its
+  // reading (kinematic data); "table" or "expression": a force on axis `axis`
+  // (N), the drive's force beyond the model as the library's effects are.
+  std::string kind;
+  int axis = -1;                      // 0..2 (the file says 1..3)
+  std::string input;                  // table: the variable it follows (d1..d3, v1..v3, a1..a3, t)
+  std::vector<double> nodes;          // SI values of the input (pitch_table: encoder readings, m), increasing
+  std::vector<double> values;         // at each node: force (N) or, for pitch_table, error (m: d~ = d + value)
+  std::string formula;                // expression: e.g. "c*v1"
+  std::vector<std::pair<std::string, double>> params;  // expression: its parameters fitted (SI)
+  double rms_after = 0.0;             // residual with it fitted beside the rest (data units; 0: not measured)
+  std::string text;                   // one sentence for people
 };
 
 struct DiagnoseOptions {
@@ -123,7 +139,20 @@ struct Diagnosis {
   Vec3 baseline_axis_rms = Vec3::Zero();
   double base_refit_rms = 0.0;
   double noise_floor = 0.0;         // estimated from second differences (data units)
-  Vec3 axis_noise = Vec3::Zero();
+  Vec3 axis_noise = Vec3::Zero();   // per axis: the weights of the fits (N)
+  // The honest floor (motion logs): per axis the white part of the final
+  // residual, from its high band (second differences along time, corrected
+  // for the filter), which the smooth effects and structures do not reach;
+  // never the residual's RMS. Said with its source.
+  Vec3 axis_floor = Vec3::Zero();   // N
+  Vec3 axis_residual_rms = Vec3::Zero();  // N: the final residual per axis
+  // Where the floor comes from, in a few words (motion: "residual high band";
+  // kinematic: "repeated poses", "bar length high band", "declared sigma",
+  // "residual (upper bound)"); noise_floor_text says it in a sentence.
+  std::string noise_floor_source;
+  // Library effects that explain part of an outside-the-library finding and
+  // are therefore not named beside it: labels ("spring[axis 2]").
+  std::vector<std::string> partial;
   std::vector<CandidateResult> candidates;  // ranked, best first
   int verdict = -1;                 // index in candidates, -1: none missing
   bool ambiguous = false;           // the verdict cannot be told apart from another candidate
@@ -145,13 +174,9 @@ struct Diagnosis {
   // Kinematic data: where the noise floor comes from (repeated poses, the
   // bar's high band, the instrument's declared sigma, or the residual, then
   // only an upper bound) and the sentence saying so.
-  std::string noise_floor_source;
   bool noise_floor_upper_bound = false;
   std::string noise_floor_text;
-  // Library effects that explain part of an outside_library finding and are
-  // therefore not named (indices in candidates); and the user effect that
-  // would describe the finding.
-  std::vector<int> partial;
+  // The user effect that would describe an outside_library finding.
   std::vector<SuggestedUserEffect> suggested_user_effects;
   Eigen::VectorXd residual_final;   // after the verdict's effects (or the base refit)
   MotionProblem motion;             // the processed data (plots, summaries), kind motion

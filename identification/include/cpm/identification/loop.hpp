@@ -21,6 +21,10 @@ struct LoopStep {
   std::string verdict;       // what the diagnosis of that model said
 };
 
+// The suggestion for a finding, or kind "" when a table or expression would
+// not describe it better than a library effect (periodic, direction, trend).
+SuggestedUserEffect suggest_user_effect(const StructureFinding& f);
+
 struct LoopResult {
   std::string kind;                          // "motion", "ballbar", "position"
   std::string units;                         // "N" or "m"
@@ -31,6 +35,7 @@ struct LoopResult {
   std::vector<LoopStep> steps;               // the waterfall: steps[0] is the model as given
   std::string stop;                          // why the loop stopped, for people
   bool outside_library = false;              // it stopped at something no library effect describes
+  SuggestedUserEffect suggestion;            // then: that finding as a user effect (kind "" if none)
 };
 
 LoopResult run_loop(const io::DataSet& data, const ctl::MachineModel& model, const DiagnoseOptions& options = {},

@@ -20,8 +20,10 @@ double normal_tail(double z);
 double effective_samples(const std::vector<std::vector<double>>& series);
 
 // sigma of white noise in a series from its second differences, robust to
-// slow structure and a few steps: 1.4826 MAD(diff2) / sqrt(6).
-double noise_from_differences(const std::vector<double>& x);
+// slow structure and a few steps: 1.4826 MAD(diff2) / sqrt(6). With lag L
+// the second differences are x[k+2L] - 2 x[k+L] + x[k] (noise correlated
+// over fewer than L samples is then white to them).
+double noise_from_differences(const std::vector<double>& x, int lag = 1);
 
 double median(std::vector<double> x);
 
