@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <filesystem>
 #include <map>
 #include <sstream>
 
@@ -32,6 +33,14 @@ std::vector<std::string> library_named(const ident::Diagnosis& D, Timing t) {
 double rms3(const Vec3& v) { return std::sqrt(v.squaredNorm() / 3.0); }
 
 void diagnose_into(OpenWorldLog& L, const GeneratedLog& g, const OpenWorldOptions& o) {
+  if (!o.write_logs.empty()) {
+    std::ostringstream name;
+    name << o.write_logs << "/outside-" << timing_name(L.timing) << "-" << noise_name(L.noise) << "-" << L.rate
+         << "Hz-seed" << L.seed << "-" << (L.kind.empty() ? std::string("null") : L.kind + "-axis" +
+                                            std::to_string(L.axis + 1) + "-x" + std::to_string(static_cast<int>(L.multiple)))
+         << ".csv";
+    io::write_motion(name.str(), g.log);
+  }
   const ctl::Machine nominal(ctl::MachineModel::elkady());
   const auto t0 = std::chrono::steady_clock::now();
   const ident::Diagnosis D = ident::diagnose_motion(g.log, nominal, o.diagnose);
@@ -63,6 +72,7 @@ OpenWorldResult run_open_world(const OpenWorldOptions& o) {
   OpenWorldResult R;
   R.options = o;
   const auto wall0 = std::chrono::steady_clock::now();
+  if (!o.write_logs.empty()) std::filesystem::create_directories(o.write_logs);
   for (double rate : o.rates)
     for (Timing timing : o.timings)
       for (NoisePlacement noise : o.noises)

@@ -28,6 +28,7 @@ struct OpenWorldOptions {
   std::vector<double> multiples = {3.0, 10.0};
   int seeds = 1, first_seed = 1;
   double duration = 15.0;
+  std::string write_logs;  // directory: every log as CSV ("" = none)
   ident::DiagnoseOptions diagnose;
 };
 

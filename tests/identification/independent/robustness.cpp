@@ -303,6 +303,7 @@ int main(int argc, char** argv) {
       w.duration = o.duration;
       if (!o.multiples.empty()) w.multiples = o.multiples;
       w.diagnose = o.diagnose;
+      w.write_logs = o.write_logs;
       if (!f.outside_kinds.empty()) {
         w.kinds.clear();
         for (const std::string& k : f.outside_kinds) {
