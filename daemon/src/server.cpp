@@ -1,11 +1,15 @@
 #include "cpm/daemon/server.hpp"
 
+#include <malloc.h>
 #include <sys/socket.h>
 #include <sys/un.h>
 #include <unistd.h>
 
 #include <chrono>
 #include <cmath>
+#include <condition_variable>
+#include <optional>
+#include <thread>
 #include <cstdio>
 #include <cstdlib>
 #include <cstdint>
@@ -60,6 +64,15 @@ std::string mm_s(double v) {
   return b;
 }
 
+// The name as the journal may print it (only valid names reach here, but
+// the journal is no place to trust that).
+std::string printable(std::string s, std::size_t max = 64) {
+  if (s.size() > max) s.resize(max);
+  for (char& c : s)
+    if (static_cast<unsigned char>(c) < 0x20 || static_cast<unsigned char>(c) > 0x7e) c = '?';
+  return s;
+}
+
 bool finite3(const double* v) { return std::isfinite(v[0]) && std::isfinite(v[1]) && std::isfinite(v[2]); }
 
 Validation reject(std::int16_t reason, std::string msg) {
@@ -87,6 +100,97 @@ std::string box_violation(const ctl::Trajectory& tr, const LimitsConfig& L, doub
 }
 
 }  // namespace
+
+// One model load at a time, on its own thread: the file is read, its YAML
+// bounded and parsed, the machine built and checked there. What the parse
+// allocated is handed back to the system before the result is (malloc_trim):
+// cpmd locks memory as it is touched (rt.cpp), and a parse's heap left
+// mapped would stay locked and resident for the daemon's life.
+class ModelLoader {
+ public:
+  struct Result {
+    std::int64_t id = 0;
+    std::unique_ptr<ctl::Machine> machine;  // nullptr: refused
+    std::string summary;                    // for the bus: the reason and the line, never the file's bytes
+    std::string journal;                    // for cpmd's journal: the path too
+  };
+  ~ModelLoader() {
+    {
+      const std::lock_guard<std::mutex> lock(mu_);
+      quit_ = true;
+    }
+    cv_.notify_all();
+    if (thread_.joinable()) thread_.join();
+  }
+  // Whether a load is in progress or its result not yet taken.
+  [[nodiscard]] bool busy() const {
+    const std::lock_guard<std::mutex> lock(mu_);
+    return pending_ || result_.has_value();
+  }
+  void start(std::int64_t id, std::string path, const DaemonConfig& cfg) {
+    {
+      const std::lock_guard<std::mutex> lock(mu_);
+      id_ = id;
+      path_ = std::move(path);
+      model_dir_ = cfg.security.model_dir;
+      force_limit_ = cfg.limits.force;
+      rate_hz_ = cfg.loop.rate_hz;
+      pending_ = true;
+    }
+    // Started by the first load, from the LCM thread: it inherits that
+    // thread's CPUs (never loop.cpu, main.cpp).
+    if (!thread_.joinable()) thread_ = std::thread([this] { run(); });
+    cv_.notify_all();
+  }
+  // The finished load, if any (never waits for one).
+  std::optional<Result> take() {
+    const std::unique_lock<std::mutex> lock(mu_, std::try_to_lock);
+    if (!lock.owns_lock() || !result_) return std::nullopt;
+    std::optional<Result> r = std::move(result_);
+    result_.reset();
+    return r;
+  }
+
+ private:
+  void run() {
+    std::unique_lock<std::mutex> lock(mu_);
+    for (;;) {
+      cv_.wait(lock, [this] { return quit_ || (pending_ && !result_); });
+      if (quit_) return;
+      Result r;
+      r.id = id_;
+      const std::string path = path_, dir = model_dir_;
+      const double force = force_limit_, rate = rate_hz_;
+      lock.unlock();
+      try {
+        ctl::MachineModel model = load_model_beneath(dir, path);
+        model.force_limit = std::min(model.force_limit, force);
+        auto machine = std::make_unique<ctl::Machine>(model);
+        ctl::check_delay_fits(machine->actuation_delay(), rate);
+        r.machine = std::move(machine);
+      } catch (const ModelLoadError& e) {
+        r.summary = e.summary;
+      } catch (const std::exception& e) {
+        // Not the file's words (they may quote it): what failed is in the model's checks.
+        r.summary = "the model cannot be used on this machine";
+        r.journal = e.what();
+      }
+      if (!r.machine) r.journal = "load_model '" + path + "': " + (r.journal.empty() ? r.summary : r.journal);
+      malloc_trim(0);
+      lock.lock();
+      pending_ = false;
+      result_ = std::move(r);
+    }
+  }
+  mutable std::mutex mu_;
+  std::condition_variable cv_;
+  std::thread thread_;
+  bool quit_ = false, pending_ = false;
+  std::int64_t id_ = 0;
+  std::string path_, model_dir_;
+  double force_limit_ = 0.0, rate_hz_ = 0.0;
+  std::optional<Result> result_;
+};
 
 Validation validate_segment(const trajectory_command_t& c, const Vec3& start, const ctl::Machine& machine,
                             const LimitsConfig& L, double dt) {
@@ -237,6 +341,33 @@ Server::Server(const DaemonConfig& cfg, ControlLoop& loop, ModelStore& models)
   lcm_->subscribe(cfg_.lcm.trajectory_channel, &Server::on_raw, this);
   lcm_->subscribe(cfg_.lcm.path_channel, &Server::on_raw, this);
   paths_ = std::make_unique<PathService>(cfg_.limits);
+  loader_ = std::make_unique<ModelLoader>();
+}
+
+bool Server::loading_model() const { return loader_->busy(); }
+
+void Server::drain_model_load() {
+  std::optional<ModelLoader::Result> r = loader_->take();
+  if (!r) return;
+  if (!r->machine) {
+    log::warning("operator %s: %s", printable(session_operator_).c_str(), printable(r->journal, 1024).c_str());
+    publish_ack(r->id, 1, control_command_t::CMD_LOAD_MODEL, false, ack_t::REASON_LOAD_FAILED,
+                "load_model: " + r->summary, loop_.mode(), latest_.queue_depth);
+    return;
+  }
+  Command& c = *scratch_;
+  c = Command{};
+  c.id = r->id;
+  c.source = 1;
+  c.code = control_command_t::CMD_LOAD_MODEL;
+  c.kind = CommandKind::load_model;
+  c.controller.emplace(*r->machine, law_, gains_);
+  c.machine = models_.add(std::move(r->machine));
+  pending_models_[c.id] = c.machine;
+  if (!send(c)) {
+    pending_models_.erase(c.id);
+    models_.release(c.machine);
+  }
 }
 
 void Server::on_raw(const lcm::ReceiveBuffer* rbuf, const std::string& channel) {
@@ -382,14 +513,6 @@ std::string seconds(double s) {
 
 namespace {
 
-// The name as the journal may print it (only valid names reach here, but
-// the journal is no place to trust that).
-std::string printable(std::string s, std::size_t max = 64) {
-  if (s.size() > max) s.resize(max);
-  for (char& c : s)
-    if (static_cast<unsigned char>(c) < 0x20 || static_cast<unsigned char>(c) > 0x7e) c = '?';
-  return s;
-}
 
 const char* control_name(std::int8_t c) {
   switch (c) {
@@ -663,30 +786,20 @@ void Server::on_control(const std::uint8_t* raw, std::size_t size, const control
       if (loop_.commands().size() < loop_.commands().capacity()) pending_laws_[c.id] = {law, g};
       break;
     }
-    case control_command_t::CMD_LOAD_MODEL: {
-      // Only from the model directory, only a regular file of bounded size
-      // (this thread must hear the next stop: no FIFO, no /dev/zero). What
-      // goes back on the bus names the reason and the line, never the
-      // file's bytes; the whole story goes to the journal.
-      try {
-        ctl::MachineModel model = load_model_beneath(cfg_.security.model_dir, m->model_path);
-        model.force_limit = std::min(model.force_limit, cfg_.limits.force);
-        auto machine = std::make_unique<ctl::Machine>(model);
-        ctl::check_delay_fits(machine->actuation_delay(), cfg_.loop.rate_hz);
-        c.controller.emplace(*machine, law_, gains_);
-        c.machine = models_.add(std::move(machine));
-      } catch (const ModelLoadError& e) {
-        log::warning("operator %s: %s", printable(session_operator_).c_str(), printable(e.what(), 1024).c_str());
-        return refuse(ack_t::REASON_LOAD_FAILED, "load_model: " + e.summary);
-      } catch (const std::exception& e) {
-        log::warning("operator %s: load_model: %s", printable(session_operator_).c_str(),
-                     printable(e.what(), 1024).c_str());
-        return refuse(ack_t::REASON_LOAD_FAILED, "load_model: the model cannot be used on this machine (cpmd's journal says why)");
-      }
-      c.kind = CommandKind::load_model;
-      pending_models_[c.id] = c.machine;
-      break;
-    }
+    case control_command_t::CMD_LOAD_MODEL:
+      // Only when disabled, said before the file is touched; then read,
+      // bounded and parsed on the loader's thread (this one must hear the
+      // next stop). Only from the model directory, a regular file of at most
+      // kMaxModelFileBytes; what goes back on the bus names the reason and
+      // the line, never the file's bytes.
+      if (loop_.mode() != Mode::disabled)
+        return refuse(ack_t::REASON_ILLEGAL_IN_MODE,
+                      std::string("load_model: the machine is ") + mode_name(loop_.mode()) +
+                          "; load a model only when it is disabled (cpm disable), nothing was read");
+      if (loader_->busy())
+        return refuse(ack_t::REASON_BUSY, "load_model: another model is being loaded; wait for its answer");
+      loader_->start(m->id, m->model_path, cfg_);
+      return;
     default:
       return refuse(ack_t::REASON_INVALID, "unknown command " + std::to_string(m->command));
   }
@@ -830,6 +943,7 @@ Server::QueueEnd Server::queue_end_now() const {
 int Server::drain() {
   int n = 0;
   drain_paths();
+  drain_model_load();
   Ack a;
   while (loop_.acks().pop(a)) {
     ++n;

@@ -211,6 +211,12 @@ TEST(HostileSession, LoadModelRefusesDevicesAndFifos) {
     m.id = id;
     m.model_path = path;
     s.publish(s.h.cfg.lcm.control_channel, Session::encode(m));
+    // Read on the model loader's thread: its answer comes with a drain (5 s at most).
+    for (int i = 0; i < 5000 && !s.ack_of(id); ++i) {
+      if (i) ::usleep(1000);
+      s.server->drain();
+      s.pump();
+    }
     const ack_t* a = s.ack_of(id++);
     ASSERT_NE(a, nullptr) << path;
     EXPECT_FALSE(a->accepted) << path;

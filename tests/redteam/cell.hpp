@@ -78,6 +78,12 @@ struct Cell {
   const ack_t* send_bytes(const std::string& channel, const Bytes& b, std::int64_t id) {
     publish(channel, b);
     for (int i = 0; i < 5 && !ack_of(id); ++i) cycles(1);
+    // A model load is read and parsed on its own thread: wait for it (5 s at most).
+    for (int i = 0; i < 5000 && !ack_of(id) && server->loading_model(); ++i) {
+      ::usleep(1000);
+      cycles(1);
+    }
+    for (int i = 0; i < 5 && !ack_of(id); ++i) cycles(1);
     return ack_of(id);
   }
   // A command signed as `who` (nullptr: no name, no MAC).

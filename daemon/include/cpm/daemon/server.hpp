@@ -33,6 +33,7 @@ class ReceiveBuffer;
 namespace cpm::daemon {
 
 class PathService;
+class ModelLoader;
 
 // Owns the prepared machine models; the loop holds a pointer to the current one.
 class ModelStore {
@@ -115,6 +116,9 @@ class Server {
   [[nodiscard]] std::size_t plans_held() const;
   // A program is being planned (tests wait for it).
   [[nodiscard]] bool planning() const;
+  // A model file is being read and checked off this thread, or its result
+  // waits for drain() (tests wait for it).
+  [[nodiscard]] bool loading_model() const;
 
   // The operators who may command (docs/security.md). Any thread: the
   // housekeeping thread hands a freshly loaded table over whole; the LCM
@@ -136,6 +140,8 @@ class Server {
   // the loop and plans the loop retired back to the store.
   void on_path(const std::uint8_t* raw, std::size_t size, const cpm_msgs::path_command_t* msg);
   void drain_paths();
+  // A model load the worker finished: to the loop, or its refusal.
+  void drain_model_load();
   // Where a new segment must start and how fast it must be moving there:
   // the end of what was sent, else of what the latest ack or state says is
   // queued (m, m/s).
@@ -209,6 +215,9 @@ class Server {
   double last_security_publish_ = -1e300, last_security_log_ = -1e300;
   std::string last_stranger_;          // the last refused operator name (journal)
   std::map<std::int64_t, const ctl::Machine*> pending_models_;
+  // CMD_LOAD_MODEL is read, parsed and checked here, off this thread, so
+  // that no file can delay the next stop (docs/security.md).
+  std::unique_ptr<ModelLoader> loader_;
   std::map<std::int64_t, Settings> pending_settings_;  // CMD_SET_PARAM of a limit or the jog, until the loop's ack
   bool params_changed_ = true;                          // publish params_t at once
   double last_params_publish_ = -1e300;
