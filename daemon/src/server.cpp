@@ -472,7 +472,10 @@ bool Server::receive(const std::string& channel, const void* data, std::size_t s
   return false;
 }
 
-Server::~Server() = default;
+Server::~Server() {
+  listener_quit_ = true;
+  if (stop_listener_.joinable()) stop_listener_.join();
+}
 
 void Server::publish_ack(std::int64_t id, std::int8_t source, std::int8_t code, bool ok, std::int16_t reason,
                          const std::string& message, Mode mode, std::int16_t depth, std::int64_t session) {
@@ -1027,12 +1030,50 @@ void Server::journal_fault(const cpm_msgs::state_t& st) {
   log::warning("fault at cycle %lld: %s", static_cast<long long>(st.fault_cycle), fault_report(st).c_str());
 }
 
+void Server::start_stop_listener(const std::atomic<bool>& stop) {
+  if (stop_listener_.joinable()) return;
+  // Its own handle: the LCM thread's handle is not to be shared, and its
+  // subscriptions' work (authentication, validation) is what this avoids.
+  auto bus = std::make_shared<lcm::LCM>(cfg_.lcm.url);
+  if (!bus->good()) {
+    log::warning("lcm: the stop listener cannot open '%s'; stops go through the command queue only",
+                 cfg_.lcm.url.c_str());
+    return;
+  }
+  struct Listener {
+    Server* self;
+    void on(const lcm::ReceiveBuffer* rb, const std::string&) {
+      // Only a whole control command whose command byte says stop: the
+      // layout check is the server's; nothing else is decoded here.
+      if (!control_layout_ok(rb->data, rb->data_size)) return;
+      control_command_t m;
+      try {
+        if (m.decode(rb->data, 0, static_cast<int>(rb->data_size)) != static_cast<int>(rb->data_size)) return;
+      } catch (const std::exception&) {
+        return;
+      }
+      if (m.command != control_command_t::CMD_STOP) return;
+      self->loop_.request_stop();
+      self->stops_heard_.fetch_add(1);
+    }
+  };
+  auto listener = std::make_shared<Listener>(Listener{this});
+  bus->subscribe(cfg_.lcm.control_channel, &Listener::on, listener.get());
+  stop_listener_ = std::thread([this, bus, listener, &stop] {
+    while (!stop.load(std::memory_order_acquire) && !listener_quit_.load(std::memory_order_acquire))
+      bus->handleTimeout(50);
+  });
+}
+
 void Server::run(const std::atomic<bool>& stop) {
+  start_stop_listener(stop);  // from this thread: it inherits its CPUs (never loop.cpu)
   while (!stop.load(std::memory_order_acquire)) {
     lcm_->handleTimeout(1);
     drain();
   }
   drain();
+  listener_quit_ = true;
+  if (stop_listener_.joinable()) stop_listener_.join();
 }
 
 bool bus_has_another_daemon(const LcmConfig& cfg, double rate_hz) {

@@ -316,6 +316,44 @@ TEST(Stop, AStrangerStopsAMovingMachine) {
   EXPECT_EQ(c.h.mode(), daemon::Mode::holding);
 }
 
+// The stop's own path (Server::start_stop_listener rings the loop): with
+// the command queue full ahead of it (16 commands, 4 taken a cycle), the
+// loop still brakes in the first cycle after the stop arrives; through the
+// queue alone it would wait its turn.
+TEST(Stop, TheStopPathBrakesBeforeAFullCommandQueue) {
+  Cell c;
+  const std::int64_t s = c.alice_holding();
+  ASSERT_TRUE(c.trajectory(&c.alice, move_to(kP1 + Vec3(-0.1, 0, 0), 0.1), s, 2).accepted);
+  c.cycles(300);
+  ASSERT_EQ(c.h.mode(), daemon::Mode::moving);
+  daemon::Command ping;
+  ping.kind = daemon::CommandKind::ping;
+  int queued = 0;
+  while (c.h.loop->commands().push(ping)) ++queued;
+  ASSERT_EQ(queued, 16);
+  c.h.loop->request_stop();
+  c.h.loop->cycle(c.h.k++, 0);
+  EXPECT_EQ(c.h.mode(), daemon::Mode::stopping) << "the stop waited behind the queue";
+  // Compare: through the queue alone, behind 16 commands.
+  c.cycles(2000);
+  ASSERT_EQ(c.h.mode(), daemon::Mode::holding);
+  ASSERT_TRUE(c.trajectory(&c.alice, move_to(kP1, 0.1), s, 3).accepted);
+  c.cycles(300);
+  ASSERT_EQ(c.h.mode(), daemon::Mode::moving);
+  queued = 0;
+  while (c.h.loop->commands().size() + 1 < c.h.loop->commands().capacity() && c.h.loop->commands().push(ping)) ++queued;
+  daemon::Command stop;
+  stop.kind = daemon::CommandKind::stop;
+  ASSERT_TRUE(c.h.loop->commands().push(stop));
+  int cycles = 0;
+  while (c.h.mode() == daemon::Mode::moving && cycles < 100) {
+    c.h.loop->cycle(c.h.k++, 0);
+    ++cycles;
+  }
+  std::printf("  the stop path: braking in 1 cycle; through the queue behind %d commands: %d cycles\n", queued, cycles);
+  EXPECT_GT(cycles, 1);
+}
+
 TEST(AcquireFlood, StrangersGetNoSessionAndFewAnswers) {
   Cell c;
   const double rate = c.h.cfg.security.refusal_acks_per_second;

@@ -13,6 +13,7 @@
 #include <memory>
 #include <mutex>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include <cpm_msgs/ack_t.hpp>
@@ -102,6 +103,13 @@ class Server {
   // tests/daemon/test_hostile_*). Returns whether the message was handled.
   bool receive(const std::string& channel, const void* data, std::size_t size);
   [[nodiscard]] std::int64_t undecodable() const noexcept { return undecodable_; }
+  // Stops on their own path: a second LCM handle on its own thread that
+  // decodes only the control channel's stops and rings the loop
+  // (ControlLoop::request_stop), so that nothing the LCM thread is busy with
+  // delays braking. run() starts it; without it (tests cycling by hand) the
+  // stop is acted on from the command queue alone.
+  void start_stop_listener(const std::atomic<bool>& stop);
+  [[nodiscard]] std::int64_t stops_heard() const noexcept { return stops_heard_.load(); }
   // The daemon's LCM handle (tests on memq:// subscribe to the acks and
   // publish raw bytes on it; handle() then runs the daemon's subscriptions).
   [[nodiscard]] lcm::LCM& bus() noexcept { return *lcm_; }
@@ -218,6 +226,9 @@ class Server {
   // CMD_LOAD_MODEL is read, parsed and checked here, off this thread, so
   // that no file can delay the next stop (docs/security.md).
   std::unique_ptr<ModelLoader> loader_;
+  std::thread stop_listener_;
+  std::atomic<std::int64_t> stops_heard_{0};
+  std::atomic<bool> listener_quit_{false};
   std::map<std::int64_t, Settings> pending_settings_;  // CMD_SET_PARAM of a limit or the jog, until the loop's ack
   bool params_changed_ = true;                          // publish params_t at once
   double last_params_publish_ = -1e300;
