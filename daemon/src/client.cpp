@@ -127,7 +127,13 @@ void Client::acquire(double timeout_s) {
   // The wall clock, rising: cpmd refuses an acquire that is old or not newer
   // than the operator's last (a recorded one played back).
   c.seq = last_acquire_seq_ = std::max(c.utime, last_acquire_seq_ + 1);
-  sign(c, *creds_);
+  // Signed for this start of cpmd (its boot id, from its state): a recording
+  // of it is refused by any later start.
+  const std::optional<cpm_msgs::state_t> st = state(timeout_s);
+  if (!st) throw Error("no state from cpmd within " + std::to_string(timeout_s) + " s: is it running on " + cfg_.url + "?");
+  Credentials for_boot = *creds_;
+  for_boot.boot = st->boot_id;
+  sign(c, for_boot);
   lcm_->publish(cfg_.control_channel, &c);
   const cpm_msgs::ack_t a = wait_ack(c.id, timeout_s);
   if (!a.accepted || a.session == 0) throw Error("cpmd refused to let this process command the machine: " + a.message);

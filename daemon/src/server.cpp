@@ -332,6 +332,7 @@ Server::Server(const DaemonConfig& cfg, ControlLoop& loop, ModelStore& models)
   refusal_tokens_ = cfg_.security.refusal_acks_per_second;
   std::random_device rd;
   session_salt_ = (std::uint64_t{rd()} << 32) ^ rd();
+  boot_id_ = static_cast<std::int64_t>(((std::uint64_t{rd()} << 32) ^ rd()) & 0x7FFFFFFFFFFFFFFFull) | 1;
   lcm_ = std::make_unique<lcm::LCM>(cfg_.lcm.url);
   if (!lcm_->good()) throw Error("lcm: cannot open '" + cfg_.lcm.url + "' (is there a multicast route? see docs/daemon.md)");
   // Untyped subscriptions: receive() decodes. lcm-gen's typed decoding
@@ -565,7 +566,7 @@ const Operator* Server::authenticate(const OperatorTable* table, const std::uint
     refuse_limited(id, source, code, ack_t::REASON_NOT_AUTHORIZED, kNotAuthorized);
     return nullptr;
   }
-  if (!verify_encoded(raw, size, op->key)) {
+  if (!verify_encoded(raw, size, op->key, boot_id_)) {
     ++counts_.refused_bad_mac;
     last_stranger_ = who + " (wrong MAC)";
     refuse_limited(id, source, code, ack_t::REASON_NOT_AUTHORIZED, kNotAuthorized);
@@ -667,7 +668,7 @@ void Server::on_control(const std::uint8_t* raw, std::size_t size, const control
     const std::string who = operator_name_of(m->operator_name);
     const Operator* op = table && !who.empty() ? table->find(who) : nullptr;
     if (held != 0 && m->session == held && op && op->name == session_operator_ && m->seq > last_seq_ &&
-        verify_encoded(raw, size, op->key)) {
+        verify_encoded(raw, size, op->key, boot_id_)) {
       last_seq_ = m->seq;
       last_heard_ = now_();
     } else {
@@ -993,6 +994,7 @@ int Server::drain() {
     loop_.snapshots().release();
     st.utime = std::chrono::duration_cast<std::chrono::microseconds>(
                    std::chrono::system_clock::now().time_since_epoch()).count();
+    st.boot_id = boot_id_;
     lcm_->publish(cfg_.lcm.state_channel, &st);
     latest_ = st;
     have_state_ = true;

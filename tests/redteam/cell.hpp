@@ -45,6 +45,7 @@ struct Cell {
     std::filesystem::create_directories(model_dir);
     server = std::make_unique<daemon::Server>(h.cfg, *h.loop, models);
     server->set_clock([this] { return now; });
+    server->set_boot_id(daemon::test::kTestBoot);
     server->set_wall_clock([] { return daemon::test::kWallClock; });
     server->set_operators(daemon::test::operator_table());
     server->bus().subscribe(h.cfg.lcm.ack_channel, &Cell::on_ack, this);

@@ -237,6 +237,39 @@ TEST(Replay, AReplayedOrStaleAcquireTakesNothing) {
   EXPECT_NE(c.acquire(c.alice), 0);  // a fresh one works
 }
 
+// A recorded acquire played to a restarted cpmd, well within the acquire
+// window and before the operator acquired again (the new start knows no
+// last acquire of hers): the acquire was signed for the old start's boot id,
+// so the new start refuses it as it refuses a wrong key. The same bytes to a
+// start with the old boot id are taken: only the boot id differs.
+TEST(Replay, ARecordedAcquireIsRefusedAfterARestart) {
+  C q{};
+  q.command = C::CMD_ACQUIRE, q.id = 710, q.session = 5, q.seq = daemon::test::acquire_seq();
+  Bytes recorded;
+  {
+    Cell before;
+    recorded = daemon::test::encode_signed(q, before.alice);
+    const ack_t* a = before.send_bytes(before.h.cfg.lcm.control_channel, recorded, 710);
+    ASSERT_TRUE(a && a->accepted);
+  }
+  Cell after;  // the restart: a new boot id
+  after.server->set_boot_id(daemon::test::kTestBoot + 1);
+  const ack_t* a = after.send_bytes(after.h.cfg.lcm.control_channel, recorded, 710);
+  ASSERT_NE(a, nullptr);
+  EXPECT_FALSE(a->accepted);
+  EXPECT_EQ(a->reason, ack_t::REASON_NOT_AUTHORIZED) << a->message;
+  EXPECT_EQ(after.server->session(), 0);
+  EXPECT_EQ(after.server->security().refused_bad_mac, 1);
+  // Alice, signing for the new boot id, acquires at once.
+  Credentials alice = after.alice;
+  alice.boot = after.server->boot_id();
+  EXPECT_NE(after.acquire(alice), 0);
+  // Control: a start with the recording's boot id takes the same bytes.
+  Cell same_boot;
+  const ack_t* b = same_boot.send_bytes(same_boot.h.cfg.lcm.control_channel, recorded, 710);
+  ASSERT_TRUE(b && b->accepted) << (b ? b->message : "no answer");
+}
+
 TEST(StaleSeq, AnOlderOrEqualSeqIsRefused) {
   Cell c;
   const std::int64_t s = c.acquire(c.alice);

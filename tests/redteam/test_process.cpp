@@ -411,6 +411,55 @@ TEST(StopPath, BrakesWhileTheLcmThreadIsBusyWithACostlyCommand) {
   EXPECT_GT(costly_ms, 200.0) << "the costly command was not costly: the test proves nothing";
 }
 
+// ---------------------------------------------------------------- replay across a restart
+
+// An operator's acquire recorded off the bus (as lcm-logger would), cpmd
+// restarted, the recording played back at once (well within the 30 s
+// acquire window): refused, no session; the operator acquires at once.
+TEST(Replay, ARecordedAcquireIsRefusedAfterARestart) {
+  Rig r("replay-restart");
+  r.start();
+  struct Recorder {
+    std::vector<Bytes> acquires;
+    void on(const lcm::ReceiveBuffer* rb, const std::string&) {
+      const auto* d = static_cast<const std::uint8_t*>(rb->data);
+      if (daemon::is_acquire(d, rb->data_size)) acquires.emplace_back(d, d + rb->data_size);
+    }
+  } rec;
+  Stranger s(r.cfg.lcm);
+  s.bus.subscribe(r.cfg.lcm.control_channel, &Recorder::on, &rec);
+  std::int64_t boot_before = 0;
+  {
+    Client alice(r.cfg.lcm, r.alice);
+    ASSERT_TRUE(alice.control(C::CMD_PING).accepted);  // acquires first
+    boot_before = alice.state(2.0)->boot_id;
+  }
+  for (auto end = Clock::now() + std::chrono::milliseconds(300); Clock::now() < end;) s.bus.handleTimeout(10);
+  ASSERT_EQ(rec.acquires.size(), 1u);
+  ASSERT_EQ(r.cpmd->terminate(), 0) << r.cpmd->log();
+  r.start();
+  const std::optional<state_t> st = r.state();
+  ASSERT_TRUE(st);
+  EXPECT_NE(st->boot_id, boot_before);
+  C recorded{};
+  ASSERT_EQ(recorded.decode(rec.acquires[0].data(), 0, static_cast<int>(rec.acquires[0].size())),
+            static_cast<int>(rec.acquires[0].size()));
+  s.acks.clear();
+  s.publish(r.cfg.lcm.control_channel, rec.acquires[0]);
+  const auto a = s.wait(recorded.id);
+  ASSERT_TRUE(a) << "no answer to the replayed acquire";
+  EXPECT_FALSE(a->accepted);
+  EXPECT_EQ(a->reason, ack_t::REASON_NOT_AUTHORIZED) << a->message;
+  EXPECT_EQ(a->session, 0);
+  const auto sec = r.security();
+  ASSERT_TRUE(sec);
+  EXPECT_EQ(sec->refused_bad_mac, 1);
+  Client alice(r.cfg.lcm, r.alice);
+  EXPECT_TRUE(alice.control(C::CMD_PING).accepted) << "the operator could not acquire after the replay";
+  std::printf("  boot %lld -> %lld; the recorded acquire: %s\n", static_cast<long long>(boot_before),
+              static_cast<long long>(st->boot_id), a->message.c_str());
+}
+
 // ---------------------------------------------------------------- flood
 
 // 20 000 hostile messages in 10 s (2 kHz, twice the loop rate) while the

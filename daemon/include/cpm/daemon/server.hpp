@@ -115,6 +115,10 @@ class Server {
   [[nodiscard]] lcm::LCM& bus() noexcept { return *lcm_; }
   // The clock sessions expire by (s, monotonic); tests replace it.
   void set_clock(std::function<double()> now) { now_ = std::move(now); }
+  // This start's boot id (state_t.boot_id; random, never 0): acquires are
+  // signed for it. Tests set a fixed one.
+  [[nodiscard]] std::int64_t boot_id() const noexcept { return boot_id_; }
+  void set_boot_id(std::int64_t id) noexcept { boot_id_ = id; }
   // The wall clock acquires are checked against (s since the epoch); tests replace it.
   void set_wall_clock(std::function<double()> now) { wall_now_ = std::move(now); }
   // The session held now (0: none, or the holder went silent for
@@ -212,6 +216,7 @@ class Server {
   std::int64_t last_seq_ = 0;       // the holder's last admitted seq
   double last_heard_ = 0.0;         // now_() when the holder last spoke
   std::uint64_t session_salt_ = 0;  // random per daemon start: sessions do not repeat across restarts
+  std::int64_t boot_id_ = 0;        // random per daemon start, published in the state
   // Security (docs/security.md).
   mutable std::mutex ops_mu_;  // guards ops_ and the reload counters (housekeeping thread vs this one)
   std::shared_ptr<const OperatorTable> ops_;
