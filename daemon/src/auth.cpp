@@ -290,6 +290,20 @@ std::string operator_name_of(const std::uint8_t (&field)[kOperatorNameBytes]) {
   return valid_operator_name(s) ? s : std::string();
 }
 
+std::string OperatorTable::who_may_command() const {
+  std::size_t engineers = 0, operators_ = 0, observers = 0;
+  for (const auto& [name, op] : operators) {
+    if (op.role == Role::engineer) ++engineers;
+    else if (op.role == Role::operator_) ++operators_;
+    else ++observers;
+  }
+  std::string s = std::to_string(engineers + operators_) + " operators may command (" + std::to_string(engineers) +
+                  " engineer" + (engineers == 1 ? "" : "s") + ", " + std::to_string(operators_) + " operator" +
+                  (operators_ == 1 ? "" : "s") + ")";
+  if (observers) s += "; " + std::to_string(observers) + (observers == 1 ? " observer reads" : " observers read") + " only";
+  return s;
+}
+
 const Operator* OperatorTable::find(std::string_view name) const {
   const auto it = operators.find(name);
   return it == operators.end() ? nullptr : &it->second;

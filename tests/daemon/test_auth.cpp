@@ -120,6 +120,15 @@ TEST(Mac, IsHmacSha256) {
 
 // An acquire is signed for one start of cpmd (its boot id): the same bytes
 // do not verify for another; other commands do not depend on it.
+// cpmd --check and the journal: observers are not counted among those who command.
+TEST(Operators, ObserversAreNotCountedAmongThoseWhoMayCommand) {
+  EXPECT_EQ(test::operator_table()->who_may_command(),
+            "2 operators may command (1 engineer, 1 operator); 1 observer reads only");
+  OperatorTable only_observers;
+  only_observers.operators.emplace("olga", Operator{"olga", Role::observer, {}});
+  EXPECT_EQ(only_observers.who_may_command(), "0 operators may command (0 engineers, 0 operators); 1 observer reads only");
+}
+
 TEST(Mac, AnAcquireIsBoundToTheBootIdOtherCommandsAreNot) {
   cpm_msgs::control_command_t m{};
   m.command = cpm_msgs::control_command_t::CMD_ACQUIRE;

@@ -127,7 +127,11 @@ TEST_F(LoadModel, ErrorsNameTheLineAndTheReasonNeverTheContent) {
     ASSERT_NE(at, std::string::npos) << from;
     text.replace(at, from.size(), to);
     std::ofstream(in_dir(name)) << text;
+    testing::internal::CaptureStderr();  // cpmd's journal
     const ack_t a = load(name);
+    const std::string journal = testing::internal::GetCapturedStderr();
+    EXPECT_EQ(journal.find("SECRET"), std::string::npos) << name << ": the journal quotes the file: " << journal;
+    EXPECT_NE(journal.find(name), std::string::npos) << name << ": the journal does not name the file: " << journal;
     EXPECT_EQ(a.reason, ack_t::REASON_LOAD_FAILED) << name;
     EXPECT_EQ(a.message.find("SECRET"), std::string::npos) << name << ": " << a.message;
     EXPECT_NE(a.message.find("line "), std::string::npos) << name << ": " << a.message;

@@ -127,6 +127,10 @@ struct OperatorTable {
   // for the journal. A skipped operator cannot command.
   std::vector<std::string> problems;
   [[nodiscard]] const Operator* find(std::string_view name) const;
+  // Who may command and who only reads: "2 operators may command (1 engineer,
+  // 1 operator); 1 observer reads only". Observers command nothing but stop
+  // (which anyone may), so they are not counted among those who command.
+  [[nodiscard]] std::string who_may_command() const;
 };
 
 // roles.yaml's text: "NAME: ROLE" lines. A bad line is skipped and noted in
