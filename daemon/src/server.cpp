@@ -113,6 +113,7 @@ class ModelLoader {
     std::unique_ptr<ctl::Machine> machine;  // nullptr: refused
     std::string summary;                    // for the bus: the reason and the line, never the file's bytes
     std::string journal;                    // for cpmd's journal: the path too
+    std::string operator_name;              // who asked (the journal)
   };
   ~ModelLoader() {
     {
@@ -127,10 +128,11 @@ class ModelLoader {
     const std::lock_guard<std::mutex> lock(mu_);
     return pending_ || result_.has_value();
   }
-  void start(std::int64_t id, std::string path, const DaemonConfig& cfg) {
+  void start(std::int64_t id, std::string path, std::string operator_name, const DaemonConfig& cfg) {
     {
       const std::lock_guard<std::mutex> lock(mu_);
       id_ = id;
+      operator_name_ = std::move(operator_name);
       path_ = std::move(path);
       model_dir_ = cfg.security.model_dir;
       force_limit_ = cfg.limits.force;
@@ -159,6 +161,7 @@ class ModelLoader {
       if (quit_) return;
       Result r;
       r.id = id_;
+      r.operator_name = operator_name_;
       const std::string path = path_, dir = model_dir_;
       const double force = force_limit_, rate = rate_hz_;
       lock.unlock();
@@ -187,7 +190,7 @@ class ModelLoader {
   std::thread thread_;
   bool quit_ = false, pending_ = false;
   std::int64_t id_ = 0;
-  std::string path_, model_dir_;
+  std::string path_, model_dir_, operator_name_;
   double force_limit_ = 0.0, rate_hz_ = 0.0;
   std::optional<Result> result_;
 };
@@ -351,7 +354,7 @@ void Server::drain_model_load() {
   std::optional<ModelLoader::Result> r = loader_->take();
   if (!r) return;
   if (!r->machine) {
-    log::warning("operator %s: %s", printable(session_operator_).c_str(), printable(r->journal, 1024).c_str());
+    log::warning("operator %s: %s", printable(r->operator_name).c_str(), printable(r->journal, 1024).c_str());
     publish_ack(r->id, 1, control_command_t::CMD_LOAD_MODEL, false, ack_t::REASON_LOAD_FAILED,
                 "load_model: " + r->summary, loop_.mode(), latest_.queue_depth);
     return;
@@ -802,7 +805,7 @@ void Server::on_control(const std::uint8_t* raw, std::size_t size, const control
                           "; load a model only when it is disabled (cpm disable), nothing was read");
       if (loader_->busy())
         return refuse(ack_t::REASON_BUSY, "load_model: another model is being loaded; wait for its answer");
-      loader_->start(m->id, m->model_path, cfg_);
+      loader_->start(m->id, m->model_path, session_operator_, cfg_);
       return;
     default:
       return refuse(ack_t::REASON_INVALID, "unknown command " + std::to_string(m->command));
