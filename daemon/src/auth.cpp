@@ -242,15 +242,37 @@ Mac hmac_sha256(const Key& key, const void* data, std::size_t size) {
   return m;
 }
 
-void sign_encoded(std::uint8_t* data, std::size_t size, const Key& key) {
+bool is_acquire(const std::uint8_t* data, std::size_t size) {
+  // The type's hash (8 bytes), utime, id, session, seq (8 each), then command.
+  constexpr std::size_t kCommandAt = 40;
+  if (size <= kCommandAt) return false;
+  std::uint64_t hash = 0;
+  for (std::size_t i = 0; i < 8; ++i) hash = (hash << 8) | data[i];
+  return hash == static_cast<std::uint64_t>(cpm_msgs::control_command_t::getHash()) &&
+         static_cast<std::int8_t>(data[kCommandAt]) == cpm_msgs::control_command_t::CMD_ACQUIRE;
+}
+
+namespace {
+// The MAC of an encoded command (without its last kMacBytes), an acquire's
+// with its boot id before it.
+Mac command_mac(const std::uint8_t* data, std::size_t size, const Key& key, std::int64_t boot) {
+  if (!is_acquire(data, size)) return hmac_sha256(key, data, size - kMacBytes);
+  std::vector<std::uint8_t> b(8 + size - kMacBytes);
+  for (int i = 0; i < 8; ++i) b[static_cast<std::size_t>(i)] = static_cast<std::uint8_t>(static_cast<std::uint64_t>(boot) >> (56 - 8 * i));
+  std::memcpy(b.data() + 8, data, size - kMacBytes);
+  return hmac_sha256(key, b.data(), b.size());
+}
+}  // namespace
+
+void sign_encoded(std::uint8_t* data, std::size_t size, const Key& key, std::int64_t boot) {
   if (size < kMacBytes) return;
-  const Mac m = hmac_sha256(key, data, size - kMacBytes);
+  const Mac m = command_mac(data, size, key, boot);
   std::memcpy(data + size - kMacBytes, m.data(), kMacBytes);
 }
 
-bool verify_encoded(const std::uint8_t* data, std::size_t size, const Key& key) {
+bool verify_encoded(const std::uint8_t* data, std::size_t size, const Key& key, std::int64_t boot) {
   if (size < kMacBytes) return false;
-  const Mac m = hmac_sha256(key, data, size - kMacBytes);
+  const Mac m = command_mac(data, size, key, boot);
   bool zero = true;
   for (auto b : m) zero = zero && b == 0;
   return !zero && CRYPTO_memcmp(m.data(), data + size - kMacBytes, kMacBytes) == 0;
@@ -266,6 +288,20 @@ std::string operator_name_of(const std::uint8_t (&field)[kOperatorNameBytes]) {
   if (!nul) return {};
   std::string s(reinterpret_cast<const char*>(field), static_cast<const std::uint8_t*>(nul) - field);
   return valid_operator_name(s) ? s : std::string();
+}
+
+std::string OperatorTable::who_may_command() const {
+  std::size_t engineers = 0, operators_ = 0, observers = 0;
+  for (const auto& [name, op] : operators) {
+    if (op.role == Role::engineer) ++engineers;
+    else if (op.role == Role::operator_) ++operators_;
+    else ++observers;
+  }
+  std::string s = std::to_string(engineers + operators_) + " operators may command (" + std::to_string(engineers) +
+                  " engineer" + (engineers == 1 ? "" : "s") + ", " + std::to_string(operators_) + " operator" +
+                  (operators_ == 1 ? "" : "s") + ")";
+  if (observers) s += "; " + std::to_string(observers) + (observers == 1 ? " observer reads" : " observers read") + " only";
+  return s;
 }
 
 const Operator* OperatorTable::find(std::string_view name) const {

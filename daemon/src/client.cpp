@@ -119,21 +119,41 @@ bool Client::lost_session(const cpm_msgs::ack_t& a) noexcept {
 
 void Client::acquire(double timeout_s) {
   need_key(cpm_msgs::control_command_t::CMD_ACQUIRE);
-  cpm_msgs::control_command_t c{};
-  c.command = cpm_msgs::control_command_t::CMD_ACQUIRE;
-  c.id = next_id();
-  c.session = nonce_;
-  c.utime = wall_us();
-  // The wall clock, rising: cpmd refuses an acquire that is old or not newer
-  // than the operator's last (a recorded one played back).
-  c.seq = last_acquire_seq_ = std::max(c.utime, last_acquire_seq_ + 1);
-  sign(c, *creds_);
-  lcm_->publish(cfg_.control_channel, &c);
-  const cpm_msgs::ack_t a = wait_ack(c.id, timeout_s);
-  if (!a.accepted || a.session == 0) throw Error("cpmd refused to let this process command the machine: " + a.message);
-  session_ = a.session;
-  seq_ = 0;
-  last_sent_ = steady_now();
+  // Signed for this start of cpmd (its boot id, from its newest state): a
+  // recording of it is refused by any later start. What is queued is read
+  // first, so that the newest state is the one used; if cpmd restarted since,
+  // the acquire is refused as unauthorized and made again for the new boot.
+  while (lcm_->handleTimeout(0) > 0) {
+  }
+  std::optional<cpm_msgs::state_t> st = last_state_;
+  for (int attempt = 0;; ++attempt) {
+    if (!st) st = state(timeout_s);
+    if (!st)
+      throw Error("no state from cpmd within " + std::to_string(timeout_s) + " s: is it running on " + cfg_.url + "?");
+    cpm_msgs::control_command_t c{};
+    c.command = cpm_msgs::control_command_t::CMD_ACQUIRE;
+    c.id = next_id();
+    c.session = nonce_;
+    c.utime = wall_us();
+    // The wall clock, rising: cpmd refuses an acquire that is old or not newer
+    // than the operator's last (a recorded one played back).
+    c.seq = last_acquire_seq_ = std::max(c.utime, last_acquire_seq_ + 1);
+    Credentials for_boot = *creds_;
+    for_boot.boot = st->boot_id;
+    sign(c, for_boot);
+    lcm_->publish(cfg_.control_channel, &c);
+    const cpm_msgs::ack_t a = wait_ack(c.id, timeout_s);
+    if (!a.accepted && a.reason == cpm_msgs::ack_t::REASON_NOT_AUTHORIZED && attempt == 0) {
+      const std::int64_t used = st->boot_id;
+      st = state(timeout_s);
+      if (st && st->boot_id != used) continue;  // cpmd restarted meanwhile
+    }
+    if (!a.accepted || a.session == 0) throw Error("cpmd refused to let this process command the machine: " + a.message);
+    session_ = a.session;
+    seq_ = 0;
+    last_sent_ = steady_now();
+    return;
+  }
 }
 
 bool Client::release(double timeout_s) {

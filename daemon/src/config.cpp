@@ -5,6 +5,7 @@
 #include <sys/stat.h>
 #include <sys/syscall.h>
 #include <unistd.h>
+#include <yaml-cpp/eventhandler.h>
 #include <yaml-cpp/yaml.h>
 
 #include <cerrno>
@@ -757,6 +758,62 @@ bool ends_with(const std::string& s, const char* tail) {
 
 }  // namespace
 
+namespace {
+
+// Counts nodes and depth as the parser meets them; throws at the first
+// excess, before the parser goes deeper or builds anything.
+class BoundedYaml : public YAML::EventHandler {
+ public:
+  explicit BoundedYaml(const std::string& where) : where_(where) {}
+  void OnDocumentStart(const YAML::Mark&) override {}
+  void OnDocumentEnd() override {}
+  void OnNull(const YAML::Mark& m, YAML::anchor_t) override { node(m); }
+  void OnAlias(const YAML::Mark& m, YAML::anchor_t) override { node(m); }
+  void OnScalar(const YAML::Mark& m, const std::string&, YAML::anchor_t, const std::string&) override { node(m); }
+  void OnSequenceStart(const YAML::Mark& m, const std::string&, YAML::anchor_t, YAML::EmitterStyle::value) override {
+    open(m);
+  }
+  void OnSequenceEnd() override { --depth_; }
+  void OnMapStart(const YAML::Mark& m, const std::string&, YAML::anchor_t, YAML::EmitterStyle::value) override {
+    open(m);
+  }
+  void OnMapEnd() override { --depth_; }
+
+ private:
+  void node(const YAML::Mark& m) {
+    if (++nodes_ > kMaxModelNodes)
+      fail(m, "more than " + std::to_string(kMaxModelNodes) + " YAML nodes (a model file has a few hundred)");
+  }
+  void open(const YAML::Mark& m) {
+    node(m);
+    if (++depth_ > kMaxModelDepth)
+      fail(m, "nested more than " + std::to_string(kMaxModelDepth) + " levels deep (a model file nests about 5)");
+  }
+  [[noreturn]] void fail(const YAML::Mark& m, const std::string& why) const {
+    const std::string at = "line " + std::to_string(m.line + 1) + ": " + why;
+    throw ModelLoadError(where_ + ": " + at, at);
+  }
+  const std::string& where_;
+  long nodes_ = 0;
+  int depth_ = 0;
+};
+
+}  // namespace
+
+void check_model_yaml_bounds(const std::string& text, const std::string& where) {
+  std::istringstream in(text);
+  BoundedYaml counter(where);
+  try {
+    YAML::Parser parser(in);
+    while (parser.HandleNextDocument(counter)) {
+    }
+  } catch (const YAML::Exception& e) {
+    // The parser's words may quote the file: they go to the journal (what()) only.
+    throw ModelLoadError(where + ": line " + std::to_string(e.mark.line + 1) + ": not valid YAML: " + e.msg,
+                         "line " + std::to_string(e.mark.line + 1) + ": not valid YAML");
+  }
+}
+
 ctl::MachineModel load_model_beneath(const std::string& model_dir, const std::string& request) {
   auto refuse = [&](const std::string& why, const std::string& summary) -> ModelLoadError {
     return ModelLoadError("load_model '" + request + "' (model directory " + model_dir + "): " + why, summary);
@@ -798,7 +855,7 @@ ctl::MachineModel load_model_beneath(const std::string& model_dir, const std::st
     if (::fstat(fd, &st) != 0) throw refuse(std::strerror(errno), "the file cannot be read");
     if (!S_ISREG(st.st_mode)) throw refuse("not a regular file", "not a regular file");
     if (st.st_size > kMaxModelFileBytes)
-      throw refuse(std::to_string(st.st_size) + " bytes", "the file is bigger than a model file may be (16 MiB)");
+      throw refuse(std::to_string(st.st_size) + " bytes", "the file is bigger than a model file may be (1 MiB)");
     try {
       text = read_regular_file(fd, request, kMaxModelFileBytes, "model file");
     } catch (const Error& err) {
@@ -810,6 +867,11 @@ ctl::MachineModel load_model_beneath(const std::string& model_dir, const std::st
   }
   ::close(fd);
 #ifdef CPM_HAVE_IO
+  try {
+    check_model_yaml_bounds(text, request);
+  } catch (const ModelLoadError& err) {
+    throw refuse(err.what(), err.summary);
+  }
   try {
     return io::parse_model_file(text, request).model;
   } catch (const io::ModelFileError& err) {
@@ -825,7 +887,9 @@ ctl::MachineModel load_model_beneath(const std::string& model_dir, const std::st
 ctl::MachineModel load_model(const std::string& path) {
   if (path == "builtin:elkady") return ctl::MachineModel::elkady();
 #ifdef CPM_HAVE_IO
-  return io::parse_model_file(read_small_file(path, kMaxModelFileBytes, "model file"), path).model;
+  const std::string text = read_small_file(path, kMaxModelFileBytes, "model file");
+  check_model_yaml_bounds(text, path);
+  return io::parse_model_file(text, path).model;
 #else
   throw Error(path + ": this build has no model-file loader (cpm_io); use builtin:elkady");
 #endif

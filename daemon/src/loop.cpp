@@ -676,6 +676,11 @@ unsigned ControlLoop::actuator_jog_box(const Vec3& v_target, Vec3& lo, Vec3& hi)
 }
 
 void ControlLoop::handle_commands(std::int64_t k) noexcept {
+  // A stop rung in from the server's stop listener: before any command.
+  if (const std::uint64_t r = stop_requests_.load(std::memory_order_acquire); r != stops_taken_) {
+    stops_taken_ = r;
+    if (mode_ == Mode::moving || mode_ == Mode::homing || mode_ == Mode::jogging) start_stop(k);
+  }
   // A bounded number per cycle keeps the cycle's time bounded.
   for (int n = 0; n < kCommandsPerCycle; ++n) {
     const Command* c = commands_.front();

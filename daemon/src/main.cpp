@@ -146,7 +146,7 @@ int run(int argc, char** argv) {
     try {
       const auto t = load_operators(cfg.security.operators_dir);
       for (const auto& p : t->problems) std::printf("warning: operators: %s\n", p.c_str());
-      std::printf("%s: %zu operators may command\n", cfg.security.operators_dir.c_str(), t->operators.size());
+      std::printf("%s: %s\n", cfg.security.operators_dir.c_str(), t->who_may_command().c_str());
     } catch (const Error& e) {
       std::printf("warning: operators: %s: nobody could command this cpmd but stop\n", e.what());
     }
@@ -181,7 +181,7 @@ int run(int argc, char** argv) {
       const auto t = load_operators(cfg.security.operators_dir);
       for (const auto& p : t->problems) log::warning("operators: %s", p.c_str());
       server.set_operators(t);
-      log::info("operators: %zu may command (%s, %s)", t->operators.size(), cfg.security.operators_dir.c_str(), why);
+      log::info("operators: %s (%s, %s)", t->who_may_command().c_str(), cfg.security.operators_dir.c_str(), why);
     } catch (const Error& e) {
       server.note_reload_failure();
       log::warning("operators: %s; %s", e.what(),

@@ -1,11 +1,15 @@
 #include "cpm/daemon/server.hpp"
 
+#include <malloc.h>
 #include <sys/socket.h>
 #include <sys/un.h>
 #include <unistd.h>
 
 #include <chrono>
 #include <cmath>
+#include <condition_variable>
+#include <optional>
+#include <thread>
 #include <cstdio>
 #include <cstdlib>
 #include <cstdint>
@@ -60,6 +64,15 @@ std::string mm_s(double v) {
   return b;
 }
 
+// The name as the journal may print it (only valid names reach here, but
+// the journal is no place to trust that).
+std::string printable(std::string s, std::size_t max = 64) {
+  if (s.size() > max) s.resize(max);
+  for (char& c : s)
+    if (static_cast<unsigned char>(c) < 0x20 || static_cast<unsigned char>(c) > 0x7e) c = '?';
+  return s;
+}
+
 bool finite3(const double* v) { return std::isfinite(v[0]) && std::isfinite(v[1]) && std::isfinite(v[2]); }
 
 Validation reject(std::int16_t reason, std::string msg) {
@@ -87,6 +100,100 @@ std::string box_violation(const ctl::Trajectory& tr, const LimitsConfig& L, doub
 }
 
 }  // namespace
+
+// One model load at a time, on its own thread: the file is read, its YAML
+// bounded and parsed, the machine built and checked there. What the parse
+// allocated is handed back to the system before the result is (malloc_trim):
+// cpmd locks memory as it is touched (rt.cpp), and a parse's heap left
+// mapped would stay locked and resident for the daemon's life.
+class ModelLoader {
+ public:
+  struct Result {
+    std::int64_t id = 0;
+    std::unique_ptr<ctl::Machine> machine;  // nullptr: refused
+    std::string summary;                    // for the bus: the reason and the line, never the file's bytes
+    std::string journal;                    // for cpmd's journal: the path too
+    std::string operator_name;              // who asked (the journal)
+  };
+  ~ModelLoader() {
+    {
+      const std::lock_guard<std::mutex> lock(mu_);
+      quit_ = true;
+    }
+    cv_.notify_all();
+    if (thread_.joinable()) thread_.join();
+  }
+  // Whether a load is in progress or its result not yet taken.
+  [[nodiscard]] bool busy() const {
+    const std::lock_guard<std::mutex> lock(mu_);
+    return pending_ || result_.has_value();
+  }
+  void start(std::int64_t id, std::string path, std::string operator_name, const DaemonConfig& cfg) {
+    {
+      const std::lock_guard<std::mutex> lock(mu_);
+      id_ = id;
+      operator_name_ = std::move(operator_name);
+      path_ = std::move(path);
+      model_dir_ = cfg.security.model_dir;
+      force_limit_ = cfg.limits.force;
+      rate_hz_ = cfg.loop.rate_hz;
+      pending_ = true;
+    }
+    // Started by the first load, from the LCM thread: it inherits that
+    // thread's CPUs (never loop.cpu, main.cpp).
+    if (!thread_.joinable()) thread_ = std::thread([this] { run(); });
+    cv_.notify_all();
+  }
+  // The finished load, if any (never waits for one).
+  std::optional<Result> take() {
+    const std::unique_lock<std::mutex> lock(mu_, std::try_to_lock);
+    if (!lock.owns_lock() || !result_) return std::nullopt;
+    std::optional<Result> r = std::move(result_);
+    result_.reset();
+    return r;
+  }
+
+ private:
+  void run() {
+    std::unique_lock<std::mutex> lock(mu_);
+    for (;;) {
+      cv_.wait(lock, [this] { return quit_ || (pending_ && !result_); });
+      if (quit_) return;
+      Result r;
+      r.id = id_;
+      r.operator_name = operator_name_;
+      const std::string path = path_, dir = model_dir_;
+      const double force = force_limit_, rate = rate_hz_;
+      lock.unlock();
+      try {
+        ctl::MachineModel model = load_model_beneath(dir, path);
+        model.force_limit = std::min(model.force_limit, force);
+        auto machine = std::make_unique<ctl::Machine>(model);
+        ctl::check_delay_fits(machine->actuation_delay(), rate);
+        r.machine = std::move(machine);
+      } catch (const ModelLoadError& e) {
+        r.summary = e.summary;
+      } catch (const std::exception& e) {
+        // Not the file's words (they may quote it): what failed is in the model's checks.
+        r.summary = "the model cannot be used on this machine";
+        r.journal = e.what();
+      }
+      if (!r.machine) r.journal = "load_model '" + path + "': " + (r.journal.empty() ? r.summary : r.journal);
+      malloc_trim(0);
+      lock.lock();
+      pending_ = false;
+      result_ = std::move(r);
+    }
+  }
+  mutable std::mutex mu_;
+  std::condition_variable cv_;
+  std::thread thread_;
+  bool quit_ = false, pending_ = false;
+  std::int64_t id_ = 0;
+  std::string path_, model_dir_, operator_name_;
+  double force_limit_ = 0.0, rate_hz_ = 0.0;
+  std::optional<Result> result_;
+};
 
 Validation validate_segment(const trajectory_command_t& c, const Vec3& start, const ctl::Machine& machine,
                             const LimitsConfig& L, double dt) {
@@ -228,6 +335,7 @@ Server::Server(const DaemonConfig& cfg, ControlLoop& loop, ModelStore& models)
   refusal_tokens_ = cfg_.security.refusal_acks_per_second;
   std::random_device rd;
   session_salt_ = (std::uint64_t{rd()} << 32) ^ rd();
+  boot_id_ = static_cast<std::int64_t>(((std::uint64_t{rd()} << 32) ^ rd()) & 0x7FFFFFFFFFFFFFFFull) | 1;
   lcm_ = std::make_unique<lcm::LCM>(cfg_.lcm.url);
   if (!lcm_->good()) throw Error("lcm: cannot open '" + cfg_.lcm.url + "' (is there a multicast route? see docs/daemon.md)");
   // Untyped subscriptions: receive() decodes. lcm-gen's typed decoding
@@ -237,6 +345,33 @@ Server::Server(const DaemonConfig& cfg, ControlLoop& loop, ModelStore& models)
   lcm_->subscribe(cfg_.lcm.trajectory_channel, &Server::on_raw, this);
   lcm_->subscribe(cfg_.lcm.path_channel, &Server::on_raw, this);
   paths_ = std::make_unique<PathService>(cfg_.limits);
+  loader_ = std::make_unique<ModelLoader>();
+}
+
+bool Server::loading_model() const { return loader_->busy(); }
+
+void Server::drain_model_load() {
+  std::optional<ModelLoader::Result> r = loader_->take();
+  if (!r) return;
+  if (!r->machine) {
+    log::warning("operator %s: %s", printable(r->operator_name).c_str(), printable(r->journal, 1024).c_str());
+    publish_ack(r->id, 1, control_command_t::CMD_LOAD_MODEL, false, ack_t::REASON_LOAD_FAILED,
+                "load_model: " + r->summary, loop_.mode(), latest_.queue_depth);
+    return;
+  }
+  Command& c = *scratch_;
+  c = Command{};
+  c.id = r->id;
+  c.source = 1;
+  c.code = control_command_t::CMD_LOAD_MODEL;
+  c.kind = CommandKind::load_model;
+  c.controller.emplace(*r->machine, law_, gains_);
+  c.machine = models_.add(std::move(r->machine));
+  pending_models_[c.id] = c.machine;
+  if (!send(c)) {
+    pending_models_.erase(c.id);
+    models_.release(c.machine);
+  }
 }
 
 void Server::on_raw(const lcm::ReceiveBuffer* rbuf, const std::string& channel) {
@@ -341,7 +476,10 @@ bool Server::receive(const std::string& channel, const void* data, std::size_t s
   return false;
 }
 
-Server::~Server() = default;
+Server::~Server() {
+  listener_quit_ = true;
+  if (stop_listener_.joinable()) stop_listener_.join();
+}
 
 void Server::publish_ack(std::int64_t id, std::int8_t source, std::int8_t code, bool ok, std::int16_t reason,
                          const std::string& message, Mode mode, std::int16_t depth, std::int64_t session) {
@@ -382,14 +520,6 @@ std::string seconds(double s) {
 
 namespace {
 
-// The name as the journal may print it (only valid names reach here, but
-// the journal is no place to trust that).
-std::string printable(std::string s, std::size_t max = 64) {
-  if (s.size() > max) s.resize(max);
-  for (char& c : s)
-    if (static_cast<unsigned char>(c) < 0x20 || static_cast<unsigned char>(c) > 0x7e) c = '?';
-  return s;
-}
 
 const char* control_name(std::int8_t c) {
   switch (c) {
@@ -439,7 +569,7 @@ const Operator* Server::authenticate(const OperatorTable* table, const std::uint
     refuse_limited(id, source, code, ack_t::REASON_NOT_AUTHORIZED, kNotAuthorized);
     return nullptr;
   }
-  if (!verify_encoded(raw, size, op->key)) {
+  if (!verify_encoded(raw, size, op->key, boot_id_)) {
     ++counts_.refused_bad_mac;
     last_stranger_ = who + " (wrong MAC)";
     refuse_limited(id, source, code, ack_t::REASON_NOT_AUTHORIZED, kNotAuthorized);
@@ -541,7 +671,7 @@ void Server::on_control(const std::uint8_t* raw, std::size_t size, const control
     const std::string who = operator_name_of(m->operator_name);
     const Operator* op = table && !who.empty() ? table->find(who) : nullptr;
     if (held != 0 && m->session == held && op && op->name == session_operator_ && m->seq > last_seq_ &&
-        verify_encoded(raw, size, op->key)) {
+        verify_encoded(raw, size, op->key, boot_id_)) {
       last_seq_ = m->seq;
       last_heard_ = now_();
     } else {
@@ -663,30 +793,20 @@ void Server::on_control(const std::uint8_t* raw, std::size_t size, const control
       if (loop_.commands().size() < loop_.commands().capacity()) pending_laws_[c.id] = {law, g};
       break;
     }
-    case control_command_t::CMD_LOAD_MODEL: {
-      // Only from the model directory, only a regular file of bounded size
-      // (this thread must hear the next stop: no FIFO, no /dev/zero). What
-      // goes back on the bus names the reason and the line, never the
-      // file's bytes; the whole story goes to the journal.
-      try {
-        ctl::MachineModel model = load_model_beneath(cfg_.security.model_dir, m->model_path);
-        model.force_limit = std::min(model.force_limit, cfg_.limits.force);
-        auto machine = std::make_unique<ctl::Machine>(model);
-        ctl::check_delay_fits(machine->actuation_delay(), cfg_.loop.rate_hz);
-        c.controller.emplace(*machine, law_, gains_);
-        c.machine = models_.add(std::move(machine));
-      } catch (const ModelLoadError& e) {
-        log::warning("operator %s: %s", printable(session_operator_).c_str(), printable(e.what(), 1024).c_str());
-        return refuse(ack_t::REASON_LOAD_FAILED, "load_model: " + e.summary);
-      } catch (const std::exception& e) {
-        log::warning("operator %s: load_model: %s", printable(session_operator_).c_str(),
-                     printable(e.what(), 1024).c_str());
-        return refuse(ack_t::REASON_LOAD_FAILED, "load_model: the model cannot be used on this machine (cpmd's journal says why)");
-      }
-      c.kind = CommandKind::load_model;
-      pending_models_[c.id] = c.machine;
-      break;
-    }
+    case control_command_t::CMD_LOAD_MODEL:
+      // Only when disabled, said before the file is touched; then read,
+      // bounded and parsed on the loader's thread (this one must hear the
+      // next stop). Only from the model directory, a regular file of at most
+      // kMaxModelFileBytes; what goes back on the bus names the reason and
+      // the line, never the file's bytes.
+      if (loop_.mode() != Mode::disabled)
+        return refuse(ack_t::REASON_ILLEGAL_IN_MODE,
+                      std::string("load_model: the machine is ") + mode_name(loop_.mode()) +
+                          "; load a model only when it is disabled (cpm disable), nothing was read");
+      if (loader_->busy())
+        return refuse(ack_t::REASON_BUSY, "load_model: another model is being loaded; wait for its answer");
+      loader_->start(m->id, m->model_path, session_operator_, cfg_);
+      return;
     default:
       return refuse(ack_t::REASON_INVALID, "unknown command " + std::to_string(m->command));
   }
@@ -830,6 +950,7 @@ Server::QueueEnd Server::queue_end_now() const {
 int Server::drain() {
   int n = 0;
   drain_paths();
+  drain_model_load();
   Ack a;
   while (loop_.acks().pop(a)) {
     ++n;
@@ -876,6 +997,7 @@ int Server::drain() {
     loop_.snapshots().release();
     st.utime = std::chrono::duration_cast<std::chrono::microseconds>(
                    std::chrono::system_clock::now().time_since_epoch()).count();
+    st.boot_id = boot_id_;
     lcm_->publish(cfg_.lcm.state_channel, &st);
     latest_ = st;
     have_state_ = true;
@@ -913,12 +1035,50 @@ void Server::journal_fault(const cpm_msgs::state_t& st) {
   log::warning("fault at cycle %lld: %s", static_cast<long long>(st.fault_cycle), fault_report(st).c_str());
 }
 
+void Server::start_stop_listener(const std::atomic<bool>& stop) {
+  if (stop_listener_.joinable()) return;
+  // Its own handle: the LCM thread's handle is not to be shared, and its
+  // subscriptions' work (authentication, validation) is what this avoids.
+  auto bus = std::make_shared<lcm::LCM>(cfg_.lcm.url);
+  if (!bus->good()) {
+    log::warning("lcm: the stop listener cannot open '%s'; stops go through the command queue only",
+                 cfg_.lcm.url.c_str());
+    return;
+  }
+  struct Listener {
+    Server* self;
+    void on(const lcm::ReceiveBuffer* rb, const std::string&) {
+      // Only a whole control command whose command byte says stop: the
+      // layout check is the server's; nothing else is decoded here.
+      if (!control_layout_ok(rb->data, rb->data_size)) return;
+      control_command_t m;
+      try {
+        if (m.decode(rb->data, 0, static_cast<int>(rb->data_size)) != static_cast<int>(rb->data_size)) return;
+      } catch (const std::exception&) {
+        return;
+      }
+      if (m.command != control_command_t::CMD_STOP) return;
+      self->loop_.request_stop();
+      self->stops_heard_.fetch_add(1);
+    }
+  };
+  auto listener = std::make_shared<Listener>(Listener{this});
+  bus->subscribe(cfg_.lcm.control_channel, &Listener::on, listener.get());
+  stop_listener_ = std::thread([this, bus, listener, &stop] {
+    while (!stop.load(std::memory_order_acquire) && !listener_quit_.load(std::memory_order_acquire))
+      bus->handleTimeout(50);
+  });
+}
+
 void Server::run(const std::atomic<bool>& stop) {
+  start_stop_listener(stop);  // from this thread: it inherits its CPUs (never loop.cpu)
   while (!stop.load(std::memory_order_acquire)) {
     lcm_->handleTimeout(1);
     drain();
   }
   drain();
+  listener_quit_ = true;
+  if (stop_listener_.joinable()) stop_listener_.join();
 }
 
 bool bus_has_another_daemon(const LcmConfig& cfg, double rate_hz) {

@@ -100,6 +100,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   server.set_clock([&k, &cfg] { return static_cast<double>(k) / cfg.loop.rate_hz; });
   server.set_wall_clock([&k, &cfg] { return static_cast<double>(k) / cfg.loop.rate_hz; });
   server.set_operators(test::operator_table());
+  server.set_boot_id(test::kTestBoot);
   const Credentials alice = test::credentials("alice");
   AckTap tap;
   server.bus().subscribe(cfg.lcm.ack_channel, &AckTap::on, &tap);
@@ -119,7 +120,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     if (b.size() < 40 + kMacBytes) return;
     if (!(op & 4)) put64(b, 24, tap.session);
     if (!(op & 8)) put64(b, 32, ++seq);
-    if (!(op & 16)) sign_encoded(b.data(), b.size(), alice.key);
+    if (!(op & 16)) sign_encoded(b.data(), b.size(), alice.key, alice.boot);
   };
 
   const double force_limit = std::min(cfg.limits.force, models.current().model().force_limit);

@@ -39,6 +39,7 @@ struct ServerCell {
     server->set_clock([this] { return now; });
     server->set_wall_clock([] { return kWallClock; });
     server->set_operators(operator_table());
+    server->set_boot_id(kTestBoot);
     server->bus().subscribe(h.cfg.lcm.ack_channel, &ServerCell::on_ack, this);
     server->bus().subscribe(h.cfg.lcm.state_channel, &ServerCell::on_state, this);
   }

@@ -118,6 +118,33 @@ TEST(Mac, IsHmacSha256) {
   EXPECT_EQ(hex, "4d59650cd9c184383752407dce14499874891854edf33acbd326f9b0c6aed7a4");
 }
 
+// An acquire is signed for one start of cpmd (its boot id): the same bytes
+// do not verify for another; other commands do not depend on it.
+// cpmd --check and the journal: observers are not counted among those who command.
+TEST(Operators, ObserversAreNotCountedAmongThoseWhoMayCommand) {
+  EXPECT_EQ(test::operator_table()->who_may_command(),
+            "2 operators may command (1 engineer, 1 operator); 1 observer reads only");
+  OperatorTable only_observers;
+  only_observers.operators.emplace("olga", Operator{"olga", Role::observer, {}});
+  EXPECT_EQ(only_observers.who_may_command(), "0 operators may command (0 engineers, 0 operators); 1 observer reads only");
+}
+
+TEST(Mac, AnAcquireIsBoundToTheBootIdOtherCommandsAreNot) {
+  cpm_msgs::control_command_t m{};
+  m.command = cpm_msgs::control_command_t::CMD_ACQUIRE;
+  m.session = 5, m.seq = 1'800'000'000'000'000;
+  const Key& key = test::credentials("alice").key;
+  std::vector<std::uint8_t> b = test::encode_signed(m, test::credentials("alice"));
+  ASSERT_TRUE(is_acquire(b.data(), b.size()));
+  EXPECT_TRUE(verify_encoded(b.data(), b.size(), key, test::kTestBoot));
+  EXPECT_FALSE(verify_encoded(b.data(), b.size(), key, test::kTestBoot + 1));
+  EXPECT_FALSE(verify_encoded(b.data(), b.size(), key, 0));
+  m.command = cpm_msgs::control_command_t::CMD_ENABLE;
+  b = test::encode_signed(m, test::credentials("alice"));
+  EXPECT_FALSE(is_acquire(b.data(), b.size()));
+  EXPECT_TRUE(verify_encoded(b.data(), b.size(), key, test::kTestBoot + 1));
+}
+
 TEST(Mac, EveryByteOfASignedCommandIsCovered) {
   cpm_msgs::control_command_t m{};
   m.command = cpm_msgs::control_command_t::CMD_ENABLE;
@@ -125,14 +152,14 @@ TEST(Mac, EveryByteOfASignedCommandIsCovered) {
   m.model_path = "machine.yaml";
   std::vector<std::uint8_t> b = test::encode_signed(m, test::credentials("alice"));
   const Key& key = test::credentials("alice").key;
-  ASSERT_TRUE(verify_encoded(b.data(), b.size(), key));
-  EXPECT_FALSE(verify_encoded(b.data(), b.size(), test::credentials("bob").key));
+  ASSERT_TRUE(verify_encoded(b.data(), b.size(), key, test::kTestBoot));
+  EXPECT_FALSE(verify_encoded(b.data(), b.size(), test::credentials("bob").key, test::kTestBoot));
   for (std::size_t i = 0; i < b.size(); ++i) {
     b[i] ^= 0x01;
-    EXPECT_FALSE(verify_encoded(b.data(), b.size(), key)) << "byte " << i << " is not covered";
+    EXPECT_FALSE(verify_encoded(b.data(), b.size(), key, test::kTestBoot)) << "byte " << i << " is not covered";
     b[i] ^= 0x01;
   }
-  EXPECT_FALSE(verify_encoded(b.data(), kMacBytes - 1, key));
+  EXPECT_FALSE(verify_encoded(b.data(), kMacBytes - 1, key, test::kTestBoot));
 }
 
 TEST(Operators, NamesAreFileNamesWithoutSurprises) {

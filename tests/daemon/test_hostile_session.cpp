@@ -45,6 +45,7 @@ struct Session {
   Session() : h(config()) {
     server = std::make_unique<Server>(h.cfg, *h.loop, models);
     server->set_wall_clock([] { return test::kWallClock; });
+    server->set_boot_id(test::kTestBoot);
     server->set_operators(test::operator_table());
     server->bus().subscribe(h.cfg.lcm.ack_channel, &Session::on_ack, this);
     // Commands need the operator's MAC and the session (test_session.cpp,
@@ -75,7 +76,7 @@ struct Session {
         for (int i = 0; i < 8; ++i)
           b[static_cast<std::size_t>(24 + 8 * k + i)] = static_cast<std::uint8_t>(v[k] >> (56 - 8 * i));
     }
-    sign_encoded(b.data(), b.size(), who.key);
+    sign_encoded(b.data(), b.size(), who.key, who.boot);
   }
   void on_ack(const lcm::ReceiveBuffer*, const std::string&, const ack_t* a) { acks.push_back(*a); }
   void pump() {
@@ -211,6 +212,12 @@ TEST(HostileSession, LoadModelRefusesDevicesAndFifos) {
     m.id = id;
     m.model_path = path;
     s.publish(s.h.cfg.lcm.control_channel, Session::encode(m));
+    // Read on the model loader's thread: its answer comes with a drain (5 s at most).
+    for (int i = 0; i < 5000 && !s.ack_of(id); ++i) {
+      if (i) ::usleep(1000);
+      s.server->drain();
+      s.pump();
+    }
     const ack_t* a = s.ack_of(id++);
     ASSERT_NE(a, nullptr) << path;
     EXPECT_FALSE(a->accepted) << path;

@@ -217,6 +217,7 @@ struct Cell {
     server->set_clock([] { return 100.0; });
     server->set_wall_clock([] { return test::kWallClock; });
     server->set_operators(test::operator_table());
+    server->set_boot_id(test::kTestBoot);
     server->bus().subscribe(h.cfg.lcm.ack_channel, &Cell::on_ack, this);
   }
   void on_ack(const lcm::ReceiveBuffer*, const std::string&, const ack_t* a) { acks.push_back(*a); }

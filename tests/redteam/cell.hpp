@@ -45,6 +45,7 @@ struct Cell {
     std::filesystem::create_directories(model_dir);
     server = std::make_unique<daemon::Server>(h.cfg, *h.loop, models);
     server->set_clock([this] { return now; });
+    server->set_boot_id(daemon::test::kTestBoot);
     server->set_wall_clock([] { return daemon::test::kWallClock; });
     server->set_operators(daemon::test::operator_table());
     server->bus().subscribe(h.cfg.lcm.ack_channel, &Cell::on_ack, this);
@@ -77,6 +78,12 @@ struct Cell {
   // Publish bytes carrying `id`; run the loop until its ack is out (or give up).
   const ack_t* send_bytes(const std::string& channel, const Bytes& b, std::int64_t id) {
     publish(channel, b);
+    for (int i = 0; i < 5 && !ack_of(id); ++i) cycles(1);
+    // A model load is read and parsed on its own thread: wait for it (5 s at most).
+    for (int i = 0; i < 5000 && !ack_of(id) && server->loading_model(); ++i) {
+      ::usleep(1000);
+      cycles(1);
+    }
     for (int i = 0; i < 5 && !ack_of(id); ++i) cycles(1);
     return ack_of(id);
   }

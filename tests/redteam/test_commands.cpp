@@ -237,6 +237,39 @@ TEST(Replay, AReplayedOrStaleAcquireTakesNothing) {
   EXPECT_NE(c.acquire(c.alice), 0);  // a fresh one works
 }
 
+// A recorded acquire played to a restarted cpmd, well within the acquire
+// window and before the operator acquired again (the new start knows no
+// last acquire of hers): the acquire was signed for the old start's boot id,
+// so the new start refuses it as it refuses a wrong key. The same bytes to a
+// start with the old boot id are taken: only the boot id differs.
+TEST(Replay, ARecordedAcquireIsRefusedAfterARestart) {
+  C q{};
+  q.command = C::CMD_ACQUIRE, q.id = 710, q.session = 5, q.seq = daemon::test::acquire_seq();
+  Bytes recorded;
+  {
+    Cell before;
+    recorded = daemon::test::encode_signed(q, before.alice);
+    const ack_t* a = before.send_bytes(before.h.cfg.lcm.control_channel, recorded, 710);
+    ASSERT_TRUE(a && a->accepted);
+  }
+  Cell after;  // the restart: a new boot id
+  after.server->set_boot_id(daemon::test::kTestBoot + 1);
+  const ack_t* a = after.send_bytes(after.h.cfg.lcm.control_channel, recorded, 710);
+  ASSERT_NE(a, nullptr);
+  EXPECT_FALSE(a->accepted);
+  EXPECT_EQ(a->reason, ack_t::REASON_NOT_AUTHORIZED) << a->message;
+  EXPECT_EQ(after.server->session(), 0);
+  EXPECT_EQ(after.server->security().refused_bad_mac, 1);
+  // Alice, signing for the new boot id, acquires at once.
+  Credentials alice = after.alice;
+  alice.boot = after.server->boot_id();
+  EXPECT_NE(after.acquire(alice), 0);
+  // Control: a start with the recording's boot id takes the same bytes.
+  Cell same_boot;
+  const ack_t* b = same_boot.send_bytes(same_boot.h.cfg.lcm.control_channel, recorded, 710);
+  ASSERT_TRUE(b && b->accepted) << (b ? b->message : "no answer");
+}
+
 TEST(StaleSeq, AnOlderOrEqualSeqIsRefused) {
   Cell c;
   const std::int64_t s = c.acquire(c.alice);
@@ -314,6 +347,44 @@ TEST(Stop, AStrangerStopsAMovingMachine) {
   EXPECT_TRUE(c.control(&mallory, C::CMD_STOP, 0, 0).accepted);
   c.cycles(1000);
   EXPECT_EQ(c.h.mode(), daemon::Mode::holding);
+}
+
+// The stop's own path (Server::start_stop_listener rings the loop): with
+// the command queue full ahead of it (16 commands, 4 taken a cycle), the
+// loop still brakes in the first cycle after the stop arrives; through the
+// queue alone it would wait its turn.
+TEST(Stop, TheStopPathBrakesBeforeAFullCommandQueue) {
+  Cell c;
+  const std::int64_t s = c.alice_holding();
+  ASSERT_TRUE(c.trajectory(&c.alice, move_to(kP1 + Vec3(-0.1, 0, 0), 0.1), s, 2).accepted);
+  c.cycles(300);
+  ASSERT_EQ(c.h.mode(), daemon::Mode::moving);
+  daemon::Command ping;
+  ping.kind = daemon::CommandKind::ping;
+  int queued = 0;
+  while (c.h.loop->commands().push(ping)) ++queued;
+  ASSERT_EQ(queued, 16);
+  c.h.loop->request_stop();
+  c.h.loop->cycle(c.h.k++, 0);
+  EXPECT_EQ(c.h.mode(), daemon::Mode::stopping) << "the stop waited behind the queue";
+  // Compare: through the queue alone, behind 16 commands.
+  c.cycles(2000);
+  ASSERT_EQ(c.h.mode(), daemon::Mode::holding);
+  ASSERT_TRUE(c.trajectory(&c.alice, move_to(kP1, 0.1), s, 3).accepted);
+  c.cycles(300);
+  ASSERT_EQ(c.h.mode(), daemon::Mode::moving);
+  queued = 0;
+  while (c.h.loop->commands().size() + 1 < c.h.loop->commands().capacity() && c.h.loop->commands().push(ping)) ++queued;
+  daemon::Command stop;
+  stop.kind = daemon::CommandKind::stop;
+  ASSERT_TRUE(c.h.loop->commands().push(stop));
+  int cycles = 0;
+  while (c.h.mode() == daemon::Mode::moving && cycles < 100) {
+    c.h.loop->cycle(c.h.k++, 0);
+    ++cycles;
+  }
+  std::printf("  the stop path: braking in 1 cycle; through the queue behind %d commands: %d cycles\n", queued, cycles);
+  EXPECT_GT(cycles, 1);
 }
 
 TEST(AcquireFlood, StrangersGetNoSessionAndFewAnswers) {

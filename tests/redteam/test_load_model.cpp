@@ -127,7 +127,11 @@ TEST_F(LoadModel, ErrorsNameTheLineAndTheReasonNeverTheContent) {
     ASSERT_NE(at, std::string::npos) << from;
     text.replace(at, from.size(), to);
     std::ofstream(in_dir(name)) << text;
+    testing::internal::CaptureStderr();  // cpmd's journal
     const ack_t a = load(name);
+    const std::string journal = testing::internal::GetCapturedStderr();
+    EXPECT_EQ(journal.find("SECRET"), std::string::npos) << name << ": the journal quotes the file: " << journal;
+    EXPECT_NE(journal.find(name), std::string::npos) << name << ": the journal does not name the file: " << journal;
     EXPECT_EQ(a.reason, ack_t::REASON_LOAD_FAILED) << name;
     EXPECT_EQ(a.message.find("SECRET"), std::string::npos) << name << ": " << a.message;
     EXPECT_NE(a.message.find("line "), std::string::npos) << name << ": " << a.message;
@@ -145,6 +149,119 @@ TEST_F(LoadModel, AModelInsideTheDirectoryLoads) {
   EXPECT_NE(&c.models.current(), before);
   EXPECT_TRUE(load(in_dir("machine.yaml")).accepted) << "by its absolute path beneath the directory";
   EXPECT_TRUE(load("builtin:elkady").accepted);
+}
+
+// The largest model file allowed: the machine's model with `extra` lines
+// and then a comment up to exactly kMaxModelFileBytes.
+std::string largest_model(const std::string& extra = "") {
+  std::string text = read(std::string(CPM_SOURCE_DIR) + "/config/machine.yaml") + extra;
+  while (text.size() + 81 <= static_cast<std::size_t>(daemon::kMaxModelFileBytes))
+    text += "# " + std::string(77, '-') + "\n";
+  text += "#" + std::string(static_cast<std::size_t>(daemon::kMaxModelFileBytes) - text.size() - 2, '-') + "\n";
+  return text;
+}
+
+TEST_F(LoadModel, RefusedUnlessDisabledBeforeTheFileIsRead) {
+  std::filesystem::copy_file(std::string(CPM_SOURCE_DIR) + "/config/machine.yaml", in_dir("machine.yaml"));
+  ASSERT_EQ(::mkfifo(in_dir("fifo.yaml").c_str(), 0600), 0);
+  ASSERT_TRUE(c.control(&c.alice, C::CMD_ENABLE, session, ++seq).accepted);
+  c.cycles(20);
+  ASSERT_EQ(c.h.mode(), daemon::Mode::holding);
+  const ctl::Machine* before = &c.models.current();
+  // A good model, a FIFO and a missing file alike: the mode is said, not the file's fate (nothing was opened).
+  for (const std::string p : {"machine.yaml", "fifo.yaml", "missing.yaml"}) {
+    const ack_t a = load(p);
+    EXPECT_FALSE(a.accepted) << p;
+    EXPECT_EQ(a.reason, ack_t::REASON_ILLEGAL_IN_MODE) << p << ": " << a.message;
+    EXPECT_NE(a.message.find("only when it is disabled"), std::string::npos) << a.message;
+    EXPECT_FALSE(c.server->loading_model()) << p << ": a load was started";
+  }
+  EXPECT_EQ(&c.models.current(), before);
+  std::printf("  while holding -> %s\n", load("machine.yaml").message.c_str());
+  // Disabled again: the same file loads.
+  ASSERT_TRUE(c.control(&c.alice, C::CMD_DISABLE, session, ++seq).accepted);
+  c.cycles(5);
+  EXPECT_TRUE(load("machine.yaml").accepted);
+}
+
+TEST_F(LoadModel, SizeNodesAndDepthAreBoundedAndARealModelFits) {
+  const std::string machine = read(std::string(CPM_SOURCE_DIR) + "/config/machine.yaml");
+  // Exactly the size allowed loads; one byte more is refused (before reading, from its size).
+  std::ofstream(in_dir("largest.yaml")) << largest_model();
+  ASSERT_EQ(std::filesystem::file_size(in_dir("largest.yaml")), static_cast<std::uintmax_t>(daemon::kMaxModelFileBytes));
+  const ack_t ok = load("largest.yaml");
+  EXPECT_TRUE(ok.accepted) << ok.message;
+  std::ofstream(in_dir("over.yaml")) << largest_model() << "\n";
+  const ack_t over = load("over.yaml");
+  EXPECT_EQ(over.reason, ack_t::REASON_LOAD_FAILED);
+  EXPECT_NE(over.message.find("1 MiB"), std::string::npos) << over.message;
+  // Nodes: a sequence of kMaxModelNodes scalars after the model.
+  std::string many = machine + "notes: [";
+  for (long i = 0; i < daemon::kMaxModelNodes; ++i) many += "0,";
+  many += "0]\n";
+  std::ofstream(in_dir("nodes.yaml")) << many;
+  const ack_t nodes = load("nodes.yaml");
+  EXPECT_EQ(nodes.reason, ack_t::REASON_LOAD_FAILED);
+  EXPECT_NE(nodes.message.find("more than 20000 YAML nodes"), std::string::npos) << nodes.message;
+  const std::string line = "line " + std::to_string(std::count(machine.begin(), machine.end(), '\n') + 1) + ":";
+  EXPECT_NE(nodes.message.find(line), std::string::npos) << nodes.message << " (expected " << line << ")";
+  // Depth: 33 nested flow sequences (and 100 000: the parser never goes that deep).
+  for (const int d : {daemon::kMaxModelDepth + 1, 100000}) {
+    std::ofstream(in_dir("deep.yaml")) << machine << "notes: " << std::string(static_cast<std::size_t>(d), '[')
+                                       << std::string(static_cast<std::size_t>(d), ']') << "\n";
+    const ack_t deep = load("deep.yaml");
+    EXPECT_EQ(deep.reason, ack_t::REASON_LOAD_FAILED) << d;
+    EXPECT_NE(deep.message.find("nested more than 32 levels"), std::string::npos) << deep.message;
+  }
+  // At the depth limit the bounds pass (and the model's own schema refuses the unknown key).
+  std::ofstream(in_dir("deep32.yaml")) << machine << "notes: " << std::string(daemon::kMaxModelDepth - 1, '[')
+                                       << std::string(daemon::kMaxModelDepth - 1, ']') << "\n";
+  const ack_t d32 = load("deep32.yaml");
+  EXPECT_EQ(d32.message.find("nested"), std::string::npos) << d32.message;
+  std::printf("  %-42s -> %s\n  %-42s -> %s\n", "1 MiB + 1 byte", over.message.c_str(), "20001 nodes",
+              nodes.message.c_str());
+}
+
+// Stop nothing can block: the largest model file allowed is sent with a
+// stop while the machine moves; the loop brakes within 2 cycles of the
+// stop's arrival (the load is refused at once, unread).
+TEST_F(LoadModel, AStopSentWithTheLargestModelBrakesWithinTwoCycles) {
+  std::ofstream(in_dir("largest.yaml")) << largest_model();
+  ASSERT_TRUE(c.control(&c.alice, C::CMD_ENABLE, session, ++seq).accepted);
+  c.cycles(20);
+  ASSERT_EQ(c.h.mode(), daemon::Mode::holding);
+  ASSERT_TRUE(c.trajectory(&c.alice, move_to(Vec3(0.40, 0.425, 0.300)), session, ++seq).accepted);
+  for (int i = 0; i < 50 && c.h.mode() != daemon::Mode::moving; ++i) c.cycles(1);
+  ASSERT_EQ(c.h.mode(), daemon::Mode::moving);
+  c.cycles(200);
+  C load_m{};
+  load_m.command = C::CMD_LOAD_MODEL;
+  load_m.id = c.next_id++;
+  load_m.session = session;
+  load_m.seq = ++seq;
+  load_m.model_path = "largest.yaml";
+  C stop{};
+  stop.command = C::CMD_STOP;
+  stop.id = c.next_id++;
+  // Both on the bus before the daemon's thread looks: the load first.
+  const Bytes lb = c.sign(load_m, &c.alice);
+  c.server->bus().publish(c.h.cfg.lcm.control_channel, lb.data(), static_cast<unsigned>(lb.size()));
+  const Bytes sb = encode(stop);
+  c.server->bus().publish(c.h.cfg.lcm.control_channel, sb.data(), static_cast<unsigned>(sb.size()));
+  c.pump();  // both arrive
+  int cycles = 0;
+  while (c.h.mode() == daemon::Mode::moving && cycles < 100) {
+    c.h.loop->cycle(c.h.k++, 0);
+    ++cycles;
+  }
+  EXPECT_LE(cycles, 2) << "cycles from the stop's arrival to braking";
+  EXPECT_EQ(c.h.mode(), daemon::Mode::stopping);
+  c.cycles(3);
+  const ack_t* la = c.ack_of(load_m.id);
+  ASSERT_NE(la, nullptr);
+  EXPECT_EQ(la->reason, ack_t::REASON_ILLEGAL_IN_MODE) << la->message;
+  EXPECT_FALSE(c.server->loading_model());
+  std::printf("  stop with the largest model: braking after %d cycle(s); the load: %s\n", cycles, la->message.c_str());
 }
 
 }  // namespace

@@ -13,6 +13,8 @@
 #include <unistd.h>
 
 #include <atomic>
+#include <fstream>
+#include <sstream>
 #include <chrono>
 #include <cmath>
 #include <lcm/lcm-cpp.hpp>
@@ -207,6 +209,255 @@ TEST(Stranger, CanStopTheMachine) {
   for (int i = 0; i < 50 && st->mode != state_t::MODE_HOLDING; ++i) st = alice.state(0.2);
   EXPECT_EQ(st->mode, state_t::MODE_HOLDING);
   EXPECT_GT(st->position[0] - 0.40, 0.01);
+}
+
+// ---------------------------------------------------------------- the largest model
+
+// The state as a stranger reads it: the first braking cycle, and the loop's
+// cycle at a moment (the newest state's cycle plus the 1 ms cycles since it
+// arrived).
+struct BrakingWatch {
+  std::int64_t last_cycle = -1, stopping_cycle = -1;
+  Clock::time_point last_at, stopping_at;
+  void on(const lcm::ReceiveBuffer*, const std::string&, const state_t* m) {
+    if (stopping_cycle < 0 && m->mode == state_t::MODE_STOPPING) {
+      stopping_cycle = m->cycle;
+      stopping_at = Clock::now();
+    }
+    if (stopping_cycle < 0 && m->cycle > last_cycle) last_cycle = m->cycle, last_at = Clock::now();
+  }
+  [[nodiscard]] std::int64_t cycle_at(Clock::time_point t) const {
+    return last_cycle + static_cast<std::int64_t>(std::llround(std::chrono::duration<double>(t - last_at).count() * 1000.0));
+  }
+};
+
+// A field of /proc/PID/status in kB (VmRSS, VmHWM, VmLck); -1 when unreadable.
+long status_kb(pid_t pid, const std::string& key) {
+  std::ifstream f("/proc/" + std::to_string(pid) + "/status");
+  std::string line;
+  while (std::getline(f, line))
+    if (line.rfind(key + ":", 0) == 0) return std::stol(line.substr(key.size() + 1));
+  return -1;
+}
+
+// The largest model files allowed (kMaxModelFileBytes): the machine's model
+// padded with a comment (it loads), and one whose padding is just under
+// kMaxModelNodes list items (the costliest parse; the schema refuses it).
+void write_largest_models(const std::filesystem::path& dir) {
+  std::ifstream f(std::string(CPM_SOURCE_DIR) + "/config/machine.yaml");
+  std::stringstream ss;
+  ss << f.rdbuf();
+  const std::string machine = ss.str();
+  const auto n = static_cast<std::size_t>(daemon::kMaxModelFileBytes);
+  std::string text = machine;
+  text += "#" + std::string(n - text.size() - 2, '-') + "\n";
+  std::ofstream(dir / "largest.yaml") << text;
+  text = machine + "notes:\n";
+  const std::size_t items = static_cast<std::size_t>(daemon::kMaxModelNodes) - 1000;
+  const std::size_t per = (n - text.size() - 64) / items;  // bytes per item line
+  for (std::size_t i = 0; i < items; ++i) text += "  - " + std::string(per - 5, 'x') + "\n";
+  text += "#" + std::string(n - text.size() - 2, '-') + "\n";
+  std::ofstream(dir / "nodes.yaml") << text;
+}
+
+// cpmd locks memory (loop.lock_memory, MCL_FUTURE | MCL_ONFAULT). Loading the
+// largest model files allowed while disabled: the daemon's LCM thread keeps
+// answering stops at once during the parse (it runs on the loader's thread),
+// and nothing of the parse stays resident or locked. Then, while moving, the
+// largest load and a stranger's stop sent together: the load is refused
+// unread, and the loop brakes within a few cycles of the stop's sending.
+TEST(LargestModel, ParsedOffTheLcmThreadLeavesNothingLockedAndAStopBrakesAtOnce) {
+  Rig r("largest-model");
+  write_largest_models(r.dir / "models");
+  r.start();
+  const pid_t pid = r.cpmd->pid();
+  Client alice(r.cfg.lcm, r.alice);
+  ASSERT_TRUE(alice.control(C::CMD_PING).accepted);
+  std::this_thread::sleep_for(std::chrono::milliseconds(500));
+  const long rss0 = status_kb(pid, "VmRSS"), lck0 = status_kb(pid, "VmLck"), hwm0 = status_kb(pid, "VmHWM");
+  std::printf("  cpmd before: VmRSS %ld kB, VmLck %ld kB, VmHWM %ld kB\n", rss0, lck0, hwm0);
+  long rss_last = -1;
+  int round = 0;
+  for (const std::string name : {"largest.yaml", "nodes.yaml", "nodes.yaml", "nodes.yaml", "nodes.yaml"}) {
+    // A stranger's stop, again and again, during the load: each one's answer time.
+    std::atomic<bool> done{false};
+    std::vector<double> stop_ms;
+    std::thread stopper([&] {
+      Stranger s(r.cfg.lcm);
+      while (!done.load()) {
+        C stop{};
+        stop.command = C::CMD_STOP;
+        const auto t0 = Clock::now();
+        if (s.send(r.cfg.lcm.control_channel, stop))
+          stop_ms.push_back(std::chrono::duration<double, std::milli>(Clock::now() - t0).count());
+      }
+    });
+    std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    C load{};
+    load.command = C::CMD_LOAD_MODEL;
+    load.model_path = name;
+    const auto t0 = Clock::now();
+    const ack_t a = alice.control(load, 20.0);
+    const double load_ms = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+    done = true;
+    stopper.join();
+    std::this_thread::sleep_for(std::chrono::milliseconds(300));
+    const long rss = status_kb(pid, "VmRSS"), lck = status_kb(pid, "VmLck"), hwm = status_kb(pid, "VmHWM");
+    ASSERT_FALSE(stop_ms.empty());
+    const double worst = *std::max_element(stop_ms.begin(), stop_ms.end());
+    std::printf("  %s (%ld B): answered in %.0f ms (%s); %zu stops answered meanwhile, the slowest in %.1f ms; "
+                "after: VmRSS %ld kB, VmLck %ld kB, VmHWM %ld kB\n",
+                name.c_str(), static_cast<long>(std::filesystem::file_size(r.dir / ("models/" + name))), load_ms,
+                a.accepted ? "loaded" : a.message.c_str(), stop_ms.size(), worst, rss, lck, hwm);
+    if (name == "largest.yaml") EXPECT_TRUE(a.accepted) << a.message;
+    else EXPECT_EQ(a.reason, ack_t::REASON_LOAD_FAILED) << a.message;
+    EXPECT_LT(worst, 100.0) << "a stop waited for the parse";
+    // Every page cpmd touches stays locked (MCL_ONFAULT), so resident is
+    // locked: what a parse leaves is bounded by the bounds on the file (the
+    // loader's heap is kept for the next load), and loads again level off.
+    EXPECT_LT(rss - rss0, 16384) << "the parse left memory resident (locked)";
+    if (++round == 5) {
+      EXPECT_LT(rss - rss_last, 1024) << "loads again go on growing cpmd";
+    }
+    rss_last = rss;
+    EXPECT_LT(hwm - hwm0, 64 * 1024) << "the parse's peak";
+    (void)lck;
+  }
+  // Moving: the largest load and a stop together.
+  ASSERT_TRUE(alice.control(C::CMD_ENABLE).accepted);
+  std::optional<state_t> st;
+  for (int i = 0; i < 50 && !(st && st->mode == state_t::MODE_HOLDING); ++i) st = alice.state(0.2);
+  ASSERT_EQ(st->mode, state_t::MODE_HOLDING);
+  ASSERT_TRUE(alice.trajectory(move_to(0.40, 0.425, 0.300, 0.05)).accepted);  // 4 s
+  for (int i = 0; i < 50 && st->mode != state_t::MODE_MOVING; ++i) st = alice.state(0.2);
+  ASSERT_EQ(st->mode, state_t::MODE_MOVING);
+  BrakingWatch w;
+  Stranger s(r.cfg.lcm);
+  s.bus.subscribe(r.cfg.lcm.state_channel, &BrakingWatch::on, &w);
+  for (auto end = Clock::now() + std::chrono::milliseconds(200); Clock::now() < end;) s.bus.handleTimeout(5);
+  C load{};
+  load.command = C::CMD_LOAD_MODEL;
+  load.model_path = "nodes.yaml";
+  std::optional<ack_t> la;
+  std::thread loader([&] { la = alice.control(load, 5.0); });
+  C stop{};
+  stop.command = C::CMD_STOP;
+  stop.id = 4242;
+  const auto sent = Clock::now();
+  const std::int64_t sent_after = w.cycle_at(sent);
+  s.publish(r.cfg.lcm.control_channel, encode(stop));
+  for (auto end = Clock::now() + std::chrono::seconds(2); w.stopping_cycle < 0 && Clock::now() < end;)
+    s.bus.handleTimeout(5);
+  loader.join();
+  ASSERT_GE(w.stopping_cycle, 0) << "no braking seen";
+  const double ms = std::chrono::duration<double, std::milli>(w.stopping_at - sent).count();
+  std::printf("  moving, the largest load and a stop together: braking %lld cycles after the stop was "
+              "sent, seen %.2f ms after sending; the load: %s\n",
+              static_cast<long long>(w.stopping_cycle - sent_after), ms, la ? la->message.c_str() : "(no answer)");
+  ASSERT_TRUE(la);
+  EXPECT_EQ(la->reason, ack_t::REASON_ILLEGAL_IN_MODE) << la->message;
+  // Over UDP and a shared host: the state in flight, the stop's trip, the LCM
+  // thread's 1 ms poll, then the loop's next cycle.
+  EXPECT_LE(w.stopping_cycle - sent_after, 3);
+}
+
+// While the LCM thread validates the longest segment allowed (a 10-minute
+// circle, sampled at the loop's period), a stranger's stop: it reaches the
+// loop on its own path and the loop brakes within 2 cycles of its arrival.
+TEST(StopPath, BrakesWhileTheLcmThreadIsBusyWithACostlyCommand) {
+  Rig r("stop-path");
+  r.start();
+  Client alice(r.cfg.lcm, r.alice);
+  ASSERT_TRUE(alice.control(C::CMD_ENABLE).accepted);
+  std::optional<state_t> st;
+  for (int i = 0; i < 50 && !(st && st->mode == state_t::MODE_HOLDING); ++i) st = alice.state(0.2);
+  ASSERT_EQ(st->mode, state_t::MODE_HOLDING);
+  ASSERT_TRUE(alice.trajectory(move_to(0.40, 0.425, 0.300, 0.05)).accepted);  // 4 s
+  for (int i = 0; i < 50 && st->mode != state_t::MODE_MOVING; ++i) st = alice.state(0.2);
+  ASSERT_EQ(st->mode, state_t::MODE_MOVING);
+  BrakingWatch w;
+  Stranger s(r.cfg.lcm);
+  s.bus.subscribe(r.cfg.lcm.state_channel, &BrakingWatch::on, &w);
+  for (auto end = Clock::now() + std::chrono::milliseconds(200); Clock::now() < end;) s.bus.handleTimeout(5);
+  // The costly command first: a circle of 590 s at the end of the move,
+  // validated sample by sample on the LCM thread.
+  trajectory_command_t long_circle = circle(590.0);
+  long_circle.radius = 0.1;
+  long_circle.centre[0] = 0.50;  // starts where the move ends (angle pi: centre - radius on x)
+  long_circle.start_angle = M_PI;
+  long_circle.allow_velocity_step = true;
+  const auto costly_sent = Clock::now();
+  const std::int64_t costly = alice.send_trajectory(long_circle);
+  std::this_thread::sleep_for(std::chrono::milliseconds(5));  // the LCM thread is in it
+  C stop{};
+  stop.command = C::CMD_STOP;
+  stop.id = 4343;
+  const auto sent = Clock::now();
+  const std::int64_t sent_after = w.cycle_at(sent);
+  s.publish(r.cfg.lcm.control_channel, encode(stop));
+  for (auto end = Clock::now() + std::chrono::seconds(3); w.stopping_cycle < 0 && Clock::now() < end;)
+    s.bus.handleTimeout(5);
+  const ack_t ca = alice.wait_ack(costly, 30.0);
+  const double costly_ms = std::chrono::duration<double, std::milli>(Clock::now() - costly_sent).count();
+  ASSERT_GE(w.stopping_cycle, 0) << "no braking seen";
+  const double ms = std::chrono::duration<double, std::milli>(w.stopping_at - sent).count();
+  std::printf("  the LCM thread busy %.0f ms with a 590 s circle (%s): braking %lld cycles after the stop was "
+              "sent, seen %.2f ms after sending\n",
+              costly_ms, ca.accepted ? "accepted" : ca.message.c_str(),
+              static_cast<long long>(w.stopping_cycle - sent_after), ms);
+  // The loop's cycle numbers say when it braked; the state saying so is
+  // published by the LCM thread once the costly command is done.
+  EXPECT_LE(w.stopping_cycle - sent_after, 3) << "the stop waited for the costly command";
+  EXPECT_GT(costly_ms, 200.0) << "the costly command was not costly: the test proves nothing";
+}
+
+// ---------------------------------------------------------------- replay across a restart
+
+// An operator's acquire recorded off the bus (as lcm-logger would), cpmd
+// restarted, the recording played back at once (well within the 30 s
+// acquire window): refused, no session; the operator acquires at once.
+TEST(Replay, ARecordedAcquireIsRefusedAfterARestart) {
+  Rig r("replay-restart");
+  r.start();
+  struct Recorder {
+    std::vector<Bytes> acquires;
+    void on(const lcm::ReceiveBuffer* rb, const std::string&) {
+      const auto* d = static_cast<const std::uint8_t*>(rb->data);
+      if (daemon::is_acquire(d, rb->data_size)) acquires.emplace_back(d, d + rb->data_size);
+    }
+  } rec;
+  Stranger s(r.cfg.lcm);
+  s.bus.subscribe(r.cfg.lcm.control_channel, &Recorder::on, &rec);
+  std::int64_t boot_before = 0;
+  {
+    Client alice(r.cfg.lcm, r.alice);
+    ASSERT_TRUE(alice.control(C::CMD_PING).accepted);  // acquires first
+    boot_before = alice.state(2.0)->boot_id;
+  }
+  for (auto end = Clock::now() + std::chrono::milliseconds(300); Clock::now() < end;) s.bus.handleTimeout(10);
+  ASSERT_EQ(rec.acquires.size(), 1u);
+  ASSERT_EQ(r.cpmd->terminate(), 0) << r.cpmd->log();
+  r.start();
+  const std::optional<state_t> st = r.state();
+  ASSERT_TRUE(st);
+  EXPECT_NE(st->boot_id, boot_before);
+  C recorded{};
+  ASSERT_EQ(recorded.decode(rec.acquires[0].data(), 0, static_cast<int>(rec.acquires[0].size())),
+            static_cast<int>(rec.acquires[0].size()));
+  s.acks.clear();
+  s.publish(r.cfg.lcm.control_channel, rec.acquires[0]);
+  const auto a = s.wait(recorded.id);
+  ASSERT_TRUE(a) << "no answer to the replayed acquire";
+  EXPECT_FALSE(a->accepted);
+  EXPECT_EQ(a->reason, ack_t::REASON_NOT_AUTHORIZED) << a->message;
+  EXPECT_EQ(a->session, 0);
+  const auto sec = r.security();
+  ASSERT_TRUE(sec);
+  EXPECT_EQ(sec->refused_bad_mac, 1);
+  Client alice(r.cfg.lcm, r.alice);
+  EXPECT_TRUE(alice.control(C::CMD_PING).accepted) << "the operator could not acquire after the replay";
+  std::printf("  boot %lld -> %lld; the recorded acquire: %s\n", static_cast<long long>(boot_before),
+              static_cast<long long>(st->boot_id), a->message.c_str());
 }
 
 // ---------------------------------------------------------------- flood
@@ -494,7 +745,7 @@ TEST(BadFilesAtStart, ModelsAreRefusedBeforeAnythingRuns) {
   ASSERT_EQ(::mkfifo((r.dir / "models/fifo.yaml").c_str(), 0600), 0);
   for (auto [file, c] : std::vector<std::pair<std::string, StartCase>>{
            {"bad.yaml", {"a model that is no model", "bad.yaml:"}},
-           {"huge.yaml", {"a 16 MiB + 1 byte model", "more than the"}},
+           {"huge.yaml", {"a 1 MiB + 1 byte model", "more than the"}},
            {"dir.yaml", {"a directory as the model", "is a directory"}},
            {"fifo.yaml", {"a FIFO as the model", "not a regular file"}}}) {
     const std::string cfg = cpm::test::sim_config(r.dir.path(), "m.yaml", r.ops.path(),

@@ -14,9 +14,14 @@
 
 namespace cpm::daemon::test {
 
+// The boot id of the servers of in-process tests (Server::set_boot_id):
+// acquires are signed for it.
+inline constexpr std::int64_t kTestBoot = 0x0B0071D;
+
 inline Credentials credentials(const std::string& name) {
   Credentials c;
   c.name = name;
+  c.boot = kTestBoot;
   for (std::size_t i = 0; i < c.key.size(); ++i)
     c.key[i] = static_cast<std::uint8_t>(0x5a ^ (i * 7) ^ static_cast<unsigned char>(name[i % name.size()]));
   return c;

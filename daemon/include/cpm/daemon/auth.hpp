@@ -67,6 +67,9 @@ void write_key_file(const std::string& path, const Key& k);
 struct Credentials {
   std::string name;  // valid_operator_name
   Key key{};
+  // The boot id of the cpmd an acquire is for (state_t.boot_id): an
+  // acquire's MAC covers it (sign_encoded).
+  std::int64_t boot = 0;
 };
 
 // The operator's key for `cpm`, in this order: `key_file` (--key FILE), then
@@ -82,8 +85,15 @@ Mac hmac_sha256(const Key& key, const void* data, std::size_t size);
 
 // An encoded command whose last kMacBytes bytes are its mac field: write the
 // MAC of the bytes before them (sign), or check it in constant time (verify).
-void sign_encoded(std::uint8_t* data, std::size_t size, const Key& key);
-bool verify_encoded(const std::uint8_t* data, std::size_t size, const Key& key);
+// An acquire's MAC (a control_command_t whose command is CMD_ACQUIRE) covers
+// `boot` too, the receiving cpmd's boot id as 8 big-endian bytes before the
+// encoding: HMAC(key, boot || encoding without the MAC). Every other command
+// carries the session, which only an acquire of this boot grants, so every
+// signed command is bound to one start of cpmd; `boot` is ignored for them.
+void sign_encoded(std::uint8_t* data, std::size_t size, const Key& key, std::int64_t boot);
+bool verify_encoded(const std::uint8_t* data, std::size_t size, const Key& key, std::int64_t boot);
+// Whether encoded bytes are an acquire (control_command_t, CMD_ACQUIRE).
+bool is_acquire(const std::uint8_t* data, std::size_t size);
 
 // Put `name` into an operator_name field (NUL-padded), and read one back
 // ("" when it is not NUL-terminated or not a valid name).
@@ -98,7 +108,7 @@ void sign(M& m, const Credentials& c) {
   set_operator_name(m.operator_name, c.name);
   std::vector<std::uint8_t> b(static_cast<std::size_t>(m.getEncodedSize()));
   m.encode(b.data(), 0, static_cast<int>(b.size()));
-  sign_encoded(b.data(), b.size(), c.key);
+  sign_encoded(b.data(), b.size(), c.key, c.boot);
   for (std::size_t i = 0; i < kMacBytes; ++i) m.mac[i] = b[b.size() - kMacBytes + i];
 }
 
@@ -117,6 +127,10 @@ struct OperatorTable {
   // for the journal. A skipped operator cannot command.
   std::vector<std::string> problems;
   [[nodiscard]] const Operator* find(std::string_view name) const;
+  // Who may command and who only reads: "2 operators may command (1 engineer,
+  // 1 operator); 1 observer reads only". Observers command nothing but stop
+  // (which anyone may), so they are not counted among those who command.
+  [[nodiscard]] std::string who_may_command() const;
 };
 
 // roles.yaml's text: "NAME: ROLE" lines. A bad line is skipped and noted in

@@ -126,9 +126,33 @@ struct SecurityConfig {
   double refusal_acks_per_second = 20.0;
 };
 
-// Files cpmd reads at start or over LCM are at most this big.
+// Files cpmd reads at start or over LCM are at most this big. A real model
+// file is a few kB (the largest in the repository under 10 kB; a screw
+// compensation table of 2000 rows stays under 100 kB): 1 MiB leaves room
+// for that ten times over, and bounds the parse's memory and time (a 14 MB
+// file once took 6.3 s and 1.66 GB, docs/security.md).
 inline constexpr long kMaxConfigFileBytes = 1 << 20;
-inline constexpr long kMaxModelFileBytes = 16 << 20;
+inline constexpr long kMaxModelFileBytes = 1 << 20;
+// A model file's YAML: at most this many nodes (scalars, sequences, maps,
+// aliases; a real model has a few hundred, a 2000-row table about 6000) and
+// this deep (a real one nests 5 levels). Counted on the parser's events
+// before any tree is built: what exceeds them costs no memory.
+inline constexpr long kMaxModelNodes = 20000;
+inline constexpr int kMaxModelDepth = 32;
+
+// A model CMD_LOAD_MODEL could not load. what() is the whole story for the
+// journal (paths, the parser's words quoting the file); `summary` is what
+// may go back over LCM: the reason and, for a parse error, the line, never
+// a byte of the file or more than a few of the path.
+struct ModelLoadError : Error {
+  ModelLoadError(const std::string& full, std::string summary_) : Error(full), summary(std::move(summary_)) {}
+  std::string summary;
+};
+
+// Refuse (ModelLoadError: the limit, the line and `where`) YAML text with more nodes
+// or deeper nesting than a model file has (kMaxModelNodes, kMaxModelDepth),
+// or that is not YAML.
+void check_model_yaml_bounds(const std::string& text, const std::string& where);
 
 struct SimConfig {
   std::string truth_model_file;   // the true machine (model file); "" = same as model_file
@@ -180,15 +204,6 @@ DaemonConfig parse_config(const std::string& text, const std::string& name,
 // throws Error naming the file. A configuration or model file must be a
 // regular file of at most kMaxConfigFileBytes / kMaxModelFileBytes.
 ctl::MachineModel load_model(const std::string& path);
-
-// A model CMD_LOAD_MODEL could not load. what() is the whole story for the
-// journal (paths, the parser's words quoting the file); `summary` is what
-// may go back over LCM: the reason and, for a parse error, the line, never
-// a byte of the file or more than a few of the path.
-struct ModelLoadError : Error {
-  ModelLoadError(const std::string& full, std::string summary_) : Error(full), summary(std::move(summary_)) {}
-  std::string summary;
-};
 
 // The model a CMD_LOAD_MODEL names: "builtin:elkady", or a path relative to
 // `model_dir` or absolute beneath it. Read through openat2(RESOLVE_BENEATH):

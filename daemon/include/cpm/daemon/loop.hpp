@@ -216,6 +216,11 @@ class ControlLoop {
   void record_schedule(bool overrun, std::int64_t skipped) noexcept;
   // Shut down: disable the drives on the next cycle (from any thread).
   void request_shutdown() noexcept { shutdown_.store(true, std::memory_order_release); }
+  // A stop heard on the bus (any thread, lock-free): the next cycle brakes
+  // a motion (moving, homing, jogging) before it takes any command. The
+  // stop's ack comes through the command queue as before; this is the path
+  // no other command's work can delay (docs/security.md).
+  void request_stop() noexcept { stop_requests_.fetch_add(1, std::memory_order_release); }
 
   // --- queues to and from the other threads ----------------------------
   SpscRing<Command, 16>& commands() noexcept { return commands_; }
@@ -341,6 +346,8 @@ class ControlLoop {
   std::int64_t enabling_since_ = 0;
   bool disable_after_stop_ = false;
   std::atomic<bool> shutdown_{false};
+  std::atomic<std::uint64_t> stop_requests_{0};
+  std::uint64_t stops_taken_ = 0;  // stop_requests_ as last acted on (loop thread)
   int consecutive_overruns_ = 0;
   bool overrun_fault_pending_ = false;
   bool backend_ok_ = true, backend_write_ok_ = true;  // last read / write: reset waits for both

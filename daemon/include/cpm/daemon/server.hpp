@@ -13,6 +13,7 @@
 #include <memory>
 #include <mutex>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include <cpm_msgs/ack_t.hpp>
@@ -33,6 +34,7 @@ class ReceiveBuffer;
 namespace cpm::daemon {
 
 class PathService;
+class ModelLoader;
 
 // Owns the prepared machine models; the loop holds a pointer to the current one.
 class ModelStore {
@@ -101,11 +103,22 @@ class Server {
   // tests/daemon/test_hostile_*). Returns whether the message was handled.
   bool receive(const std::string& channel, const void* data, std::size_t size);
   [[nodiscard]] std::int64_t undecodable() const noexcept { return undecodable_; }
+  // Stops on their own path: a second LCM handle on its own thread that
+  // decodes only the control channel's stops and rings the loop
+  // (ControlLoop::request_stop), so that nothing the LCM thread is busy with
+  // delays braking. run() starts it; without it (tests cycling by hand) the
+  // stop is acted on from the command queue alone.
+  void start_stop_listener(const std::atomic<bool>& stop);
+  [[nodiscard]] std::int64_t stops_heard() const noexcept { return stops_heard_.load(); }
   // The daemon's LCM handle (tests on memq:// subscribe to the acks and
   // publish raw bytes on it; handle() then runs the daemon's subscriptions).
   [[nodiscard]] lcm::LCM& bus() noexcept { return *lcm_; }
   // The clock sessions expire by (s, monotonic); tests replace it.
   void set_clock(std::function<double()> now) { now_ = std::move(now); }
+  // This start's boot id (state_t.boot_id; random, never 0): acquires are
+  // signed for it. Tests set a fixed one.
+  [[nodiscard]] std::int64_t boot_id() const noexcept { return boot_id_; }
+  void set_boot_id(std::int64_t id) noexcept { boot_id_ = id; }
   // The wall clock acquires are checked against (s since the epoch); tests replace it.
   void set_wall_clock(std::function<double()> now) { wall_now_ = std::move(now); }
   // The session held now (0: none, or the holder went silent for
@@ -115,6 +128,9 @@ class Server {
   [[nodiscard]] std::size_t plans_held() const;
   // A program is being planned (tests wait for it).
   [[nodiscard]] bool planning() const;
+  // A model file is being read and checked off this thread, or its result
+  // waits for drain() (tests wait for it).
+  [[nodiscard]] bool loading_model() const;
 
   // The operators who may command (docs/security.md). Any thread: the
   // housekeeping thread hands a freshly loaded table over whole; the LCM
@@ -136,6 +152,8 @@ class Server {
   // the loop and plans the loop retired back to the store.
   void on_path(const std::uint8_t* raw, std::size_t size, const cpm_msgs::path_command_t* msg);
   void drain_paths();
+  // A model load the worker finished: to the loop, or its refusal.
+  void drain_model_load();
   // Where a new segment must start and how fast it must be moving there:
   // the end of what was sent, else of what the latest ack or state says is
   // queued (m, m/s).
@@ -198,6 +216,7 @@ class Server {
   std::int64_t last_seq_ = 0;       // the holder's last admitted seq
   double last_heard_ = 0.0;         // now_() when the holder last spoke
   std::uint64_t session_salt_ = 0;  // random per daemon start: sessions do not repeat across restarts
+  std::int64_t boot_id_ = 0;        // random per daemon start, published in the state
   // Security (docs/security.md).
   mutable std::mutex ops_mu_;  // guards ops_ and the reload counters (housekeeping thread vs this one)
   std::shared_ptr<const OperatorTable> ops_;
@@ -209,6 +228,12 @@ class Server {
   double last_security_publish_ = -1e300, last_security_log_ = -1e300;
   std::string last_stranger_;          // the last refused operator name (journal)
   std::map<std::int64_t, const ctl::Machine*> pending_models_;
+  // CMD_LOAD_MODEL is read, parsed and checked here, off this thread, so
+  // that no file can delay the next stop (docs/security.md).
+  std::unique_ptr<ModelLoader> loader_;
+  std::thread stop_listener_;
+  std::atomic<std::int64_t> stops_heard_{0};
+  std::atomic<bool> listener_quit_{false};
   std::map<std::int64_t, Settings> pending_settings_;  // CMD_SET_PARAM of a limit or the jog, until the loop's ack
   bool params_changed_ = true;                          // publish params_t at once
   double last_params_publish_ = -1e300;
