@@ -85,6 +85,7 @@ TEST(Loop, OpenWorldAddsTheOutsideFindingAsAnExpressionDownToTheNoiseFloor) {
   EXPECT_EQ(e.axis, 1);
   ASSERT_EQ(e.params.size(), 1u);
   EXPECT_NEAR(e.params.front().value, 25.0, 2.5);
+  std::printf("c = %.3f N s/m (planted 25)\n", e.params.front().value);
   EXPECT_FALSE(R.outside_library);
   ASSERT_GE(R.steps.size(), 3u);
   EXPECT_EQ(R.steps.back().added, "expression[axis 2]: c*v1");
