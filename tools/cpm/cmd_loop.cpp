@@ -106,7 +106,7 @@ Run setup(CLI::App& app) {
                  "(comma-separated)")
       ->type_name("KIND[,KIND...]")
       ->delimiter(',')
-      ->check(CLI::IsMember({"table", "expression", "pitch_table"}));
+      ->check(CLI::IsMember({"table", "expression", "pitch_table"}).description(""));
   app.footer("Each step adds the effect the diagnosis names first and refits every effect added so far together;\n"
              "it stops when nothing is missing, when something no library effect describes remains, or after N\n"
              "steps. At something outside the library it prints the finding as a user effect (model-file YAML,\n"
