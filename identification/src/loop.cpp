@@ -8,6 +8,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "cpm/calibration/workflow.hpp"
 #include "cpm/identification/fit_user.hpp"
 #include "cpm/identification/kinematic.hpp"
 #include "cpm/identification/report.hpp"
@@ -82,7 +83,12 @@ Refit refit(const io::DataSet& data, const ctl::MachineModel& model, const std::
     if (const auto* m = std::get_if<io::MotionData>(&data)) {
       out.rms = motion_rms(*m, model, o.motion);
     } else {
-      out.rms = diagnose_any(data, model, o).base_refit_rms;
+      // The planes recalibrated beside the user effects (the model file must hold them calibrated).
+      io::ModelFile in;
+      in.model = model;
+      const cal::CalibrationResult C = cal::calibrate(in, data, "", "", "cpm loop");
+      out.model = C.model.model;
+      out.rms = C.residual_rms();
     }
     return out;
   }

@@ -454,5 +454,27 @@ TEST(KinematicOutside, LoopAddsThePitchTableDownToTheFloor) {
   EXPECT_GT(N.steps.back().rms, 1.2 * N.steps.back().noise_floor);
 }
 
+// Position data (a laser tracker, 2 µm): the same pitch error at 10x its noise.
+TEST(KinematicOutside, LoopAddsThePitchTableOnPositionData) {
+  PitchSet s;
+  s.position = true;
+  s.axis = 0;
+  s.shape = 2;
+  s.multiple = 10.0;
+  s.seed = 3;
+  const io::DataSet ds = pitch_data(s);
+  const ident::LoopResult R = ident::run_loop(ds, ctl::MachineModel::elkady(), {}, 6, {"pitch_table"});
+  std::fputs(ident::loop_text(R).c_str(), stdout);
+  ASSERT_EQ(R.user_added.size(), 1u);
+  EXPECT_EQ(R.user_added.front().kind, "pitch_table");
+  EXPECT_EQ(R.user_added.front().axis, 0);
+  EXPECT_LE(R.steps.back().rms, 1.2 * R.steps.back().noise_floor);
+  // No library effect was added: the model it leaves has its planes calibrated
+  // beside the table, so the model as it is reaches the floor too.
+  const ident::Diagnosis D = ident::diagnose_kinematic(
+      std::make_shared<const ident::KinematicProblem>(ident::prepare_kinematic(ds, R.model.kinematics)), {});
+  EXPECT_LE(D.baseline_rms, 1.2 * D.noise_floor);
+}
+
 }  // namespace
 }  // namespace cpm::test
