@@ -8,6 +8,8 @@
 
 #include <nlohmann/json.hpp>
 
+#include "cpm/calibration/workflow.hpp"
+#include "cpm/identification/fit_user.hpp"
 #include "cpm/identification/kinematic.hpp"
 #include "cpm/identification/report.hpp"
 
@@ -76,6 +78,20 @@ struct Refit {
 Refit refit(const io::DataSet& data, const ctl::MachineModel& model, const std::vector<FitRequest>& trial,
             const DiagnoseOptions& o) {
   Refit out{model, 0.0, {}, {}};
+  if (trial.empty()) {
+    // Only user effects in the model so far: nothing of the library to refit.
+    if (const auto* m = std::get_if<io::MotionData>(&data)) {
+      out.rms = motion_rms(*m, model, o.motion);
+    } else {
+      // The planes recalibrated beside the user effects (the model file must hold them calibrated).
+      io::ModelFile in;
+      in.model = model;
+      const cal::CalibrationResult C = cal::calibrate(in, data, "", "", "cpm loop");
+      out.model = C.model.model;
+      out.rms = C.residual_rms();
+    }
+    return out;
+  }
   if (const auto* m = std::get_if<io::MotionData>(&data)) {
     const FitResult F = fit_motion(*m, model, trial, o, nullptr, false);
     out.model = F.model;
@@ -135,7 +151,106 @@ std::optional<Refit> first_that_lowers(const io::DataSet& data, const ctl::Machi
   return std::nullopt;
 }
 
+bool same_user_effect(const SuggestedUserEffect& a, const SuggestedUserEffect& b) {
+  return a.kind == b.kind && a.axis == b.axis && a.input == b.input && a.formula == b.formula;
+}
+
+// The step that adds the suggestion `s` to `base` (the model as given with
+// the user effects added so far) and fits it beside the library effects
+// already added; nullopt (and `why`) when it cannot be fitted or lowers nothing.
+std::optional<Refit> add_user_effect_step(const io::DataSet& data, ctl::MachineModel& base, LoopResult& R,
+                                          SuggestedUserEffect s, const DiagnoseOptions& o, std::string& why) {
+  const double before = R.steps.back().rms;
+  ctl::MachineModel trial_base = base;
+  try {
+    if (const auto* m = std::get_if<io::MotionData>(&data)) {
+      // Fitted on the model the loop has (its library effects held), then
+      // those refitted beside the fitted user effect.
+      ctl::MachineModel held = R.model;
+      held.user_effects.push_back(user_effect_of(s));
+      const int index = static_cast<int>(held.user_effects.size()) - 1;
+      const UserFit U = fit_user_effect(*m, held, index, o.motion);
+      const ctl::UserEffect& fitted = U.model.user_effects[static_cast<std::size_t>(index)];
+      trial_base.user_effects.push_back(fitted);
+      if (fitted.kind == ctl::UserEffectKind::table) {
+        s.values = fitted.values;
+      } else {
+        for (std::size_t k = 0; k < s.params.size() && k < fitted.params.size(); ++k)
+          s.params[k] = {fitted.params[k].name, fitted.params[k].value};
+      }
+    } else {
+      trial_base.kinematics.effects[static_cast<std::size_t>(s.axis)].pitch_table = pitch_table_of(s);
+    }
+    Refit F = refit(data, trial_base, R.added, o);
+    if (!(F.rms < before)) {
+      why = "adding " + label_of(s) + " left the residual at " + std::to_string(F.rms) + " " + R.units +
+            " (not below " + std::to_string(before) + "); not kept";
+      return std::nullopt;
+    }
+    s.rms_after = F.rms;
+    base = std::move(trial_base);
+    R.user_added.push_back(std::move(s));
+    return F;
+  } catch (const Error& e) {
+    why = "adding " + label_of(s) + " failed: " + e.what();
+    return std::nullopt;
+  }
+}
+
 }  // namespace
+
+SuggestedUserEffect suggestion_of(const Diagnosis& D) {
+  if (D.kind != "motion") {
+    if (!D.suggested_user_effects.empty()) return D.suggested_user_effects.front();
+    return {};
+  }
+  if (D.outside_library.empty()) return {};
+  return suggest_user_effect(D.outside_library.front());
+}
+
+ctl::UserEffect user_effect_of(const SuggestedUserEffect& s) {
+  ctl::UserEffect e;
+  e.axis = s.axis;
+  if (s.kind == "table") {
+    if (s.input.size() != 2 || (s.input[0] != 'd' && s.input[0] != 'v') || s.input[1] < '1' || s.input[1] > '3')
+      throw Error("a table follows d1..d3 or v1..v3, not " + s.input);
+    e.kind = ctl::UserEffectKind::table;
+    e.input = s.input[0];
+    e.input_axis = s.input[1] - '1';
+    e.nodes = s.nodes;
+    e.values = s.values;
+    if (e.values.size() != e.nodes.size()) e.values.assign(e.nodes.size(), 0.0);
+  } else if (s.kind == "expression") {
+    e.kind = ctl::UserEffectKind::expression;
+    e.formula = s.formula;
+    for (const auto& [name, value] : s.params) e.params.push_back({name, "", value});
+  } else {
+    throw Error("a " + (s.kind.empty() ? std::string("finding without a suggestion") : s.kind) +
+                " is not a force effect of the model");
+  }
+  ctl::validate_user_effect(e, 0);
+  return e;
+}
+
+kin::PitchTable pitch_table_of(const SuggestedUserEffect& s) {
+  if (s.kind != "pitch_table" || s.axis < 0 || s.axis > 2) throw Error("not a pitch_table on axis 1..3");
+  if (s.nodes.size() > static_cast<std::size_t>(kin::PitchTable::kCapacity) || s.values.size() != s.nodes.size())
+    throw Error("pitch_table: " + std::to_string(s.nodes.size()) + " nodes and " + std::to_string(s.values.size()) +
+                " values (equal numbers, at most " + std::to_string(kin::PitchTable::kCapacity) + ")");
+  kin::PitchTable t;
+  t.size = static_cast<int>(s.nodes.size());
+  std::copy(s.nodes.begin(), s.nodes.end(), t.node.begin());
+  std::copy(s.values.begin(), s.values.end(), t.error.begin());
+  t.validate();
+  return t;
+}
+
+std::string label_of(const SuggestedUserEffect& s) {
+  std::string l = s.kind + "[axis " + std::to_string(s.axis + 1) + "]";
+  if (s.kind == "expression") l += ": " + s.formula;
+  if (s.kind == "table") l += ": " + s.input;
+  return l;
+}
 
 SuggestedUserEffect suggest_user_effect(const StructureFinding& f) {
   SuggestedUserEffect s;
@@ -182,9 +297,11 @@ SuggestedUserEffect suggest_user_effect(const StructureFinding& f) {
   return s;
 }
 
-LoopResult run_loop(const io::DataSet& data, const ctl::MachineModel& model, const DiagnoseOptions& o, int max_steps) {
+LoopResult run_loop(const io::DataSet& data, const ctl::MachineModel& model, const DiagnoseOptions& o, int max_steps,
+                    const std::vector<std::string>& allow) {
   LoopResult R;
   R.model = model;
+  ctl::MachineModel base = model;  // the model as given with the user effects added: the library refits start there
   Diagnosis D = diagnose_any(data, model, o);
   record_model_as_given(R, D, data, model, o);
   for (int step = 0; step < max_steps; ++step) {
@@ -192,11 +309,32 @@ LoopResult run_loop(const io::DataSet& data, const ctl::MachineModel& model, con
     R.stop = why_stop(D, R, named);
     if (!R.stop.empty()) {
       R.outside_library = !D.outside_library.empty();
-      if (R.outside_library) R.suggestion = suggest_user_effect(D.outside_library.front());
-      return R;
+      if (!R.outside_library) return R;
+      R.suggestion = suggestion_of(D);
+      const SuggestedUserEffect s = R.suggestion;
+      if (s.kind.empty() || std::find(allow.begin(), allow.end(), s.kind) == allow.end()) return R;
+      if (std::any_of(R.user_added.begin(), R.user_added.end(),
+                      [&](const SuggestedUserEffect& u) { return same_user_effect(u, s); })) {
+        R.stop += "; the diagnosis suggests " + label_of(s) + " again after it was added: the data cannot settle more";
+        return R;
+      }
+      std::string why;
+      std::optional<Refit> F = add_user_effect_step(data, base, R, s, o, why);
+      if (!F) {
+        R.stop += "; " + why;
+        return R;
+      }
+      R.fitted = std::move(F->fitted);
+      R.effects = std::move(F->effects);
+      R.model = std::move(F->model);
+      R.outside_library = false;
+      R.suggestion = {};
+      D = diagnose_any(data, R.model, o);
+      R.steps.push_back({label_of(R.user_added.back()), F->rms, D.noise_floor, D.verdict_text});
+      continue;
     }
     std::string label;
-    std::optional<Refit> F = first_that_lowers(data, model, R, named, o, label);
+    std::optional<Refit> F = first_that_lowers(data, base, R, named, o, label);
     if (!F) {
       R.stop = "adding " + label + " did not lower the model's residual below " + std::to_string(R.steps.back().rms) +
                " " + R.units + "; not kept";
@@ -250,11 +388,10 @@ std::string loop_json(const LoopResult& R, const std::string& data_file, const s
             {"waterfall", waterfall}, {"effects", effects}, {"outside_library", R.outside_library},
             {"stop", R.stop}};
   // The outside finding as a user effect for the model file's `user_effects:` list.
-  const SuggestedUserEffect& s = R.suggestion;
-  if (!s.kind.empty()) {
+  auto user_json = [](const SuggestedUserEffect& s) {
     Json u = {{"kind", s.kind}, {"axis", s.axis + 1}};
-    if (s.kind == "table") {
-      u["input"] = s.input;
+    if (s.kind == "table" || s.kind == "pitch_table") {
+      if (s.kind == "table") u["input"] = s.input;
       u["nodes"] = s.nodes;
       u["values"] = s.values;
     } else {
@@ -263,11 +400,14 @@ std::string loop_json(const LoopResult& R, const std::string& data_file, const s
       for (const auto& [name, value] : s.params) params[name] = value;
       u["params"] = params;
     }
+    if (s.rms_after > 0.0) u["rms_after"] = s.rms_after;
     u["text"] = s.text;
-    o["suggested_user_effect"] = u;
-  } else {
-    o["suggested_user_effect"] = nullptr;
-  }
+    return u;
+  };
+  Json added = Json::array();
+  for (const SuggestedUserEffect& s : R.user_added) added.push_back(user_json(s));
+  o["user_effects_added"] = added;
+  o["suggested_user_effect"] = R.suggestion.kind.empty() ? Json() : user_json(R.suggestion);
   return o.dump(2, ' ', false, Json::error_handler_t::replace) + "\n";
 }
 

@@ -71,6 +71,7 @@ struct SimSpec {
   double resolution = 0.0;
   bool base_errors = true;        // Kim-sized planes in the truth
   std::vector<std::tuple<std::string, int, std::vector<double>>> effects;  // planted (axis 0..2 / -1)
+  std::vector<std::string> user_effects;  // planted user effects, in cpm sim's --truth-effect form
   const ctl::Trajectory* trajectory = nullptr;  // default: Lissajous(duration)
 };
 
@@ -79,6 +80,7 @@ inline io::MotionData simulate(const SimSpec& s, sim::RunResult* run = nullptr,
   ctl::MachineModel tm = ctl::MachineModel::elkady();
   if (s.base_errors) tm.kinematics = kim_sized_planes(s.seed * 7919 + 3);
   for (const auto& [name, axis, values] : s.effects) ctl::add_effect(tm, name, axis, values);
+  for (const std::string& u : s.user_effects) ctl::add_user_effect(tm, u);
   const ctl::Machine truth(tm);
   const ctl::Machine model(controller_model);
   const ctl::Controller ctrl(model, ctl::ControlLaw::computed_torque,

@@ -2,6 +2,7 @@
 // diagnose, add the effect found, refit, diagnose again, until nothing is
 // missing; prints the waterfall, writes the new model file (never the input)
 // and, on request, the waterfall as JSON and as an HTML page.
+#include <algorithm>
 #include <cstdio>
 #include <sstream>
 
@@ -19,7 +20,46 @@ struct Options {
   std::optional<std::string> json, report;
   std::string out;
   int max_steps = 6;
+  std::vector<std::string> allow;  // user effect kinds the loop may add
 };
+
+// The model file's `user_effects:` section for the suggestion, to paste.
+std::string suggestion_yaml(const ident::SuggestedUserEffect& s) {
+  ctl::MachineModel m = ctl::MachineModel::elkady();
+  if (s.kind == "pitch_table") {
+    m.kinematics.effects[static_cast<std::size_t>(s.axis)].pitch_table = ident::pitch_table_of(s);
+  } else {
+    m.user_effects.push_back(ident::user_effect_of(s));
+  }
+  // The file's own rendering of that model, its user_effects section only
+  // (from the section's comment up to the next section's).
+  io::ModelFile mf;
+  mf.model = m;
+  const std::string file = io::render_model_file(mf);
+  const std::size_t from = file.find("\n# Effects added by the user");
+  const std::size_t list = file.find("\nuser_effects:", from == std::string::npos ? 0 : from);
+  if (from == std::string::npos || list == std::string::npos) return file;
+  const std::size_t to = file.find("\n# ", list);
+  return file.substr(from + 1, to == std::string::npos ? std::string::npos : to - from);
+}
+
+// Without --allow (or with other kinds): the suggestion as YAML and the command that adds it.
+void print_suggestion(const ident::LoopResult& R, const Options& opt) {
+  const ident::SuggestedUserEffect& s = R.suggestion;
+  if (!R.outside_library || s.kind.empty()) return;
+  std::string yaml;
+  try {
+    yaml = suggestion_yaml(s);
+  } catch (const Error& e) {
+    std::printf("(the suggestion cannot be written as a user effect: %s)\n", e.what());
+    return;
+  }
+  std::printf("\nthe outside finding as a user effect (%s), ready to paste into the model file:\n%s",
+              ident::label_of(s).c_str(), yaml.c_str());
+  std::string cmd = "cpm loop --model " + opt.in.model_path() + " --data " + opt.in.data + " --allow " + s.kind;
+  cmd += " --out " + opt.out;
+  std::printf("or let the loop add and fit it:\n  %s\n", cmd.c_str());
+}
 
 int run(const Options& opt) {
   const std::string model_path = opt.in.model_path();
@@ -32,8 +72,9 @@ int run(const Options& opt) {
   o.motion.half_window = opt.in.half_window();
   const io::DataSet ds = read_measurements(data_path);
   io::ModelFile mf = io::load_model_file(model_path);
-  const ident::LoopResult R = ident::run_loop(ds, mf.model, o, max_steps);
+  const ident::LoopResult R = ident::run_loop(ds, mf.model, o, max_steps, opt.allow);
   std::fputs(ident::loop_text(R).c_str(), stdout);
+  print_suggestion(R, opt);
   mf.model = R.model;
   std::ostringstream note;
   note << "cpm loop added";
@@ -60,9 +101,19 @@ Run setup(CLI::App& app) {
   app.add_option("--max-steps", o->max_steps, "stop after N steps (1 .. 20)")
       ->type_name("N")
       ->check(CLI::Range(1, 20).description(""));
+  app.add_option("--allow", o->allow,
+                 "user effect kinds the loop may add at an outside finding: table, expression, pitch_table "
+                 "(comma-separated)")
+      ->type_name("KIND[,KIND...]")
+      ->delimiter(',')
+      ->check(CLI::IsMember({"table", "expression", "pitch_table"}).description(""));
   app.footer("Each step adds the effect the diagnosis names first and refits every effect added so far together;\n"
              "it stops when nothing is missing, when something no library effect describes remains, or after N\n"
-             "steps. The waterfall is the residual RMS of the model after each step beside the noise floor.");
+             "steps. At something outside the library it prints the finding as a user effect (model-file YAML,\n"
+             "docs/effects.md \"Effects you add\") and the command that adds it; with --allow KIND it adds a\n"
+             "suggestion of that kind itself (a table or expression on motion logs, fitted with the effects added\n"
+             "before refitted beside it; a pitch_table on ball-bar and position data, the planes recalibrated), and\n"
+             "goes on. The waterfall is the residual RMS of the model after each step beside the noise floor.");
   return [o] { return run(*o); };
 }
 

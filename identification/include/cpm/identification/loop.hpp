@@ -36,10 +36,30 @@ struct LoopResult {
   std::string stop;                          // why the loop stopped, for people
   bool outside_library = false;              // it stopped at something no library effect describes
   SuggestedUserEffect suggestion;            // then: that finding as a user effect (kind "" if none)
+  std::vector<SuggestedUserEffect> user_added;  // user effects added (allowed kinds), as fitted, in order
 };
 
+// The suggestion of a diagnosis' first outside finding: kinematic data, the
+// pitch_table the diagnosis fitted; motion, suggest_user_effect of the finding.
+SuggestedUserEffect suggestion_of(const Diagnosis& D);
+
+// The model's user effect for a motion suggestion (table or expression), or
+// throws Error saying why it cannot be one (a table over a1..a3 or t).
+ctl::UserEffect user_effect_of(const SuggestedUserEffect& s);
+
+// The model's pitch table for a pitch_table suggestion; throws Error when it is not a usable one.
+kin::PitchTable pitch_table_of(const SuggestedUserEffect& s);
+
+// The waterfall's label of a user effect: "expression[axis 2]: c*v1", "table[axis 1]: d1", "pitch_table[axis 1]".
+std::string label_of(const SuggestedUserEffect& s);
+
+// `allow`: the user effect kinds ("table", "expression", "pitch_table") the
+// loop may add when it reaches an outside finding whose suggestion is of that
+// kind: it adds it, fits it (motion: fit_user_effect with the library effects
+// held, then those refitted beside it; kinematic: the diagnosis' pitch table,
+// the planes recalibrated beside it) and goes on. Empty: it stops there.
 LoopResult run_loop(const io::DataSet& data, const ctl::MachineModel& model, const DiagnoseOptions& options = {},
-                    int max_steps = 6);
+                    int max_steps = 6, const std::vector<std::string>& allow = {});
 
 // The waterfall as text and as an HTML page (bars of RMS per step, the noise floor drawn over them).
 std::string loop_text(const LoopResult& R);
