@@ -64,4 +64,8 @@ void select_scales_at_the_given_model(const KinematicProblem& P, const Engine& E
 // verdict text.
 void select_kinematic_effects(const KinematicProblem& P, const Engine& E, const DiagnoseOptions& opt, Diagnosis& D);
 
+// The engine of the base refit with the columns X (m per unit) as base columns
+// too, each named `name`: a fit on it takes them beside every other column.
+Engine with_base_columns(const Engine& E, const Eigen::MatrixXd& X, const char* name);
+
 }  // namespace cpm::ident::kinematic_detail

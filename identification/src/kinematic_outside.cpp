@@ -219,18 +219,6 @@ ColumnTest test_columns(const Engine& E, const Eigen::MatrixXd& X, double trials
   return t;
 }
 
-// The base refit with X as base columns too.
-Engine with_columns(const Engine& E, const Eigen::MatrixXd& X) {
-  LinearProblem L = E.problem();
-  L.B = detail::hstack(L.B, X);
-  for (Eigen::Index j = 0; j < X.cols(); ++j) {
-    L.base_names.emplace_back("smooth error");
-    L.base_units.emplace_back("m");
-    L.base_values.push_back(0.0);
-    L.nuisance.push_back(0);
-  }
-  return Engine(std::move(L));
-}
 
 // Peak to peak (m) over the stroke of the smooth error b2 P2 + b3 P3 (no linear part).
 double smooth_size(const Eigen::VectorXd& b) {
@@ -426,7 +414,7 @@ void kinematic_outside_library(const KinematicProblem& P, const Engine& E, const
            fmt(f.hi * 1e3, 4) + " mm; p = " + fmt(best_p, 2) + ")";
 
   // Library effects that still add something beside it stay named; the others explained part of it only.
-  const Engine Es = with_columns(E, X_best);
+  const Engine Es = with_base_columns(E, X_best, "smooth error");
   std::vector<int> kept, partial;
   Eigen::MatrixXd XK(N, 0);
   for (int j : found) {

@@ -31,19 +31,6 @@ namespace {
 
 using detail::amount;
 
-// The engine of the base refit with the columns `others` as base columns too:
-// a search on it fits them beside every value it tries.
-Engine beside(const Engine& E, const Eigen::MatrixXd& others) {
-  LinearProblem L = E.problem();
-  L.B = detail::hstack(L.B, others);
-  for (Eigen::Index j = 0; j < others.cols(); ++j) {
-    L.base_names.emplace_back("chosen effect");
-    L.base_units.emplace_back("m");
-    L.base_values.push_back(0.0);
-    L.nuisance.push_back(0);
-  }
-  return Engine(std::move(L));
-}
 
 // From the calibrated base, what each term adds measured against the model
 // reached, searched parameters searched again beside the effects chosen.
@@ -57,7 +44,7 @@ detail::SelectionKind from_the_calibrated_base(const KinematicProblem& P, const 
     const KinematicEffectFitter* f = type ? kinematic_fitter(*type) : nullptr;
     if (!f || !f->search_beside || c.axis < 0 || c.axis > 2) return;
     const KinematicCandidateContext x{P, E, c.axis, kin::info(*type), span_of(P)};
-    f->search_beside(x, beside(E, others), c);
+    f->search_beside(x, with_base_columns(E, others, "chosen effect"), c);
     t.X = c.columns;
   };
   return k;
@@ -130,6 +117,18 @@ void select_kinematic_effects(const KinematicProblem& P, const Engine& E, const 
   select_scales_at_the_given_model(P, E, opt, D, sel);
   detail::apply_selection(D, E, sel);
   D.verdict_text = D.verdict < 0 ? detail::no_effect_text(D) : kinematic_verdict_text(D);
+}
+
+Engine with_base_columns(const Engine& E, const Eigen::MatrixXd& X, const char* name) {
+  LinearProblem L = E.problem();
+  L.B = detail::hstack(L.B, X);
+  for (Eigen::Index j = 0; j < X.cols(); ++j) {
+    L.base_names.emplace_back(name);
+    L.base_units.emplace_back("m");
+    L.base_values.push_back(0.0);
+    L.nuisance.push_back(0);
+  }
+  return Engine(std::move(L));
 }
 
 }  // namespace cpm::ident::kinematic_detail
