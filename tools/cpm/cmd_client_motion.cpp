@@ -228,8 +228,8 @@ std::string row_name(const StreamRows& s, std::size_t i) {
 // The whole file through the checks cpmd makes on each stream segment
 // (daemon::validate_segment: soft limits, the machine's workspace, speed
 // and acceleration), before anything is sent. On a refusal, the first
-// stretch between two rows that fails on its own names the row it ends at
-// (t, the time in cpmd's message, counts from the stretch's start). Returns
+// stretch between two rows that fails on its own names the row (t, the
+// time in cpmd's message, counts from the stretch's start). Returns
 // "" when every segment passes, else what and where.
 std::string check_stream(const StreamRows& s, const std::vector<trajectory_command_t>& chunks,
                          const std::vector<std::size_t>& first_row, const ctl::Machine& machine,
@@ -249,24 +249,32 @@ std::string check_stream(const StreamRows& s, const std::vector<trajectory_comma
     const trajectory_command_t& m = chunks[c];
     const daemon::Validation v = daemon::validate_segment(m, client::vec3_of(m.position[0]), machine, L, dt);
     if (v.ok) continue;
-    // A stream's piece between two rows depends on those two rows only.
-    for (int i = 0; i + 1 < m.count; ++i) {
+    // A stream's piece between two rows depends on those two rows only. A
+    // chunk's last row is checked at its start only (cpmd samples a chunk's
+    // end as the point at rest), so the search runs into the next chunk's
+    // first stretch.
+    const std::size_t last = std::min(first_row[c] + static_cast<std::size_t>(m.count), s.rows.size() - 1);
+    for (std::size_t from = first_row[c]; from < last; ++from) {
       trajectory_command_t two{};
       two.kind = trajectory_command_t::KIND_STREAM;
       two.count = 2;
       for (int j = 0; j < 2; ++j) {
-        two.time[j] = m.time[i + j] - m.time[i];
+        const auto& r = s.rows[from + static_cast<std::size_t>(j)];
+        two.time[j] = r[0] - s.rows[from][0];
         for (int k = 0; k < 3; ++k) {
-          two.position[j][k] = m.position[i + j][k];
-          two.velocity[j][k] = m.velocity[i + j][k];
+          two.position[j][k] = r[1 + k];
+          two.velocity[j][k] = r[4 + k];
         }
       }
       const daemon::Validation w = daemon::validate_segment(two, client::vec3_of(two.position[0]), machine, L, dt);
       if (!w.ok) {
-        const std::size_t row = first_row[c] + static_cast<std::size_t>(i) + 1;
+        // cpmd's message says when, from the stretch's start: at 0 the
+        // stretch's first row (its own velocity), else the row it ends at.
+        const std::size_t at = w.message.find("t = ");
+        const bool first = at != std::string::npos && std::strtod(w.message.c_str() + at + 4, nullptr) == 0.0;
         char span[96];
-        std::snprintf(span, sizeof span, ", the stretch from t = %.4f s to %.4f s: ", s.rows[row - 1][0], s.rows[row][0]);
-        return row_name(s, row) + span + w.message;
+        std::snprintf(span, sizeof span, ", the stretch from t = %.4f s to %.4f s: ", s.rows[from][0], s.rows[from + 1][0]);
+        return row_name(s, first ? from : from + 1) + span + w.message;
       }
     }
     return "rows " + std::to_string(first_row[c] + 1) + ".." + std::to_string(first_row[c] + m.count) + ": " + v.message;
