@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "cmd_client_common.hpp"
+#include "cpm/daemon/fault_report.hpp"
 #include "cpm/daemon/loop.hpp"
 #include "cpm/daemon/params.hpp"
 #include "cpm/daemon/server.hpp"
@@ -366,7 +367,17 @@ int stream(const Options& o) {
   int segments = 0;
   for (std::size_t k = 0; k < chunks.size(); ++k) {
     for (;;) {
-      const auto ack = c->trajectory(chunks[k]);
+      ack_t ack{};
+      try {
+        ack = c->trajectory(chunks[k]);
+      } catch (const Error&) {
+        // A sender that fell behind (paused, starved): cpmd may have run
+        // dry and latched stream_underrun meanwhile; say so if it did.
+        const auto now = c->state(2.0);
+        if (!now || !now->faults) throw;
+        std::printf("stream: rows from %zu on not sent; cpmd: %s\n", first_row[k] + 1, daemon::fault_report(*now).c_str());
+        return 1;
+      }
       if (ack.accepted) {
         last_id = ack.id;
         ++segments;
