@@ -286,6 +286,26 @@ const Command r9{"keygen", "make a new operator key file (32 random bytes, hex, 
                        ->required();
                    return [file] { return keygen(*file); };
                  }};
+const Command r10{"daemon-keygen",
+                  "make cpmd's signing key (as keygen) and write its public half, which clients verify state with",
+                  [](CLI::App& app) -> Run {
+                    auto files = std::make_shared<std::pair<std::string, std::string>>();
+                    app.add_option("KEY", files->first, "cpmd's key file to create (security.signing_key; mode 0600)")
+                        ->type_name("FILE")
+                        ->required();
+                    app.add_option("PUBLIC", files->second, "its public half (e.g. ~/.config/cpm/cpmd.pub)")
+                        ->type_name("FILE")
+                        ->required();
+                    return [files] {
+                      const daemon::Key k = daemon::generate_key();
+                      daemon::write_key_file(files->first, k);
+                      daemon::write_public_key_file(files->second, daemon::public_key_of(k));
+                      std::printf("%s: cpmd's signing key (security.signing_key in cpmd.yaml); %s: its public half, "
+                                  "for every client (--daemon-key, or ~/.config/cpm/cpmd.pub)\n",
+                                  files->first.c_str(), files->second.c_str());
+                      return 0;
+                    };
+                  }};
 const Command r8{"stats", "print cpmd's loop timing: wake-up latency and per-phase times",
                  state_command(stats, "one line of JSON (times in µs) instead of the table")};
 
