@@ -211,6 +211,74 @@ TEST(Stranger, CanStopTheMachine) {
   EXPECT_GT(st->position[0] - 0.40, 0.01);
 }
 
+// ---------------------------------------------------------------- forged state
+
+// Issue 27's first attack against a signing cpmd: forged "holding" states
+// carrying the id of the move `cpm move` waits for (the genuine message,
+// mode changed: its signature no longer verifies; and unsigned ones), sent
+// every 5 ms for 1.5 s of a 4 s move. The waiting `cpm move` must not end
+// early, `cpm status` must show the machine moving.
+TEST(ForgedState, DoesNotEndAWaitingMoveNorShowInStatus) {
+  cpm::test::TempDir kd("redteam-forged-key");
+  const std::string key = kd / "cpmd.key", pub = kd / "cpmd.pub";
+  const daemon::Key seed = daemon::generate_key();
+  daemon::write_key_file(key, seed);
+  daemon::write_public_key_file(pub, daemon::public_key_of(seed));
+  Rig r("forged", {{"refusal_acks_per_second: 20", "refusal_acks_per_second: 20\n  signing_key: " + key}});
+  r.start();
+  Client alice(r.cfg.lcm, r.alice);
+  alice.verify_with(daemon::public_key_of(seed));
+  ASSERT_TRUE(alice.control(C::CMD_ENABLE).accepted);
+  std::optional<state_t> st;
+  for (int i = 0; i < 50 && !(st && st->mode == state_t::MODE_HOLDING); ++i) st = alice.state(0.2);
+  ASSERT_EQ(st->mode, state_t::MODE_HOLDING);
+  alice.release();
+  const auto t0 = Clock::now();
+  std::vector<std::string> argv{"/usr/bin/env", "-i", "HOME=" + (r.dir / "nohome"), CPM_EXE, "move", "0.40,0.425,0.300",
+                                "--vmax", "0.05", "--url", r.cfg.lcm.url, "--key", r.ops.key_path("alice"),
+                                "--daemon-key", pub};
+  cpm::test::Process move(argv, r.dir / "move.log", /*stdout_log=*/true);
+  for (int i = 0; i < 50 && st->mode != state_t::MODE_MOVING; ++i) st = alice.state(0.2);
+  ASSERT_EQ(st->mode, state_t::MODE_MOVING) << move.log();
+  const std::int64_t move_id = st->segment_id;
+  std::atomic<int> forged{0};
+  std::thread forger([&] {
+    Stranger s(r.cfg.lcm);
+    const auto end = Clock::now() + std::chrono::milliseconds(1500);
+    while (Clock::now() < end) {
+      state_t f = *st;  // the genuine message, signature and all
+      f.mode = state_t::MODE_HOLDING;
+      f.segment_id = -1;
+      f.queue_depth = 0;
+      f.last_segment_id = move_id;
+      f.last_segment_rmse = f.last_segment_max = 1e-7;
+      f.sign_counter = st->sign_counter + 1000000 + forged;
+      s.publish(r.cfg.lcm.state_channel, encode(f));
+      f.sign_counter = 0;
+      for (auto& b : f.signature) b = 0;
+      s.publish(r.cfg.lcm.state_channel, encode(f));
+      forged += 2;
+      std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    }
+  });
+  std::string out;
+  std::vector<std::string> status{"/usr/bin/env", "-i", "HOME=" + (r.dir / "nohome"), CPM_EXE, "status",
+                                  "--url", r.cfg.lcm.url, "--daemon-key", pub};
+  cpm::test::Process stat(status, r.dir / "status.log", /*stdout_log=*/true);
+  const auto src = stat.wait_exit_for(10);
+  forger.join();
+  EXPECT_EQ(src.value_or(-1), 0) << stat.log();
+  EXPECT_NE(stat.log().find("moving"), std::string::npos) << stat.log();
+  EXPECT_EQ(stat.log().find("holding"), std::string::npos) << stat.log();
+  EXPECT_FALSE(move.wait_exit_for(0.1).has_value()) << "cpm move ended on forged state:\n" << move.log();
+  const auto rc = move.wait_exit_for(30);
+  const double took = std::chrono::duration<double>(Clock::now() - t0).count();
+  EXPECT_EQ(rc.value_or(-1), 0) << move.log();
+  EXPECT_GT(took, 3.5) << move.log();
+  std::printf("forged states sent while cpm move waited: %d; cpm move ended after %.2f s (a 4 s move)\n",
+              forged.load(), took);
+}
+
 // ---------------------------------------------------------------- the largest model
 
 // The state as a stranger reads it: the first braking cycle, and the loop's
