@@ -279,6 +279,29 @@ TEST(ForgedState, DoesNotEndAWaitingMoveNorShowInStatus) {
               forged.load(), took);
 }
 
+// Against a cpmd that does not sign (an old one, or no security.signing_key):
+// `cpm status` told to verify refuses its state and says it cannot be
+// verified; without a public key it shows the state marked NOT VERIFIED.
+TEST(ForgedState, AnUnsignedCpmdsStateIsSaidToBeUnverifiable) {
+  cpm::test::TempDir kd("redteam-unsigned-key");
+  const std::string pub = kd / "cpmd.pub";
+  daemon::write_public_key_file(pub, daemon::public_key_of(daemon::generate_key()));
+  Rig r("unsigned");
+  r.start();
+  std::vector<std::string> base{"/usr/bin/env", "-i", "HOME=" + (r.dir / "nohome"), CPM_EXE, "status",
+                                "--url", r.cfg.lcm.url};
+  std::vector<std::string> with_key = base;
+  with_key.insert(with_key.end(), {"--daemon-key", pub});
+  cpm::test::Process verified(with_key, r.dir / "status-key.log", /*stdout_log=*/true);
+  EXPECT_NE(verified.wait_exit_for(10).value_or(0), 0) << verified.log();
+  EXPECT_NE(verified.log().find("cannot be verified"), std::string::npos) << verified.log();
+  EXPECT_EQ(verified.log().find("disabled"), std::string::npos) << "showed unverified state:\n" << verified.log();
+  cpm::test::Process plain(base, r.dir / "status.log", /*stdout_log=*/true);
+  EXPECT_EQ(plain.wait_exit_for(10).value_or(-1), 0) << plain.log();
+  EXPECT_NE(plain.log().find("CANNOT BE VERIFIED"), std::string::npos) << plain.log();
+  EXPECT_NE(plain.log().find("NOT VERIFIED"), std::string::npos) << plain.log();
+}
+
 // ---------------------------------------------------------------- the largest model
 
 // The state as a stranger reads it: the first braking cycle, and the loop's
