@@ -12,6 +12,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
 #include <fstream>
 #include <sstream>
@@ -58,12 +59,24 @@ struct Rig {
   std::string config;
   daemon::DaemonConfig cfg;
   std::unique_ptr<cpm::test::Process> cpmd;
-  explicit Rig(const std::string& name, const std::vector<std::pair<std::string, std::string>>& edits = {})
+  daemon::Key signing_seed = daemon::generate_key();
+  explicit Rig(const std::string& name, const std::vector<std::pair<std::string, std::string>>& edits = {},
+               bool unsigned_daemon = false)
       : dir("redteam-" + name), ops(dir / "operators.d"), alice(ops.add("alice", Role::engineer)),
         bob(ops.add("bob", Role::operator_)) {
     std::filesystem::create_directories(dir / "models");
     std::filesystem::copy_file(std::string(CPM_SOURCE_DIR) + "/config/machine.yaml", dir / "models/machine.yaml");
-    config = cpm::test::sim_config(dir.path(), "sim.yaml", ops.path(), edits, dir / "models");
+    // cpmd signs its state and acks, as on a shop floor (docs/security.md, "Signed state");
+    // a test's own signing_key edit, or `unsigned_daemon`, comes instead.
+    std::vector<std::pair<std::string, std::string>> all = edits;
+    if (!unsigned_daemon && std::none_of(edits.begin(), edits.end(), [](const auto& e) {
+          return e.second.find("signing_key") != std::string::npos;
+        })) {
+      daemon::write_key_file(dir / "cpmd.key", signing_seed);
+      all.insert(all.begin(), {"refusal_acks_per_second: 20", "refusal_acks_per_second: 20\n  signing_key: " +
+                                                                  (dir / "cpmd.key")});
+    }
+    config = cpm::test::sim_config(dir.path(), "sim.yaml", ops.path(), all, dir / "models");
     cfg = daemon::load_config(config);
   }
   // Starts cpmd (with `extra` arguments) and waits for its first state.
@@ -286,7 +299,7 @@ TEST(ForgedState, AnUnsignedCpmdsStateIsSaidToBeUnverifiable) {
   cpm::test::TempDir kd("redteam-unsigned-key");
   const std::string pub = kd / "cpmd.pub";
   daemon::write_public_key_file(pub, daemon::public_key_of(daemon::generate_key()));
-  Rig r("unsigned");
+  Rig r("unsigned", {}, /*unsigned_daemon=*/true);
   r.start();
   std::vector<std::string> base{"/usr/bin/env", "-i", "HOME=" + (r.dir / "nohome"), CPM_EXE, "status",
                                 "--url", r.cfg.lcm.url};
