@@ -69,7 +69,7 @@ set(CPACK_DEBIAN_CPMD_PACKAGE_CONTROL_STRICT_PERMISSION ON)
 set(CPACK_DEBIAN_DEV_PACKAGE_NAME cpmd-dev)
 set(CPACK_DEBIAN_DEV_PACKAGE_SECTION libdevel)
 # What a program built with find_package(cpmd) compiles and links against.
-set(CPACK_DEBIAN_DEV_PACKAGE_DEPENDS "liblcm-dev, libyaml-cpp-dev, libssl-dev")
+set(CPACK_DEBIAN_DEV_PACKAGE_DEPENDS "liblcm-dev, libyaml-cpp-dev, libssl-dev, libsodium-dev")
 set(CPACK_DEBIAN_DEV_PACKAGE_RECOMMENDS "cmake")
 set(CPACK_DEBIAN_DEV_PACKAGE_SUGGESTS "cpmd")
 set(CPACK_COMPONENT_DEV_DESCRIPTION

@@ -6,7 +6,10 @@
 #include <lcm/lcm-cpp.hpp>
 #include <algorithm>
 #include <cerrno>
+#include <cstdio>
+#include <cstdlib>
 #include <cstring>
+#include <utility>
 #include <random>
 
 #include "cpm/daemon/modes.hpp"
@@ -40,9 +43,20 @@ std::string with_receive_buffer(const std::string& url) {
 }
 }  // namespace
 
+std::string daemon_public_key_path(const LcmConfig& cfg) {
+  if (!cfg.daemon_public_key.empty()) return cfg.daemon_public_key;
+  if (const char* env = std::getenv("CPM_DAEMON_KEY"); env && *env) return env;
+  if (const char* home = std::getenv("HOME"); home && *home) {
+    const std::string p = std::string(home) + "/.config/cpm/cpmd.pub";
+    if (::access(p.c_str(), F_OK) == 0) return p;
+  }
+  return "";
+}
+
 std::optional<cpm_msgs::ack_t> decode_ack(const void* data, std::size_t size) {
   // hash, utime, id (8 each), source, command, accepted (1), reason (2): then message.
-  constexpr std::size_t kHead = 8 + 8 + 8 + 1 + 1 + 1 + 2, kTail = 1 + 2 + 8;
+  // After it: mode, queue_depth, session, boot_id, sign_counter, signature.
+  constexpr std::size_t kHead = 8 + 8 + 8 + 1 + 1 + 1 + 2, kTail = 1 + 2 + 8 + 8 + 8 + kSignatureBytes;
   if (size < kHead + 4 + 1 + kTail || size > (1u << 20)) return std::nullopt;
   const auto* p = static_cast<const std::uint8_t*>(data) + kHead;
   const auto len = static_cast<std::int32_t>((std::uint32_t{p[0]} << 24) | (std::uint32_t{p[1]} << 16) |
@@ -71,6 +85,11 @@ Client::Client(const LcmConfig& cfg, std::optional<Credentials> operator_key)
   lcm_->subscribe(cfg_.security_channel, &Client::on_security_msg, this)->setQueueCapacity(100);
   lcm_->subscribe(cfg_.drives_channel, &Client::on_drives_msg, this)->setQueueCapacity(100);
   lcm_->subscribe(cfg_.params_channel, &Client::on_params, this)->setQueueCapacity(100);
+  // Said now, before a full-screen view (cpm watch) takes the terminal.
+  if (const std::string pk = daemon_public_key_path(cfg_); !pk.empty())
+    verify_with(read_public_key_file(pk));
+  else
+    unverified();
   std::random_device rd;
   next_id_ = (static_cast<std::int64_t>(rd() & 0x7fffffu) << 32) ^ (static_cast<std::int64_t>(::getpid()) << 8);
   nonce_ = static_cast<std::int64_t>(((std::uint64_t{rd()} << 32) ^ rd()) & 0x7FFFFFFFFFFFFFFFull) | 1;
@@ -128,6 +147,7 @@ void Client::acquire(double timeout_s) {
   std::optional<cpm_msgs::state_t> st = last_state_;
   for (int attempt = 0;; ++attempt) {
     if (!st) st = state(timeout_s);
+    need_same_boot();
     if (!st)
       throw Error("no state from cpmd within " + std::to_string(timeout_s) + " s: is it running on " + cfg_.url + "?");
     cpm_msgs::control_command_t c{};
@@ -146,7 +166,8 @@ void Client::acquire(double timeout_s) {
     if (!a.accepted && a.reason == cpm_msgs::ack_t::REASON_NOT_AUTHORIZED && attempt == 0) {
       const std::int64_t used = st->boot_id;
       st = state(timeout_s);
-      if (st && st->boot_id != used) continue;  // cpmd restarted meanwhile
+      need_same_boot();  // verified state of another boot is refused: a restart is reported
+      if (st && st->boot_id != used) continue;  // cpmd restarted meanwhile (unverified clients only)
     }
     if (!a.accepted || a.session == 0) throw Error("cpmd refused to let this process command the machine: " + a.message);
     session_ = a.session;
@@ -183,9 +204,49 @@ void Client::keep_alive() {
 
 std::int64_t Client::next_id() { return ++next_id_; }
 
+void Client::refused(Trust t, const char* what) {
+  if (refused_cb_) return refused_cb_(t, what);
+  if (told_[static_cast<int>(t)]) return;
+  told_[static_cast<int>(t)] = true;
+  std::fprintf(stderr, "cpm: %s refused: %s (docs/security.md, \"Signed state\"); said once, counted after\n", what,
+               trust_text(t));
+}
+
+void Client::unverified() {
+  if (std::exchange(told_unverified_, true)) return;
+  std::fprintf(stderr,
+               "cpm: warning: no public key of cpmd (--daemon-key, $CPM_DAEMON_KEY, ~/.config/cpm/cpmd.pub): its state "
+               "and acks CANNOT BE VERIFIED and are shown as sent, forged or not (docs/security.md, \"Signed state\")\n");
+}
+
+bool Client::trusted(const cpm_msgs::state_t& m) {
+  if (!verifier_) return true;
+  const Trust t = verifier_->check(m, m.boot_id, 0);
+  if (t == Trust::ok) return true;
+  if (t == Trust::other_boot) restarted_ = m.boot_id;
+  refused(t, "a state");
+  return false;
+}
+
+bool Client::trusted(const cpm_msgs::ack_t& m) {
+  if (!verifier_) return true;
+  const Trust t = verifier_->check(m, m.boot_id, 1);
+  if (t == Trust::ok) return true;
+  if (t == Trust::other_boot) restarted_ = m.boot_id;
+  refused(t, "an ack");
+  return false;
+}
+
+void Client::need_same_boot() const {
+  if (restarted_ != 0)
+    throw Error("cpmd restarted since this client began (boot id " + std::to_string(verifier_->boot()) + ", now " +
+                std::to_string(restarted_) + "): its new state is not taken on trust; start again");
+}
+
 void Client::on_ack(const lcm::ReceiveBuffer* rbuf, const std::string&) {
   const auto a = decode_ack(rbuf->data, rbuf->data_size);
   if (!a) return;  // not an ack: somebody else's bytes
+  if (!trusted(*a)) return;
   const cpm_msgs::ack_t* m = &*a;
   if (pings_.erase(m->id)) {
     // A keep-alive refused: the session is gone (daemon restarted, or it
@@ -204,6 +265,7 @@ void Client::on_ack(const lcm::ReceiveBuffer* rbuf, const std::string&) {
   acks_[m->id] = *m;
 }
 void Client::on_state_msg(const lcm::ReceiveBuffer*, const std::string&, const cpm_msgs::state_t* m) {
+  if (!trusted(*m)) return;
   last_state_ = *m;
   if (state_cb_) state_cb_(*m);
 }

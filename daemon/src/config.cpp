@@ -668,10 +668,12 @@ DaemonConfig parse_config_checked(const std::string& text, const std::string& na
   }
   if (root["security"]) {
     const auto s = r.map(root["security"], "security", {},
-                         {"operators_dir", "model_dir", "acquire_window", "refusal_acks_per_second"});
+                         {"operators_dir", "model_dir", "acquire_window", "refusal_acks_per_second", "signing_key"});
     if (s["operators_dir"])
       c.security.operators_dir = resolve(base_dir, r.text(s["operators_dir"], "security.operators_dir"));
     if (s["model_dir"]) c.security.model_dir = resolve(base_dir, r.text(s["model_dir"], "security.model_dir"));
+    if (s["signing_key"])
+      c.security.signing_key = resolve(base_dir, r.text(s["signing_key"], "security.signing_key"));
     if (s["acquire_window"])
       c.security.acquire_window = r.positive(s["acquire_window"], "security.acquire_window", 3600.0, "s");
     if (s["refusal_acks_per_second"])

@@ -336,6 +336,11 @@ Server::Server(const DaemonConfig& cfg, ControlLoop& loop, ModelStore& models)
   std::random_device rd;
   session_salt_ = (std::uint64_t{rd()} << 32) ^ rd();
   boot_id_ = static_cast<std::int64_t>(((std::uint64_t{rd()} << 32) ^ rd()) & 0x7FFFFFFFFFFFFFFFull) | 1;
+  if (!cfg_.security.signing_key.empty())
+    signer_ = std::make_unique<Signer>(read_key_file(cfg_.security.signing_key));
+  else
+    log::warning("security.signing_key is not set: state and acks go out unsigned; clients cannot verify them "
+                 "(docs/security.md, \"Signed state\")");
   lcm_ = std::make_unique<lcm::LCM>(cfg_.lcm.url);
   if (!lcm_->good()) throw Error("lcm: cannot open '" + cfg_.lcm.url + "' (is there a multicast route? see docs/daemon.md)");
   // Untyped subscriptions: receive() decodes. lcm-gen's typed decoding
@@ -495,6 +500,8 @@ void Server::publish_ack(std::int64_t id, std::int8_t source, std::int8_t code, 
   a.mode = static_cast<std::int8_t>(mode);
   a.queue_depth = depth;
   a.session = session;
+  a.boot_id = boot_id_;
+  if (signer_) signer_->sign(a);
   lcm_->publish(cfg_.lcm.ack_channel, &a);
 }
 
@@ -998,6 +1005,7 @@ int Server::drain() {
     st.utime = std::chrono::duration_cast<std::chrono::microseconds>(
                    std::chrono::system_clock::now().time_since_epoch()).count();
     st.boot_id = boot_id_;
+    if (signer_) signer_->sign(st);  // this thread, not the control cycle's
     lcm_->publish(cfg_.lcm.state_channel, &st);
     latest_ = st;
     have_state_ = true;

@@ -32,14 +32,16 @@ struct Cell {
   const Credentials alice = daemon::test::credentials("alice"), bob = daemon::test::credentials("bob"),
                     olga = daemon::test::credentials("olga");
 
-  static daemon::DaemonConfig config(const std::string& model_dir) {
+  static daemon::DaemonConfig config(const std::string& model_dir, const std::string& signing_key) {
     daemon::DaemonConfig c = daemon::test::test_config();
     c.lcm.url = "memq://";
     c.security.model_dir = model_dir;
+    c.security.signing_key = signing_key;
     return c;
   }
-  Cell()
-      : h(config(testing::TempDir() + "cpm-redteam-models-" + std::to_string(::getpid()))),
+  // `signing_key`: cpmd's key file (security.signing_key); empty: unsigned.
+  explicit Cell(const std::string& signing_key = {})
+      : h(config(testing::TempDir() + "cpm-redteam-models-" + std::to_string(::getpid()), signing_key)),
         model_dir(h.cfg.security.model_dir) {
     std::filesystem::remove_all(model_dir);
     std::filesystem::create_directories(model_dir);

@@ -12,6 +12,7 @@
 #include <sys/stat.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <atomic>
 #include <fstream>
 #include <sstream>
@@ -58,12 +59,24 @@ struct Rig {
   std::string config;
   daemon::DaemonConfig cfg;
   std::unique_ptr<cpm::test::Process> cpmd;
-  explicit Rig(const std::string& name, const std::vector<std::pair<std::string, std::string>>& edits = {})
+  daemon::Key signing_seed = daemon::generate_key();
+  explicit Rig(const std::string& name, const std::vector<std::pair<std::string, std::string>>& edits = {},
+               bool unsigned_daemon = false)
       : dir("redteam-" + name), ops(dir / "operators.d"), alice(ops.add("alice", Role::engineer)),
         bob(ops.add("bob", Role::operator_)) {
     std::filesystem::create_directories(dir / "models");
     std::filesystem::copy_file(std::string(CPM_SOURCE_DIR) + "/config/machine.yaml", dir / "models/machine.yaml");
-    config = cpm::test::sim_config(dir.path(), "sim.yaml", ops.path(), edits, dir / "models");
+    // cpmd signs its state and acks, as on a shop floor (docs/security.md, "Signed state");
+    // a test's own signing_key edit, or `unsigned_daemon`, comes instead.
+    std::vector<std::pair<std::string, std::string>> all = edits;
+    if (!unsigned_daemon && std::none_of(edits.begin(), edits.end(), [](const auto& e) {
+          return e.second.find("signing_key") != std::string::npos;
+        })) {
+      daemon::write_key_file(dir / "cpmd.key", signing_seed);
+      all.insert(all.begin(), {"refusal_acks_per_second: 20", "refusal_acks_per_second: 20\n  signing_key: " +
+                                                                  (dir / "cpmd.key")});
+    }
+    config = cpm::test::sim_config(dir.path(), "sim.yaml", ops.path(), all, dir / "models");
     cfg = daemon::load_config(config);
   }
   // Starts cpmd (with `extra` arguments) and waits for its first state.
@@ -209,6 +222,97 @@ TEST(Stranger, CanStopTheMachine) {
   for (int i = 0; i < 50 && st->mode != state_t::MODE_HOLDING; ++i) st = alice.state(0.2);
   EXPECT_EQ(st->mode, state_t::MODE_HOLDING);
   EXPECT_GT(st->position[0] - 0.40, 0.01);
+}
+
+// ---------------------------------------------------------------- forged state
+
+// Issue 27's first attack against a signing cpmd: forged "holding" states
+// carrying the id of the move `cpm move` waits for (the genuine message,
+// mode changed: its signature no longer verifies; and unsigned ones), sent
+// every 5 ms for 1.5 s of a 4 s move. The waiting `cpm move` must not end
+// early, `cpm status` must show the machine moving.
+TEST(ForgedState, DoesNotEndAWaitingMoveNorShowInStatus) {
+  cpm::test::TempDir kd("redteam-forged-key");
+  const std::string key = kd / "cpmd.key", pub = kd / "cpmd.pub";
+  const daemon::Key seed = daemon::generate_key();
+  daemon::write_key_file(key, seed);
+  daemon::write_public_key_file(pub, daemon::public_key_of(seed));
+  Rig r("forged", {{"refusal_acks_per_second: 20", "refusal_acks_per_second: 20\n  signing_key: " + key}});
+  r.start();
+  Client alice(r.cfg.lcm, r.alice);
+  alice.verify_with(daemon::public_key_of(seed));
+  ASSERT_TRUE(alice.control(C::CMD_ENABLE).accepted);
+  std::optional<state_t> st;
+  for (int i = 0; i < 50 && !(st && st->mode == state_t::MODE_HOLDING); ++i) st = alice.state(0.2);
+  ASSERT_EQ(st->mode, state_t::MODE_HOLDING);
+  alice.release();
+  const auto t0 = Clock::now();
+  std::vector<std::string> argv{"/usr/bin/env", "-i", "HOME=" + (r.dir / "nohome"), CPM_EXE, "move", "0.40,0.425,0.300",
+                                "--vmax", "0.05", "--url", r.cfg.lcm.url, "--key", r.ops.key_path("alice"),
+                                "--daemon-key", pub};
+  cpm::test::Process move(argv, r.dir / "move.log", /*stdout_log=*/true);
+  for (int i = 0; i < 50 && st->mode != state_t::MODE_MOVING; ++i) st = alice.state(0.2);
+  ASSERT_EQ(st->mode, state_t::MODE_MOVING) << move.log();
+  const std::int64_t move_id = st->segment_id;
+  std::atomic<int> forged{0};
+  std::thread forger([&] {
+    Stranger s(r.cfg.lcm);
+    const auto end = Clock::now() + std::chrono::milliseconds(1500);
+    while (Clock::now() < end) {
+      state_t f = *st;  // the genuine message, signature and all
+      f.mode = state_t::MODE_HOLDING;
+      f.segment_id = -1;
+      f.queue_depth = 0;
+      f.last_segment_id = move_id;
+      f.last_segment_rmse = f.last_segment_max = 1e-7;
+      f.sign_counter = st->sign_counter + 1000000 + forged;
+      s.publish(r.cfg.lcm.state_channel, encode(f));
+      f.sign_counter = 0;
+      for (auto& b : f.signature) b = 0;
+      s.publish(r.cfg.lcm.state_channel, encode(f));
+      forged += 2;
+      std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    }
+  });
+  std::string out;
+  std::vector<std::string> status{"/usr/bin/env", "-i", "HOME=" + (r.dir / "nohome"), CPM_EXE, "status",
+                                  "--url", r.cfg.lcm.url, "--daemon-key", pub};
+  cpm::test::Process stat(status, r.dir / "status.log", /*stdout_log=*/true);
+  const auto src = stat.wait_exit_for(10);
+  forger.join();
+  EXPECT_EQ(src.value_or(-1), 0) << stat.log();
+  EXPECT_NE(stat.log().find("moving"), std::string::npos) << stat.log();
+  EXPECT_EQ(stat.log().find("holding"), std::string::npos) << stat.log();
+  EXPECT_FALSE(move.wait_exit_for(0.1).has_value()) << "cpm move ended on forged state:\n" << move.log();
+  const auto rc = move.wait_exit_for(30);
+  const double took = std::chrono::duration<double>(Clock::now() - t0).count();
+  EXPECT_EQ(rc.value_or(-1), 0) << move.log();
+  EXPECT_GT(took, 3.5) << move.log();
+  std::printf("forged states sent while cpm move waited: %d; cpm move ended after %.2f s (a 4 s move)\n",
+              forged.load(), took);
+}
+
+// Against a cpmd that does not sign (an old one, or no security.signing_key):
+// `cpm status` told to verify refuses its state and says it cannot be
+// verified; without a public key it shows the state marked NOT VERIFIED.
+TEST(ForgedState, AnUnsignedCpmdsStateIsSaidToBeUnverifiable) {
+  cpm::test::TempDir kd("redteam-unsigned-key");
+  const std::string pub = kd / "cpmd.pub";
+  daemon::write_public_key_file(pub, daemon::public_key_of(daemon::generate_key()));
+  Rig r("unsigned", {}, /*unsigned_daemon=*/true);
+  r.start();
+  std::vector<std::string> base{"/usr/bin/env", "-i", "HOME=" + (r.dir / "nohome"), CPM_EXE, "status",
+                                "--url", r.cfg.lcm.url};
+  std::vector<std::string> with_key = base;
+  with_key.insert(with_key.end(), {"--daemon-key", pub});
+  cpm::test::Process verified(with_key, r.dir / "status-key.log", /*stdout_log=*/true);
+  EXPECT_NE(verified.wait_exit_for(10).value_or(0), 0) << verified.log();
+  EXPECT_NE(verified.log().find("cannot be verified"), std::string::npos) << verified.log();
+  EXPECT_EQ(verified.log().find("disabled"), std::string::npos) << "showed unverified state:\n" << verified.log();
+  cpm::test::Process plain(base, r.dir / "status.log", /*stdout_log=*/true);
+  EXPECT_EQ(plain.wait_exit_for(10).value_or(-1), 0) << plain.log();
+  EXPECT_NE(plain.log().find("CANNOT BE VERIFIED"), std::string::npos) << plain.log();
+  EXPECT_NE(plain.log().find("NOT VERIFIED"), std::string::npos) << plain.log();
 }
 
 // ---------------------------------------------------------------- the largest model

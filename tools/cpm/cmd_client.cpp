@@ -96,6 +96,9 @@ int status(const StateOptions& o) {
   const auto l = lcm_options(o.connection);
   daemon::Client c(l);
   auto s = c.state(2.0);
+  if (!s && c.verifying() && c.verifier()->refused_total() > 0)
+    throw Error("no verified state from cpmd within 2 s: " + std::to_string(c.verifier()->refused_total()) +
+                " state messages refused (said above); an unsigned cpmd's state cannot be verified");
   if (!s) throw Error("no state from cpmd within 2 s (is it running? LCM " + l.url + ", channel " + l.state_channel + ")");
   if (json) {
     std::printf("%s\n", json_text(json_state(*s), -1).c_str());
@@ -106,6 +109,11 @@ int status(const StateOptions& o) {
               ctl::law_name(static_cast<ctl::ControlLaw>(s->controller)), static_cast<long long>(s->cycles),
               static_cast<long long>(s->overruns), s->max_latency_ns * 1e-3);
   if (s->faults) std::printf("first fault: %s\n", daemon::fault_report(*s).c_str());
+  if (c.verifying())
+    std::printf("state signed by cpmd and verified (boot id %lld, counter %lld)\n", static_cast<long long>(s->boot_id),
+                static_cast<long long>(s->sign_counter));
+  else
+    std::printf("state NOT VERIFIED: no public key of cpmd (--daemon-key)\n");
   if (s->last_segment_id >= 0)
     std::printf("last segment %lld: tracking error RMS %.1f um, max %.1f um\n",
                 static_cast<long long>(s->last_segment_id), s->last_segment_rmse * 1e6, s->last_segment_max * 1e6);
@@ -286,6 +294,26 @@ const Command r9{"keygen", "make a new operator key file (32 random bytes, hex, 
                        ->required();
                    return [file] { return keygen(*file); };
                  }};
+const Command r10{"daemon-keygen",
+                  "make cpmd's signing key (as keygen) and write its public half, which clients verify state with",
+                  [](CLI::App& app) -> Run {
+                    auto files = std::make_shared<std::pair<std::string, std::string>>();
+                    app.add_option("KEY", files->first, "cpmd's key file to create (security.signing_key; mode 0600)")
+                        ->type_name("FILE")
+                        ->required();
+                    app.add_option("PUBLIC", files->second, "its public half (e.g. ~/.config/cpm/cpmd.pub)")
+                        ->type_name("FILE")
+                        ->required();
+                    return [files] {
+                      const daemon::Key k = daemon::generate_key();
+                      daemon::write_key_file(files->first, k);
+                      daemon::write_public_key_file(files->second, daemon::public_key_of(k));
+                      std::printf("%s: cpmd's signing key (security.signing_key in cpmd.yaml); %s: its public half, "
+                                  "for every client (--daemon-key, or ~/.config/cpm/cpmd.pub)\n",
+                                  files->first.c_str(), files->second.c_str());
+                      return 0;
+                    };
+                  }};
 const Command r8{"stats", "print cpmd's loop timing: wake-up latency and per-phase times",
                  state_command(stats, "one line of JSON (times in µs) instead of the table")};
 

@@ -14,7 +14,7 @@ namespace cpm::cli::client {
 
 // --config FILE (the daemon's config: its lcm section) and/or --url URL.
 struct Connection {
-  std::optional<std::string> config, url;
+  std::optional<std::string> config, url, daemon_key;
 };
 inline void add_connection(CLI::App& app, Connection& c) {
   app.add_option("--config", c.config, "the daemon's configuration: its lcm section says where cpmd listens")
@@ -22,11 +22,15 @@ inline void add_connection(CLI::App& app, Connection& c) {
   app.add_option("--url", c.url, "the LCM URL, instead of the config's")
       ->type_name("LCM_URL")
       ->default_str(daemon::LcmConfig{}.url);
+  app.add_option("--daemon-key", c.daemon_key, "cpmd's public key: only state and acks it signed are believed")
+      ->type_name("FILE")
+      ->default_str("$CPM_DAEMON_KEY, else ~/.config/cpm/cpmd.pub");
 }
 inline daemon::LcmConfig lcm_options(const Connection& c) {
   daemon::LcmConfig l;
   if (c.config) l = daemon::load_config(*c.config).lcm;
   if (c.url) l.url = *c.url;
+  if (c.daemon_key) l.daemon_public_key = *c.daemon_key;
   return l;
 }
 

@@ -23,6 +23,7 @@
 #include "cpm/daemon/auth.hpp"
 #include "cpm/daemon/lcm_config.hpp"
 #include "cpm/daemon/modes.hpp"
+#include "cpm/daemon/signing.hpp"
 
 namespace lcm {
 class LCM;
@@ -114,6 +115,17 @@ class Client {
   int handle(double timeout_s);
   [[nodiscard]] const LcmConfig& config() const noexcept { return cfg_; }
 
+  // Signed state (docs/security.md): from now on only state and acks signed by
+  // `pk`, newer than the last and of the boot of the first verified one are
+  // taken; the rest are dropped, counted, and reported once per cause (to
+  // stderr, or to `on_refused`). Without it everything is taken unverified.
+  void verify_with(const PublicKey& pk) { verifier_.emplace(pk); }
+  [[nodiscard]] bool verifying() const noexcept { return verifier_.has_value(); }
+  [[nodiscard]] const std::optional<Verifier>& verifier() const noexcept { return verifier_; }
+  void on_refused(std::function<void(Trust, const char* what)> f) { refused_cb_ = std::move(f); }
+  // The boot id of verified-signed messages from another start of cpmd (0: none seen).
+  [[nodiscard]] std::int64_t restarted() const noexcept { return restarted_; }
+
  private:
   // Raw: whoever is on the bus may publish there, and lcm-gen's typed
   // decoding of a string trusts its length (a bad one throws out of handle()).
@@ -137,6 +149,11 @@ class Client {
   std::optional<M> next(std::optional<M>& slot, double timeout_s, int poll_ms);
   void keep_alive();  // a ping when the holder has been silent for 0.25 s
   static bool lost_session(const cpm_msgs::ack_t& a) noexcept;
+  bool trusted(const cpm_msgs::state_t& m);
+  bool trusted(const cpm_msgs::ack_t& m);
+  void refused(Trust t, const char* what);
+  void need_same_boot() const;
+  void unverified();  // warns once that nothing can be verified  // throws Error once cpmd is seen to have restarted
 
   LcmConfig cfg_;
   std::optional<Credentials> creds_;
@@ -160,7 +177,16 @@ class Client {
   std::optional<cpm_msgs::params_t> last_params_;
   std::optional<cpm_msgs::ack_t> last_jog_ack_;
   std::function<void(const cpm_msgs::state_t&)> state_cb_;
+  std::optional<Verifier> verifier_;
+  std::function<void(Trust, const char*)> refused_cb_;
+  std::array<bool, 5> told_{};
+  std::int64_t restarted_ = 0;
+  bool told_unverified_ = false;
 };
+
+// The public key file a client verifies with (LcmConfig::daemon_public_key's
+// order); "" when there is none.
+std::string daemon_public_key_path(const LcmConfig& cfg);
 
 // "mode names": disabled, holding, ...
 const char* mode_text(std::int8_t mode) noexcept;

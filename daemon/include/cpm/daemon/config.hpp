@@ -117,6 +117,10 @@ struct SecurityConfig {
   // The only directory CMD_LOAD_MODEL reads from (beneath it, no symlink out,
   // regular files of at most kMaxModelFileBytes).
   std::string model_dir = "/var/lib/cpmd/models";
+  // cpmd's Ed25519 key (32-byte seed, a key file as `cpm keygen` writes; mode 0600):
+  // every state and ack is signed with it (docs/security.md, "Signed state").
+  // Empty: nothing is signed, and clients say that state cannot be verified.
+  std::string signing_key;
   // An acquire's seq is the sender's wall clock (us since the epoch): one
   // farther than this from the daemon's clock is refused, so a recorded
   // acquire cannot be replayed later (s).

@@ -22,6 +22,10 @@ struct LcmConfig {
   // A commander's session ends after this long without a command or ping
   // from it (s); clients ping every 0.25 s while they hold one.
   double session_timeout = 2.0;
+  // A client's: cpmd's public key file (docs/security.md, "Signed state").
+  // Empty: $CPM_DAEMON_KEY, else ~/.config/cpm/cpmd.pub if it exists, else
+  // none (state and acks are then taken unverified, with a warning).
+  std::string daemon_public_key;
 };
 
 }  // namespace cpm::daemon

@@ -24,6 +24,7 @@
 
 #include "cpm/control/gain_check.hpp"
 #include "cpm/daemon/auth.hpp"
+#include "cpm/daemon/signing.hpp"
 #include "cpm/daemon/loop.hpp"
 
 namespace lcm {
@@ -217,6 +218,7 @@ class Server {
   double last_heard_ = 0.0;         // now_() when the holder last spoke
   std::uint64_t session_salt_ = 0;  // random per daemon start: sessions do not repeat across restarts
   std::int64_t boot_id_ = 0;        // random per daemon start, published in the state
+  std::unique_ptr<Signer> signer_;  // null: no security.signing_key, nothing signed
   // Security (docs/security.md).
   mutable std::mutex ops_mu_;  // guards ops_ and the reload counters (housekeeping thread vs this one)
   std::shared_ptr<const OperatorTable> ops_;
