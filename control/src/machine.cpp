@@ -183,9 +183,10 @@ Status Machine::forward_dynamics(const Vec3& p, const Vec3& p_dot, const Vec3& f
   // the order of their micrometres with them). Newton's method on p_dd, with
   // df/da by differences of step 1 m/s^2 (exact for a law linear in a):
   // one step solves a linear law, nonlinear ones take a few.
+  // f_act holds the user forces at a = 0: add them back, take them at a below.
   Vec3 f_user_rest = Vec3::Zero();
   user_.add_forces(d, d_dot, Vec3::Zero(), in.t, f_user_rest);
-  const Vec3 f_drive = drive_gain().cwiseProduct(force_command) - (effect_forces(d, d_dot, Vec3::Zero(), in.t));
+  const Vec3& f_drive = f_act;
   for (int it = 0; it < 8; ++it) {
     const Vec3 a = J_inv * p_dd;
     Vec3 f0 = Vec3::Zero();
