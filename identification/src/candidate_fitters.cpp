@@ -102,9 +102,21 @@ void fit_spring(const CandidateContext& ctx, CandidateResult& c) {
   }
 }
 
+// The speed is searched with a Coulomb force on the same axis free beside
+// the bell (both at least 0): alone, a broad bell (v_s well above the true
+// one) takes the Coulomb step as well and wins, and a Coulomb column beside it
+// then adds nothing, so the pair was never reached (issue 26).
 double search_stribeck_speed(const CandidateContext& ctx, double lo, double hi) {
+  ctl::DynamicEffect coulomb;
+  coulomb.type = ctl::DynamicEffectType::coulomb_friction;
+  coulomb.axis = static_cast<std::int8_t>(ctx.axis);
+  coulomb.param = {1.0, 0, 0, 0};
+  const Eigen::VectorXd xc = ctx.P.effect_column(coulomb, 0);
   auto cost = [&](double logvs) {
-    const JointFit f = ctx.E.fit(stribeck_column(ctx, std::exp(logvs)));
+    const Eigen::MatrixXd xs = stribeck_column(ctx, std::exp(logvs));
+    const JointFit pair = ctx.E.fit(hcat({xc, xs.col(0)}));
+    if (pair.beta(0) >= 0.0 && pair.beta(1) >= 0.0) return pair.rss;
+    const JointFit f = ctx.E.fit(xs);
     return f.beta(0) >= 0.0 ? f.rss : ctx.E.rss_base();
   };
   return std::exp(grid_then_golden(cost, std::log(lo), std::log(hi), 16, 12, std::log(lo)));

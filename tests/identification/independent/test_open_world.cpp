@@ -119,6 +119,67 @@ TEST(OpenWorld, NoEffectFittedToZeroIsNamedMissing) {
   }
 }
 
+// Defect (a), the pair itself: Coulomb and Stribeck friction together on the
+// vertical axis behind a one-period delay, at sizes like the issue's. Both are
+// named on axis 3 within 10 % (or 3 standard errors) of what was planted,
+// nothing else is named (the delay, when named, at one period), the alignment
+// is at one period, and the residual left is the true model's (nominal +
+// planted + the delay). Where the true model itself reaches the floor (2 N at
+// 10 mm/s), the axis-3 residual is within 20 % of it; at 4 N and 20 mm/s the
+// rows slower than 5 mm/s leave 3x the floor under the true model too (the
+// friction columns' error at reversals, "Stick-slip" in the docs), so there
+// the true model's residual is the bar.
+TEST(OpenWorld, CoulombAndStribeckTogetherAreBothNamed) {
+  struct Pair {
+    double fc, fs, vs;
+    bool floor_reachable;
+  };
+  for (const Pair& p : {Pair{3.0, 4.0, 0.02, false}, Pair{3.0, 2.0, 0.01, true}})
+    for (NoisePlacement n : {NoisePlacement::plant, NoisePlacement::command}) {
+      GeneratorSpec s = spec(Timing::delay1, n, 2);
+      s.effects = {{"coulomb_friction", 2, {p.fc}}, {"stribeck_friction", 2, {p.fs, p.vs}}};
+      const GeneratedLog g = generate(s);
+      const ident::Diagnosis D = diagnose(g);
+      std::printf("Coulomb %.1f N + Stribeck %.1f N at %.0f mm/s, %s: %s\n", p.fc, p.fs, p.vs * 1e3, noise_name(n),
+                  D.verdict_text.c_str());
+      const double T = D.alignment.period;
+      auto near = [](const ident::ParamEstimate& q, double truth) {
+        return std::fabs(q.value - truth) <= std::max(0.1 * truth, 3.0 * q.std_error);
+      };
+      bool coulomb = false, stribeck = false;
+      for (int j : D.found()) {
+        const ident::CandidateResult& c = D.candidates[static_cast<std::size_t>(j)];
+        ASSERT_FALSE(c.params.empty()) << c.label();
+        if (c.effect == "coulomb_friction" && c.axis == 2) {
+          coulomb = true;
+          EXPECT_TRUE(near(c.params[0], p.fc)) << c.label() << " f_c " << c.params[0].value;
+        } else if (c.effect == "stribeck_friction" && c.axis == 2) {
+          stribeck = true;
+          ASSERT_EQ(c.params.size(), 2u);
+          EXPECT_TRUE(near(c.params[0], p.fs)) << c.label() << " f_s " << c.params[0].value;
+          EXPECT_TRUE(near(c.params[1], p.vs)) << c.label() << " v_s " << c.params[1].value;
+        } else if (c.effect == "actuation_delay") {
+          EXPECT_NEAR(c.params[0].value, T, std::max(0.15 * T, 3.0 * c.params[0].std_error));
+        } else {
+          ADD_FAILURE() << "named beside the pair: " << c.label();
+        }
+      }
+      EXPECT_TRUE(coulomb && stribeck) << D.verdict_text;
+      EXPECT_TRUE(D.outside_library.empty()) << D.outside_library.front().text;
+      EXPECT_NEAR(D.alignment.tau, T, std::max(0.15 * T, 3.0 * D.alignment.std_error));
+      std::vector<PlantedEffect> truth_effects = s.effects;
+      truth_effects.push_back({"actuation_delay", -1, {T}});
+      const double truth = ident::motion_rms(g.log, true_model(truth_effects));
+      std::printf("  residual %.4f N (true model %.4f N); axis 3: %.4f N, floor %.4f N (%.2f x)\n",
+                  rms3(D.axis_residual_rms), truth, D.axis_residual_rms[2], D.axis_floor[2],
+                  D.axis_residual_rms[2] / D.axis_floor[2]);
+      EXPECT_LT(rms3(D.axis_residual_rms), 1.02 * truth);
+      if (p.floor_reachable) {
+        EXPECT_LT(D.axis_residual_rms[2], 1.2 * D.axis_floor[2]);
+      }
+    }
+}
+
 // Defect (b) and issue 28 point 4: cogging that explains most of the residual
 // beside a small force outside the library: the loop adds the cogging first,
 // then stops at the outside finding and offers it as a user effect.
