@@ -117,9 +117,10 @@ struct BoundedFit {
 };
 BoundedFit fit_bounded_column(const Engine& E, const Eigen::MatrixXd& X, double lower, double upper);
 
-// The Stribeck speed v_s (m/s) that fits best on [lo, hi] (a log grid of 16
-// then golden-section refinement; a negative breakaway force counts as no
-// fit), and the effective number of independent trials of that search.
+// The Stribeck speed v_s (m/s) that fits best on [lo, hi], with a Coulomb
+// force on the same axis free beside it (a log grid of 16 then golden-section
+// refinement; a negative breakaway or Coulomb force counts as none), and the
+// effective number of independent trials of that search.
 double search_stribeck_speed(const CandidateContext& ctx, double lo, double hi);
 double stribeck_trials(double lo, double hi);
 
