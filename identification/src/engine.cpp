@@ -33,16 +33,23 @@ Engine::Engine(LinearProblem problem) : p_(std::move(problem)) {
     throw Error("identification: residual, base columns, weights and series differ in length");
   yw_ = p_.w.cwiseProduct(p_.y);
   Bw_ = p_.w.asDiagonal() * p_.B;
-  // Identifiable base columns: greedy by pivoted QR on scaled columns.
+  // Identifiable base columns: greedy by pivoted QR on scaled columns,
+  // the nuisance first. A nuisance column is fitted in every test; where it
+  // is collinear with a base parameter (a structure's constant on z and the
+  // weight) the pivot must keep it, else a fit without the base refit leaves
+  // that direction free and an effect beside it takes it (a drive gain or a
+  // payload on z took the mean of a force outside the library).
   const Eigen::Index nb = Bw_.cols();
   if (nb > 0) {
-    Eigen::VectorXd scale(nb);
+    Eigen::VectorXd scale(nb), pivot(nb);
     for (Eigen::Index j = 0; j < nb; ++j) {
       const double s = Bw_.col(j).norm();
       scale(j) = s > 0.0 ? 1.0 / s : 0.0;
+      const bool nuisance = static_cast<std::size_t>(j) < p_.nuisance.size() && p_.nuisance[static_cast<std::size_t>(j)];
+      pivot(j) = nuisance ? 2.0 * scale(j) : scale(j);
     }
     const Eigen::MatrixXd Bs = Bw_ * scale.asDiagonal();
-    Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(Bs);
+    Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(Bw_ * pivot.asDiagonal());
     qr.setThreshold(1e-7);
     rank_ = static_cast<int>(qr.rank());
     for (Eigen::Index j = 0; j < nb; ++j) {
