@@ -317,6 +317,13 @@ TEST(ForgedState, AnUnsignedCpmdsStateIsSaidToBeUnverifiable) {
 
 // ---------------------------------------------------------------- the largest model
 
+// Cycles from a stop's sending to the loop's braking that still show it did
+// not wait behind other work on the LCM thread (the costly command of
+// StopPath holds it > 200 cycles): 1-2 on a quiet host, the figure the tests
+// print; a host loaded with other tests delays the listener's wake-up by a
+// few cycles, which is scheduling, not the path under test.
+constexpr std::int64_t kStopWithoutWaiting = 50;
+
 // The state as a stranger reads it: the first braking cycle, and the loop's
 // cycle at a moment (the newest state's cycle plus the 1 ms cycles since it
 // arrived).
@@ -461,8 +468,10 @@ TEST(LargestModel, ParsedOffTheLcmThreadLeavesNothingLockedAndAStopBrakesAtOnce)
   ASSERT_TRUE(la);
   EXPECT_EQ(la->reason, ack_t::REASON_ILLEGAL_IN_MODE) << la->message;
   // Over UDP and a shared host: the state in flight, the stop's trip, the LCM
-  // thread's 1 ms poll, then the loop's next cycle.
-  EXPECT_LE(w.stopping_cycle - sent_after, 3);
+  // thread's 1 ms poll, then the loop's next cycle: 1-2 cycles on a quiet
+  // host (the figure printed above). Asserted is the property, not a time:
+  // the stop did not wait behind the load (kStopWithoutWaiting).
+  EXPECT_LE(w.stopping_cycle - sent_after, kStopWithoutWaiting);
 }
 
 // While the LCM thread validates the longest segment allowed (a 10-minute
@@ -511,7 +520,10 @@ TEST(StopPath, BrakesWhileTheLcmThreadIsBusyWithACostlyCommand) {
               static_cast<long long>(w.stopping_cycle - sent_after), ms);
   // The loop's cycle numbers say when it braked; the state saying so is
   // published by the LCM thread once the costly command is done.
-  EXPECT_LE(w.stopping_cycle - sent_after, 3) << "the stop waited for the costly command";
+  // 1-2 cycles on a quiet host (printed above); asserted is that the stop did
+  // not wait for the costly command (> 200 ms, below), whatever else the host
+  // is doing: a shared CI host stalls a thread for several ms.
+  EXPECT_LE(w.stopping_cycle - sent_after, kStopWithoutWaiting) << "the stop waited for the costly command";
   EXPECT_GT(costly_ms, 200.0) << "the costly command was not costly: the test proves nothing";
 }
 
