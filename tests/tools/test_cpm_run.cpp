@@ -18,39 +18,21 @@
 #include "cpm/path/program.hpp"
 #include "cpm/path/test_paths.hpp"
 
+#include "tools/cpm_command.hpp"
+
 namespace cpm {
 namespace {
 
 namespace fs = std::filesystem;
 
-struct Result {
-  int status = -1;
-  std::string out, err;
+using Result = test::CpmResult;
+using test::slurp;
+
+struct Temp : test::TempFolder {
+  Temp() : test::TempFolder("run") {}
 };
 
-std::string slurp(const fs::path& p) {
-  std::ifstream f(p);
-  std::stringstream ss;
-  ss << f.rdbuf();
-  return ss.str();
-}
-
-struct Temp {
-  fs::path dir = fs::temp_directory_path() / ("cpm-run-" + std::to_string(getpid()));
-  Temp() { fs::create_directories(dir); }
-  ~Temp() { fs::remove_all(dir); }
-};
-
-Result cpm(const std::string& args, const Temp& t) {
-  const std::string cmd = std::string(CPM_EXE) + " " + args + " >" + (t.dir / "out").string() + " 2>" +
-                          (t.dir / "err").string();
-  const int rc = std::system(cmd.c_str());
-  Result r;
-  r.status = WIFEXITED(rc) ? WEXITSTATUS(rc) : -1;
-  r.out = slurp(t.dir / "out");
-  r.err = slurp(t.dir / "err");
-  return r;
-}
+Result cpm(const std::string& args, const Temp& t) { return test::run_cpm(args, t); }
 
 const char* kModel = "config/machine.yaml";  // the tests run in the source folder
 
