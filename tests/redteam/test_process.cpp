@@ -324,6 +324,17 @@ TEST(ForgedState, AnUnsignedCpmdsStateIsSaidToBeUnverifiable) {
 // few cycles, which is scheduling, not the path under test.
 constexpr std::int64_t kStopWithoutWaiting = 50;
 
+// Enable, then a 4 s move: the machine is moving when it returns.
+void start_a_four_second_move(Client& alice) {
+  ASSERT_TRUE(alice.control(C::CMD_ENABLE).accepted);
+  std::optional<state_t> st;
+  for (int i = 0; i < 50 && !(st && st->mode == state_t::MODE_HOLDING); ++i) st = alice.state(0.2);
+  ASSERT_EQ(st->mode, state_t::MODE_HOLDING);
+  ASSERT_TRUE(alice.trajectory(move_to(0.40, 0.425, 0.300, 0.05)).accepted);
+  for (int i = 0; i < 50 && st->mode != state_t::MODE_MOVING; ++i) st = alice.state(0.2);
+  ASSERT_EQ(st->mode, state_t::MODE_MOVING);
+}
+
 // The state as a stranger reads it: the first braking cycle, and the loop's
 // cycle at a moment (the newest state's cycle plus the 1 ms cycles since it
 // arrived).
@@ -435,13 +446,8 @@ TEST(LargestModel, ParsedOffTheLcmThreadLeavesNothingLockedAndAStopBrakesAtOnce)
     (void)lck;
   }
   // Moving: the largest load and a stop together.
-  ASSERT_TRUE(alice.control(C::CMD_ENABLE).accepted);
-  std::optional<state_t> st;
-  for (int i = 0; i < 50 && !(st && st->mode == state_t::MODE_HOLDING); ++i) st = alice.state(0.2);
-  ASSERT_EQ(st->mode, state_t::MODE_HOLDING);
-  ASSERT_TRUE(alice.trajectory(move_to(0.40, 0.425, 0.300, 0.05)).accepted);  // 4 s
-  for (int i = 0; i < 50 && st->mode != state_t::MODE_MOVING; ++i) st = alice.state(0.2);
-  ASSERT_EQ(st->mode, state_t::MODE_MOVING);
+  start_a_four_second_move(alice);
+  if (HasFatalFailure()) return;
   BrakingWatch w;
   Stranger s(r.cfg.lcm);
   s.bus.subscribe(r.cfg.lcm.state_channel, &BrakingWatch::on, &w);
@@ -481,13 +487,8 @@ TEST(StopPath, BrakesWhileTheLcmThreadIsBusyWithACostlyCommand) {
   Rig r("stop-path");
   r.start();
   Client alice(r.cfg.lcm, r.alice);
-  ASSERT_TRUE(alice.control(C::CMD_ENABLE).accepted);
-  std::optional<state_t> st;
-  for (int i = 0; i < 50 && !(st && st->mode == state_t::MODE_HOLDING); ++i) st = alice.state(0.2);
-  ASSERT_EQ(st->mode, state_t::MODE_HOLDING);
-  ASSERT_TRUE(alice.trajectory(move_to(0.40, 0.425, 0.300, 0.05)).accepted);  // 4 s
-  for (int i = 0; i < 50 && st->mode != state_t::MODE_MOVING; ++i) st = alice.state(0.2);
-  ASSERT_EQ(st->mode, state_t::MODE_MOVING);
+  start_a_four_second_move(alice);
+  if (HasFatalFailure()) return;
   BrakingWatch w;
   Stranger s(r.cfg.lcm);
   s.bus.subscribe(r.cfg.lcm.state_channel, &BrakingWatch::on, &w);
