@@ -1,0 +1,418 @@
+#include "cpm/identification/excitation.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+#include <random>
+
+#include "cpm/control/effects.hpp"
+#include "cpm/identification/fit.hpp"
+#include "cpm/identification/motion.hpp"
+#include "cpm/kinematics/plane_model.hpp"
+
+namespace cpm::ident {
+namespace {
+
+constexpr double kPi = std::numbers::pi;
+
+// Quintic fade 0 -> 1 over [0, r] and its derivatives.
+void fade(double t, double r, double& s, double& sd, double& sdd) {
+  s = 1.0;
+  sd = sdd = 0.0;
+  if (r <= 0.0 || t >= r) return;
+  if (t <= 0.0) {
+    s = 0.0;
+    return;
+  }
+  const double u = t / r;
+  s = u * u * u * (10 - 15 * u + 6 * u * u);
+  sd = 30 * u * u * (1 - u) * (1 - u) / r;
+  sdd = 60 * u * (1 - u) * (1 - 2 * u) / (r * r);
+}
+
+}  // namespace
+
+void ExcitationOptions::validate() const {
+  if (!(period >= 0.5 && period <= 120.0)) throw Error("excite: --period must be within 0.5..120 s");
+  if (periods < 2 || periods > 100) throw Error("excite: --periods must be 2..100 (noise is estimated between periods)");
+  if (harmonics < 1 || harmonics > 30) throw Error("excite: --harmonics must be 1..30");
+  if (!(ramp >= 0.2 && ramp <= 10.0)) throw Error("excite: --ramp must be within 0.2..10 s");
+  if (iterations < 0 || iterations > 100000) throw Error("excite: --iterations must be 0..100000");
+}
+
+MultiSine::MultiSine(Vec3 centre, double period, int periods, double ramp, std::array<std::vector<int>, 3> harmonic,
+                     std::array<std::vector<double>, 3> amplitude, std::array<std::vector<double>, 3> phase)
+    : centre_(std::move(centre)), period_(period), ramp_(ramp), periods_(periods), k_(std::move(harmonic)),
+      a_(std::move(amplitude)), phi_(std::move(phase)) {}
+
+ctl::TrajectorySample MultiSine::periodic(double t) const noexcept {
+  ctl::TrajectorySample out;
+  const double w0 = 2.0 * kPi / period_;
+  for (int i = 0; i < 3; ++i) {
+    double x = 0, v = 0, a = 0;
+    for (std::size_t j = 0; j < k_[i].size(); ++j) {
+      const double w = w0 * k_[i][j];
+      const double ph = w * t + phi_[i][j];
+      x += a_[i][j] * std::sin(ph);
+      v += a_[i][j] * w * std::cos(ph);
+      a -= a_[i][j] * w * w * std::sin(ph);
+    }
+    out.p[i] = x;
+    out.v[i] = v;
+    out.a[i] = a;
+  }
+  return out;
+}
+
+ctl::TrajectorySample MultiSine::sample(double t) const noexcept {
+  const double T = duration();
+  const double tc = std::clamp(t, 0.0, T);
+  // Fade in over the first ramp, out over the last (mirror image in time).
+  double s1, sd1, sdd1, s2, sd2, sdd2;
+  fade(tc, ramp_, s1, sd1, sdd1);
+  fade(T - tc, ramp_, s2, sd2, sdd2);
+  const double s = s1 * s2, sd = sd1 * s2 - s1 * sd2, sdd = sdd1 * s2 - 2 * sd1 * sd2 + s1 * sdd2;
+  const ctl::TrajectorySample f = periodic(tc - ramp_);
+  ctl::TrajectorySample out;
+  out.p = centre_ + s * f.p;
+  if (t < 0.0 || t > T) return out;
+  out.v = sd * f.p + s * f.v;
+  out.a = sdd * f.p + 2 * sd * f.v + s * f.a;
+  return out;
+}
+
+Vec3 MultiSine::peak_displacement() const {
+  Vec3 peak = Vec3::Zero();
+  const int n = std::max(200, static_cast<int>(period_ * 400));
+  for (int k = 0; k < n; ++k) peak = peak.cwiseMax(periodic(period_ * k / n).p.cwiseAbs());
+  return peak;
+}
+
+MultiSine MultiSine::scaled(const Vec3& s) const {
+  auto a = a_;
+  for (int i = 0; i < 3; ++i)
+    for (double& x : a[i]) x *= s[i];
+  return MultiSine(centre_, period_, periods_, ramp_, k_, a, phi_);
+}
+
+namespace {
+
+struct Peaks {
+  double speed = 0, acceleration = 0, force = 0;
+  bool reachable = true;
+};
+
+// The model's actuator force for a motion: J^T (M p_dd + G p_dot + K) plus
+// its effects, over its drive gain (the plant's equation, machine.hpp).
+bool actuator_force(const ctl::Machine& m, const ctl::TrajectorySample& s, Vec3& force, Vec3& d, Vec3& d_dot) {
+  kin::KinematicInputs in;
+  Mat3 Jinv, J;
+  if (!kin::inverse(m.kinematics(), s.p, in, d, &Jinv).ok()) return false;
+  if (!m.jacobian(d, s.p, in, J).ok()) return false;
+  Vec3 Fp;
+  if (!m.inverse_dynamics(s.p, s.v, s.a, Fp).ok()) return false;
+  d_dot = Jinv * s.v;
+  force = (J.transpose() * Fp + m.effect_forces(d, d_dot)).cwiseQuotient(m.drive_gain());
+  return true;
+}
+
+Peaks peaks(const MultiSine& m, const ctl::Machine& model, double step) {
+  Peaks p;
+  const double T = m.duration();
+  const int n = static_cast<int>(std::ceil(T / step));
+  for (int k = 0; k <= n; ++k) {
+    const ctl::TrajectorySample s = m.sample(std::min(T, k * step));
+    p.speed = std::max(p.speed, s.v.norm());
+    p.acceleration = std::max(p.acceleration, s.a.norm());
+    Vec3 f, d, dd;
+    if (!actuator_force(model, s, f, d, dd)) {
+      p.reachable = false;
+      continue;
+    }
+    p.force = std::max(p.force, f.cwiseAbs().maxCoeff());
+  }
+  return p;
+}
+
+}  // namespace
+
+MultiSine scale_to_limits(const MultiSine& shape, const ctl::Machine& model, const ExcitationLimits& L) {
+  const Vec3& c = shape.centre();
+  const Vec3 room = (L.workspace_max - c).cwiseMin(c - L.workspace_min);
+  if (room.minCoeff() <= 0.0) throw Error("excite: the centre lies outside the workspace box");
+  // Each axis to its share of the box, then all together to speed and acceleration.
+  const Vec3 peak = shape.peak_displacement();
+  Vec3 s;
+  for (int i = 0; i < 3; ++i) s[i] = peak[i] > 0.0 ? L.margin * room[i] / peak[i] : 0.0;
+  MultiSine m = shape.scaled(s);
+  for (int round = 0; round < 40; ++round) {
+    const Peaks p = peaks(m, model, 2e-3);
+    double g = 1.0;
+    if (p.speed > L.margin * L.velocity) g = std::min(g, L.margin * L.velocity / p.speed);
+    if (p.acceleration > L.margin * L.acceleration) g = std::min(g, L.margin * L.acceleration / p.acceleration);
+    if (!p.reachable) g = std::min(g, 0.9);
+    // The force has a part (gravity) that does not scale: shrink step by step.
+    if (p.force > L.margin * L.force) g = std::min(g, 0.95);
+    if (g >= 1.0) return m;
+    m = m.scaled(Vec3::Constant(g));
+  }
+  throw Error("excite: no amplitude of this design stays within the force limit " + std::to_string(L.force) + " N");
+}
+
+namespace {
+
+// One period of the design as a noise-free motion log at 1 kHz, with a
+// margin of the filter's width on each side so that the kept rows cover it.
+io::MotionData design_log(const MultiSine& m, const ctl::Machine& model) {
+  io::MotionData d;
+  d.info.path = "design";
+  d.rate = 1000.0;
+  const double dt = 1e-3, pad = 0.1;
+  const int n = static_cast<int>(std::lround((m.period() + 2 * pad) / dt));
+  for (int k = 0; k <= n; ++k) {
+    const double t = k * dt;
+    ctl::TrajectorySample s = m.periodic(t - pad);
+    s.p += m.centre();
+    Vec3 f, q, qd;
+    if (!actuator_force(model, s, f, q, qd)) throw Error("excite: the design leaves the machine's reach");
+    // The actuator acceleration from the platform's (J^-1 p_dd, the J^-1-dot
+    // term left out: second order on this machine's nearly constant Jacobian).
+    kin::KinematicInputs in;
+    Mat3 Jinv;
+    model.inverse_jacobian(q, s.p, in, Jinv);
+    d.t.push_back(t);
+    d.d.push_back(q);
+    d.v.push_back(qd);
+    d.a.push_back(Jinv * s.a);
+    d.f.push_back(f);
+  }
+  return d;
+}
+
+struct Regressor {
+  Eigen::MatrixXd X;
+  std::vector<std::string> names;
+  int base_cols = 0;
+};
+
+std::string axis_label(const char* name, int i) { return std::string(name) + "[axis " + std::to_string(i + 1) + "]"; }
+
+// The columns diagnosis fits: the base parameters with the plane nuisance
+// (prepare_motion's), and the linear columns of every library effect at a
+// design point (Stribeck at v_s = 20 mm/s, the spring's stiffness;
+// cogging is left out: its pitch is unknown before it is found, and
+// payload_mass and inertia_error are base directions, actuation_delay the
+// force's slope in time).
+Regressor regressor(const MultiSine& m, const ctl::Machine& model) {
+  const io::MotionData log = design_log(m, model);
+  MotionOptions mo;
+  mo.accel = MotionOptions::Accel::automatic;
+  const MotionProblem P = prepare_motion(log, model, mo);
+  Regressor R;
+  std::vector<Eigen::VectorXd> cols;
+  for (Eigen::Index j = 0; j < P.base.cols(); ++j) {
+    cols.push_back(P.base.col(j));
+    R.names.push_back(P.base_params[static_cast<std::size_t>(j)].name);
+  }
+  R.base_cols = static_cast<int>(cols.size());
+  using T = ctl::DynamicEffectType;
+  for (int i = 0; i < 3; ++i) {
+    auto unit = [&](T type, std::array<double, 4> p) {
+      ctl::DynamicEffect e;
+      e.type = type;
+      e.axis = static_cast<std::int8_t>(i);
+      e.param = p;
+      return e;
+    };
+    cols.push_back(P.effect_column(unit(T::viscous_friction, {1, 0, 0, 0}), 0));
+    R.names.push_back(axis_label("viscous_friction", i));
+    cols.push_back(P.effect_column(unit(T::coulomb_friction, {1, 0, 0, 0}), 0));
+    R.names.push_back(axis_label("coulomb_friction", i));
+    cols.push_back(P.effect_column(unit(T::stribeck_friction, {1, 0.02, 0, 0}), 0));
+    R.names.push_back(axis_label("stribeck_friction", i));
+    cols.push_back(P.effect_column(unit(T::spring, {1, 0, 0, 0}), 0));
+    R.names.push_back(axis_label("spring", i));
+    cols.push_back(P.force_gain_column(i));
+    R.names.push_back(axis_label("force_gain", i));
+    cols.push_back(P.actuator_acceleration_column(i));
+    R.names.push_back(axis_label("actuator_inertia", i));
+  }
+  cols.push_back(P.force_delay_slope(0.0));
+  R.names.push_back("actuation_delay");
+  R.X.resize(cols.front().size(), static_cast<Eigen::Index>(cols.size()));
+  for (std::size_t j = 0; j < cols.size(); ++j) R.X.col(static_cast<Eigen::Index>(j)) = cols[j];
+  return R;
+}
+
+// "coulomb_friction:1" -> "coulomb_friction[axis 1]"; "payload_mass" as it is.
+std::string column_name(const std::string& spec) {
+  const FitRequest r = parse_fit_request(spec);
+  return r.axis >= 0 ? axis_label(r.effect.c_str(), r.axis) : r.effect;
+}
+
+// 1 - rho^2 of two columns of X after the base columns are projected out.
+double separation(const Regressor& R, int a, int b) {
+  const Eigen::MatrixXd B = R.X.leftCols(R.base_cols);
+  const Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(B);
+  auto off = [&](const Eigen::VectorXd& x) -> Eigen::VectorXd { return x - B * qr.solve(x); };
+  const Eigen::VectorXd xa = off(R.X.col(a)), xb = off(R.X.col(b));
+  const double na = xa.norm(), nb = xb.norm();
+  if (na <= 0.0 || nb <= 0.0) return 0.0;
+  const double rho = xa.dot(xb) / (na * nb);
+  return 1.0 - rho * rho;
+}
+
+int find_column(const Regressor& R, const std::string& name) {
+  // payload_mass: the base direction 0.5 A + g E (candidate_fitters.cpp).
+  for (std::size_t j = 0; j < R.names.size(); ++j)
+    if (R.names[j] == name) return static_cast<int>(j);
+  return -1;
+}
+
+}  // namespace
+
+ExcitationFigures excitation_figures(const MultiSine& m, const ctl::Machine& model, const ExcitationOptions& o) {
+  ExcitationFigures F;
+  F.peak_displacement = m.peak_displacement();
+  const Peaks p = peaks(m, model, 2e-3);
+  F.peak_speed = p.speed;
+  F.peak_acceleration = p.acceleration;
+  F.peak_force = p.force;
+  Regressor R = regressor(m, model);
+  if (o.separate) {
+    // payload_mass is a base direction: its column is added for the separation.
+    for (const std::string& s : {o.separate->first, o.separate->second})
+      if (s == "payload_mass" && find_column(R, s) < 0) {
+        R.X.conservativeResize(Eigen::NoChange, R.X.cols() + 1);
+        R.X.col(R.X.cols() - 1) = 0.5 * R.X.col(0) + ctl::kGravity * R.X.col(3);
+        R.names.push_back("payload_mass");
+      }
+    const int a = find_column(R, column_name(o.separate->first)), b = find_column(R, column_name(o.separate->second));
+    if (a < 0 || b < 0)
+      throw Error("excite: --separate names an effect the design has no column for (" +
+                  (a < 0 ? o.separate->first : o.separate->second) + ")");
+    // A base direction beside the base is the base itself: measure it beside the nuisance only.
+    Regressor S = R;
+    if (o.separate->first == "payload_mass" || o.separate->second == "payload_mass") S.base_cols = 0;
+    F.separation = separation(S, a, b);
+    if (R.names.back() == "payload_mass") {
+      R.X.conservativeResize(Eigen::NoChange, R.X.cols() - 1);
+      R.names.pop_back();
+    }
+  }
+  const Eigen::VectorXd norms = R.X.colwise().norm();
+  Eigen::MatrixXd Xn = R.X;
+  for (Eigen::Index j = 0; j < Xn.cols(); ++j) Xn.col(j) /= std::max(norms(j), 1e-300);
+  const Eigen::MatrixXd G = Xn.transpose() * Xn;
+  const Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(G);
+  const Eigen::VectorXd ev = es.eigenvalues().cwiseMax(1e-14);
+  F.condition = std::sqrt(ev.maxCoeff() / ev.minCoeff());
+  F.log_det = ev.array().log().sum() + 2.0 * norms.array().max(1e-300).log().sum();
+  const Eigen::MatrixXd Ginv = es.eigenvectors() * ev.cwiseInverse().asDiagonal() * es.eigenvectors().transpose();
+  F.std_error = Ginv.diagonal().cwiseSqrt().cwiseQuotient(norms.cwiseMax(1e-300));
+  F.log_std_errors = -F.std_error.array().max(1e-300).log().sum();
+  F.columns = R.names;
+  return F;
+}
+
+namespace {
+
+double score(const ExcitationFigures& F, const ExcitationOptions& o) {
+  // --separate: the separation first, the information beside it as a tie-break.
+  const double info = o.criterion == ExcitationOptions::Criterion::log_det ? F.log_det : F.log_std_errors;
+  return o.separate ? std::log(std::max(F.separation, 1e-12)) * 100.0 + 1e-3 * info : info;
+}
+
+std::array<std::vector<int>, 3> harmonics_of(int n) {
+  std::array<std::vector<int>, 3> k;
+  for (int i = 0; i < 3; ++i)
+    for (int m = 0; m < n; ++m) k[i].push_back(3 * m + i + 1);
+  return k;
+}
+
+}  // namespace
+
+MultiSine schroeder_multisine(const ctl::Machine& model, const ExcitationLimits& L, const ExcitationOptions& o) {
+  o.validate();
+  const int n = o.harmonics;
+  std::array<std::vector<double>, 3> a, phi;
+  for (int i = 0; i < 3; ++i)
+    for (int m = 1; m <= n; ++m) {
+      a[i].push_back(1.0);
+      phi[i].push_back(-kPi * m * (m - 1) / n);  // Schroeder: a flat spectrum with a low crest factor
+    }
+  const Vec3 centre = 0.5 * (L.workspace_min + L.workspace_max);
+  return scale_to_limits(MultiSine(centre, o.period, o.periods, o.ramp, harmonics_of(n), a, phi), model, L);
+}
+
+ExcitationDesign design_excitation(const ctl::Machine& model, const ExcitationLimits& L, const ExcitationOptions& o) {
+  o.validate();
+  if (!(L.margin > 0.0 && L.margin <= 1.0)) throw Error("excite: the limits' margin must be within (0, 1]");
+  const MultiSine start = schroeder_multisine(model, L, o);
+  ExcitationDesign D{start, excitation_figures(start, model, o), {}, 1};
+  D.start = D.figures;
+  if (!o.optimise) return D;
+  // Random local search on log-amplitudes and phases (the criterion is
+  // neither smooth nor convex in them; a few hundred designs of one period
+  // each take seconds). Every candidate is scaled to the limits first, so a
+  // design is better by its shape, not by breaking a limit.
+  std::mt19937_64 rng(o.seed);
+  std::normal_distribution<double> gauss(0.0, 1.0);
+  std::uniform_real_distribution<double> uni(0.0, 1.0);
+  auto amp = start.amplitude();
+  auto phi = start.phase();
+  double best = score(D.figures, o);
+  double step = 0.5;
+  for (int it = 0; it < o.iterations; ++it) {
+    auto a2 = amp;
+    auto p2 = phi;
+    if (uni(rng) < 0.5) {
+      // One harmonic of one axis much larger or smaller: moves energy
+      // between frequencies, which small steps do only slowly.
+      const int i = static_cast<int>(uni(rng) * 3) % 3;
+      const std::size_t j = static_cast<std::size_t>(uni(rng) * static_cast<double>(a2[i].size())) % a2[i].size();
+      a2[i][j] *= std::exp(uni(rng) < 0.5 ? -1.0 : 1.0);
+    } else {
+      for (int i = 0; i < 3; ++i)
+        for (std::size_t j = 0; j < a2[i].size(); ++j)
+          if (uni(rng) < 0.3) {
+            a2[i][j] *= std::exp(step * gauss(rng));
+            p2[i][j] += step * 2.0 * gauss(rng);
+          }
+    }
+    try {
+      const MultiSine cand = scale_to_limits(
+          MultiSine(start.centre(), o.period, o.periods, o.ramp, start.harmonic(), a2, p2), model, L);
+      const ExcitationFigures F = excitation_figures(cand, model, o);
+      ++D.evaluations;
+      const double s = score(F, o);
+      if (s > best) {
+        best = s;
+        amp = cand.amplitude();
+        phi = cand.phase();
+        D.trajectory = cand;
+        D.figures = F;
+      } else {
+        step = std::max(0.05, step * 0.98);
+      }
+    } catch (const Error&) {
+      // A shape the limits leave no amplitude for: not a design.
+    }
+  }
+  ctl::validate_trajectory(D.trajectory, model, 1e-3, L.velocity, L.acceleration);
+  return D;
+}
+
+std::vector<std::array<double, 7>> excitation_rows(const MultiSine& m, double rate) {
+  std::vector<std::array<double, 7>> rows;
+  const int n = static_cast<int>(std::lround(m.duration() * rate));
+  for (int k = 0; k <= n; ++k) {
+    const double t = k / rate;
+    const ctl::TrajectorySample s = m.sample(t);
+    const bool end = k == 0 || k == n;  // at rest at both ends
+    rows.push_back({t, s.p.x(), s.p.y(), s.p.z(), end ? 0.0 : s.v.x(), end ? 0.0 : s.v.y(), end ? 0.0 : s.v.z()});
+  }
+  return rows;
+}
+
+}  // namespace cpm::ident
