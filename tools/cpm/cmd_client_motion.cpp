@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "cmd_client_common.hpp"
+#include "stream_file.hpp"
 #include "cpm/daemon/fault_report.hpp"
 #include "cpm/daemon/loop.hpp"
 #include "cpm/daemon/params.hpp"
@@ -117,12 +118,9 @@ int circle(const Options& o) {
   return r.last_segment_id == ack.id ? 0 : 1;
 }
 
-// A stream file's setpoints (SI) and the file line each came from.
-struct StreamRows {
-  std::vector<std::array<double, 7>> rows;  // t, x, y, z, vx, vy, vz
-  std::vector<int> line;                    // the file's line of each row (1-based); 0: appended here
-};
+}  // namespace
 
+// The stream file's checks (stream_file.hpp), shared with cpm excite.
 // CSV with columns t,x,y,z and optionally vx,vy,vz (SI).
 StreamRows read_stream(const std::string& path) {
   std::ifstream f(path);
@@ -221,7 +219,7 @@ std::vector<trajectory_command_t> stream_chunks(const StreamRows& s, std::vector
   return out;
 }
 
-std::string row_name(const StreamRows& s, std::size_t i) {
+static std::string row_name(const StreamRows& s, std::size_t i) {
   if (s.line[i] == 0) return "the stop appended after the last row";
   return "row " + std::to_string(i + 1) + " (line " + std::to_string(s.line[i]) + ")";
 }
@@ -303,6 +301,8 @@ void apply_published_limits(const cpm_msgs::params_t& p, daemon::DaemonConfig& c
     }
   }
 }
+
+namespace {
 
 int stream(const Options& o) {
   StreamRows s = read_stream(o.file);
