@@ -43,9 +43,15 @@ bool has(const std::vector<FitRequest>& v, const FitRequest& r) {
   return std::any_of(v.begin(), v.end(), [&](const FitRequest& a) { return a.effect == r.effect && a.axis == r.axis; });
 }
 
-// Why the loop stops at this diagnosis (empty: go on and add one of `next`,
-// the effects it names that the model does not have yet, best first).
-std::string why_stop(const Diagnosis& D, const LoopResult& R, std::vector<FitRequest>& next) {
+double rms_of(const Eigen::VectorXd& x) { return x.size() ? std::sqrt(x.squaredNorm() / static_cast<double>(x.size())) : 0.0; }
+
+}  // namespace
+
+bool finding_too_small(const StructureFinding& f, const Diagnosis& D, double explained) {
+  return std::fabs(f.size) < D.noise_floor || std::fabs(f.size) < kSmallFindingShare * explained;
+}
+
+std::string loop_stop_reason(const Diagnosis& D, const LoopResult& R, std::vector<FitRequest>& next) {
   const std::vector<int> found = D.found();
   next.clear();
   for (int j : found) {
@@ -58,6 +64,23 @@ std::string why_stop(const Diagnosis& D, const LoopResult& R, std::vector<FitReq
   // is reported but must not keep them out of the model).
   if (!D.outside_library.empty()) {
     if (!next.empty()) return {};
+    // A finding the selection led with, so that it named no library effect
+    // beside it: when every finding is too small to matter (9.5 mN at 13
+    // sigma beside 3 N of friction stopped the loop with a viscous friction
+    // and a payload still significant in the same diagnosis), the significant
+    // candidates are added, best first, before it may stop the loop.
+    double explained = 0.0;
+    if (R.steps.size() >= 2)
+      explained = std::sqrt(std::max(0.0, R.steps.front().rms * R.steps.front().rms - R.steps.back().rms * R.steps.back().rms));
+    for (const CandidateResult& c : D.candidates)
+      if (c.significant && c.identifiable) explained = std::max(explained, rms_of(c.fitted));
+    const bool small = std::all_of(D.outside_library.begin(), D.outside_library.end(),
+                                   [&](const StructureFinding& f) { return finding_too_small(f, D, explained); });
+    if (small)
+      for (const CandidateResult& c : D.candidates)
+        if (c.significant && c.identifiable && !has(R.added, {c.effect, c.axis}))
+          next.push_back({c.effect, c.axis});
+    if (!next.empty()) return {};
     return "something no library effect describes remains: " + D.outside_library.front().text;
   }
   if (found.empty()) return "nothing is missing: the diagnosis finds no significant effect";
@@ -66,6 +89,8 @@ std::string why_stop(const Diagnosis& D, const LoopResult& R, std::vector<FitReq
            " again after it was fitted: the data cannot settle it";
   return {};
 }
+
+namespace {
 
 // Every effect of `trial` refitted together on the model as given.
 struct Refit {
@@ -306,7 +331,9 @@ LoopResult run_loop(const io::DataSet& data, const ctl::MachineModel& model, con
   record_model_as_given(R, D, data, model, o);
   for (int step = 0; step < max_steps; ++step) {
     std::vector<FitRequest> named;
-    R.stop = why_stop(D, R, named);
+    R.stop = loop_stop_reason(D, R, named);
+    for (const StructureFinding& f : D.outside_library)
+      if (R.stop.empty() && R.notes.size() < 20) R.notes.push_back("reported, not stopping the loop (too small beside the effects): " + f.text);
     if (!R.stop.empty()) {
       R.outside_library = !D.outside_library.empty();
       if (!R.outside_library) return R;
@@ -364,6 +391,7 @@ std::string loop_text(const LoopResult& R) {
       << u << "  (" << (s.noise_floor > 0.0 ? s.rms / s.noise_floor : 0.0) << " x the noise floor " << s.noise_floor * k
       << " " << u << ")\n";
   }
+  for (const std::string& n : R.notes) o << "note: " << n << "\n";
   o << "stop: " << R.stop << "\n";
   if (!R.suggestion.text.empty()) o << "suggested user effect: " << R.suggestion.text << "\n";
   if (!R.steps.empty()) o << "last diagnosis: " << R.steps.back().verdict << "\n";

@@ -37,7 +37,21 @@ struct LoopResult {
   bool outside_library = false;              // it stopped at something no library effect describes
   SuggestedUserEffect suggestion;            // then: that finding as a user effect (kind "" if none)
   std::vector<SuggestedUserEffect> user_added;  // user effects added (allowed kinds), as fitted, in order
+  std::vector<std::string> notes;            // outside findings reported that did not stop the loop
 };
+
+// An outside finding too small to stop the loop while significant library
+// effects remain: under the noise floor, or under kSmallFindingShare of what
+// the effects explain (`explained`, RMS in the data's units).
+inline constexpr double kSmallFindingShare = 0.02;
+bool finding_too_small(const StructureFinding& f, const Diagnosis& D, double explained);
+
+// Why the loop stops at diagnosis D after the steps of R (empty: go on and
+// add one of `next`, best first). With an outside finding: the library
+// effects named beside it first; when every finding is too small
+// (finding_too_small), the significant library candidates not yet added;
+// only then the finding stops it.
+std::string loop_stop_reason(const Diagnosis& D, const LoopResult& R, std::vector<FitRequest>& next);
 
 // The suggestion of a diagnosis' first outside finding: kinematic data, the
 // pitch_table the diagnosis fitted; motion, suggest_user_effect of the finding.
