@@ -346,34 +346,45 @@ int stream(const Options& o) {
               cfg.limits.velocity * 1e3, cfg.limits.acceleration * 1e3);
   if (o.dry_run) return 0;
   if (!c) c.emplace(lcm_options(o.connection), operator_key(o.op));
+  PlayOptions p;
+  p.approach = !o.no_approach;
+  p.approach_vmax = std::min(o.approach_vmax, cfg.limits.velocity);
+  p.approach_amax = std::min(1.0, cfg.limits.acceleration);
+  p.wait = !o.no_wait;
+  return play_stream(*c, s, chunks, first_row, p);
+}
 
+}  // namespace
+
+int play_stream(daemon::Client& c, const StreamRows& s, const std::vector<trajectory_command_t>& chunks,
+                const std::vector<std::size_t>& first_row, const PlayOptions& o) {
   // The approach, as `cpm circle` makes it: a jerk-limited move from where the queue ends.
   const Vec3 start = client::vec3_of(chunks[0].position[0]);
-  auto st = c->state(2.0);
+  auto st = c.state(2.0);
   if (!st) throw Error("no state from cpmd within 2 s");
-  if (!o.no_approach && (vec3_of(st->queue_end) - start).norm() > 1e-6) {
+  if (o.approach && (vec3_of(st->queue_end) - start).norm() > 1e-6) {
     std::printf("approach: moving to the file's first point (%.3f, %.3f, %.3f) mm\n", start.x() * 1e3,
                 start.y() * 1e3, start.z() * 1e3);
-    const auto ack = c->trajectory(move_cmd(start, std::min(o.approach_vmax, cfg.limits.velocity),
-                                            std::min(1.0, cfg.limits.acceleration), 50.0));
+    const auto ack = c.trajectory(move_cmd(start, o.approach_vmax, o.approach_amax, 50.0));
     if (report("approach move", ack) != 0) return 1;
-    const state_t r = wait_segment(*c, ack.id, 600.0, false);
+    const state_t r = wait_segment(c, ack.id, 600.0, false);
     if (r.last_segment_id != ack.id) {
       print_result(r, ack.id);
       return 1;
     }
   }
+  if (o.on_approached) o.on_approached();
   std::int64_t last_id = -1;
   int segments = 0;
   for (std::size_t k = 0; k < chunks.size(); ++k) {
     for (;;) {
       ack_t ack{};
       try {
-        ack = c->trajectory(chunks[k]);
+        ack = c.trajectory(chunks[k]);
       } catch (const Error&) {
         // A sender that fell behind (paused, starved): cpmd may have run
         // dry and latched stream_underrun meanwhile; say so if it did.
-        const auto now = c->state(2.0);
+        const auto now = c.state(2.0);
         if (!now || !now->faults) throw;
         std::printf("stream: rows from %zu on not sent; cpmd: %s\n", first_row[k] + 1, daemon::fault_report(*now).c_str());
         return 1;
@@ -384,7 +395,7 @@ int stream(const Options& o) {
         break;
       }
       if (ack.reason == ack_t::REASON_QUEUE_FULL || ack.reason == ack_t::REASON_BUSY) {
-        c->handle(0.05);
+        c.handle(0.05);
         continue;
       }
       std::printf("stream: segment starting at row %zu REJECTED: %s\n", first_row[k] + 1, ack.message.c_str());
@@ -392,11 +403,13 @@ int stream(const Options& o) {
     }
   }
   std::printf("stream: %zu setpoints sent as %d segments\n", s.rows.size(), segments);
-  if (o.no_wait) return 0;
-  const state_t r = wait_segment(*c, last_id, 3600.0, true);
+  if (!o.wait) return 0;
+  const state_t r = wait_segment(c, last_id, 3600.0, true);
   print_result(r, last_id);
   return r.last_segment_id == last_id ? 0 : 1;
 }
+
+namespace {
 
 // --no-wait, where cpmd is, and who commands it: every motion command has them.
 void add_common(CLI::App& app, Options& o) {

@@ -3,10 +3,12 @@
 #pragma once
 
 #include <array>
+#include <functional>
 #include <string>
 #include <vector>
 
 #include "cpm/control/machine.hpp"
+#include "cpm/daemon/client.hpp"
 #include "cpm/daemon/config.hpp"
 #include "cpm_msgs/params_t.hpp"
 #include "cpm_msgs/trajectory_command_t.hpp"
@@ -31,5 +33,17 @@ std::string check_stream(const StreamRows& s, const std::vector<cpm_msgs::trajec
                          const daemon::LimitsConfig& L, double dt);
 // cpmd's limits as it publishes them (params_t), over the configured ones.
 void apply_published_limits(const cpm_msgs::params_t& p, daemon::DaemonConfig& cfg);
+
+// Play checked chunks on cpmd: the approach to the first row (a jerk-limited
+// move, as cpm circle makes it), then the chunks as fast as cpmd accepts
+// them, then (wait) until the last one ends. 0 when it played to its end.
+struct PlayOptions {
+  bool approach = true;
+  double approach_vmax = 0.1, approach_amax = 1.0;  // m/s, m/s^2
+  bool wait = true;
+  std::function<void()> on_approached;  // called at rest at the first row, before the first chunk
+};
+int play_stream(daemon::Client& c, const StreamRows& s, const std::vector<cpm_msgs::trajectory_command_t>& chunks,
+                const std::vector<std::size_t>& first_row, const PlayOptions& o);
 
 }  // namespace cpm::cli::client

@@ -1,0 +1,103 @@
+// `cpm identify` on cpmd's simulator, as a user runs it (the built programs,
+// each in its own process): a true machine with Coulomb friction on axis 1,
+// viscous friction on axis 3 and a 0.4 kg payload, none of them in the
+// model; the experiment from `cpm excite`; the new model names each within 2 %.
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+
+#include <cstdlib>
+#include <fstream>
+#include <sstream>
+#include <string>
+
+#include "cpm/daemon/client.hpp"
+#include "cpm/io/model_file.hpp"
+#include "support/daemon_process.hpp"
+
+namespace cpm {
+namespace {
+
+using cpm_msgs::control_command_t;
+using cpm_msgs::state_t;
+
+struct Result {
+  int status = -1;
+  std::string out;
+};
+
+Result run(const std::string& cmd, const std::string& log) {
+  const int rc = std::system((cmd + " >" + log + " 2>&1").c_str());
+  std::ifstream f(log);
+  std::stringstream ss;
+  ss << f.rdbuf();
+  return {WIFEXITED(rc) ? WEXITSTATUS(rc) : -1, ss.str()};
+}
+
+TEST(IdentifyOnCpmd, TheExperimentRecordedAndTheLoopNameEveryPlantedEffect) {
+  const test::TempDir dir("identify");
+  test::OperatorsDir ops(dir / "operators.d");
+  const daemon::Credentials eng = ops.add("eng", daemon::Role::engineer);
+  // The true machine: the shipped model with the three effects added.
+  io::ModelFile truth = io::load_model_file(std::string(CPM_SOURCE_DIR) + "/config/machine.yaml");
+  ctl::add_effect(truth.model, "coulomb_friction", 0, {3.0});
+  ctl::add_effect(truth.model, "viscous_friction", 2, {20.0});
+  ctl::add_effect(truth.model, "payload_mass", -1, {0.4});
+  const std::string truth_path = dir / "truth.yaml";
+  io::save_model_file(truth_path, truth);
+  const std::string cfg_path = test::sim_config(dir.path(), "sim.yaml", ops.path(),
+                                                {{"truth_model_file: [^ \\n]+", "truth_model_file: " + truth_path},
+                                                 {"position_noise: 0.0", "position_noise: 1.0e-6"},
+                                                 {"velocity_noise: 0.0", "velocity_noise: 2.0e-4"}});
+  const auto cfg = daemon::load_config(cfg_path);
+  auto d = test::start_cpmd(cfg_path, dir / "cpmd.log");
+  daemon::Client c(cfg.lcm, eng);
+  std::optional<state_t> s;
+  for (int i = 0; i < 50 && !s; ++i) s = c.state(0.2);
+  ASSERT_TRUE(s) << "cpmd published no state:\n" << d->log();
+  ASSERT_TRUE(c.control(control_command_t::CMD_ENABLE).accepted);
+  for (int i = 0; i < 100 && s->mode != state_t::MODE_HOLDING; ++i) s = c.state(0.2);
+  ASSERT_EQ(s->mode, state_t::MODE_HOLDING);
+  ASSERT_TRUE(c.release());
+
+  const std::string model = std::string(CPM_SOURCE_DIR) + "/config/machine.yaml";
+  const std::string exc = dir / "exc.csv";
+  const Result e = run(std::string(CPM_EXE) + " excite --config " + cfg_path + " --out " + exc +
+                           " --period 4 --periods 2 --harmonics 4 --iterations 40",
+                       dir / "excite.out");
+  ASSERT_EQ(e.status, 0) << e.out;
+  const std::string better = dir / "better.yaml";
+  const Result r = run(std::string(CPM_EXE) + " identify " + exc + " --model " + model + " --out " + better +
+                           " --log " + (dir / "log.csv") + " --url '" + cfg.lcm.url + "' --key " + ops.key_path("eng") +
+                           " --operator eng",
+                       dir / "identify.out");
+  std::printf("%s", r.out.c_str());
+  ASSERT_EQ(r.status, 0) << r.out << d->log();
+  EXPECT_NE(r.out.find("within cpmd's limits"), std::string::npos) << r.out;
+  const io::ModelFile got = io::load_model_file(better);
+  bool coulomb = false, viscous = false, payload = false;
+  for (const ctl::DynamicEffect& x : got.model.effects) {
+    std::printf("fitted %s: %.5g %.5g %.5g %.5g\n", x.label().c_str(), x.param[0], x.param[1], x.param[2], x.param[3]);
+    if (x.type == ctl::DynamicEffectType::coulomb_friction && x.axis == 0) {
+      coulomb = true;
+      EXPECT_NEAR(x.param[0], 3.0, 0.06);
+    }
+    if (x.type == ctl::DynamicEffectType::viscous_friction && x.axis == 2) {
+      viscous = true;
+      EXPECT_NEAR(x.param[0], 20.0, 0.4);
+    }
+    if (x.type == ctl::DynamicEffectType::payload_mass) {
+      payload = true;
+      EXPECT_NEAR(x.param[0], 0.4, 0.008);
+    }
+    if (x.type == ctl::DynamicEffectType::inertia_error) {  // the payload in the base refit: dE = m g
+      payload = true;
+      EXPECT_NEAR(x.param[3], 0.4 * ctl::kGravity, 0.02 * 0.4 * ctl::kGravity);
+    }
+  }
+  EXPECT_TRUE(coulomb) << r.out;
+  EXPECT_TRUE(viscous) << r.out;
+  EXPECT_TRUE(payload) << r.out;
+}
+
+}  // namespace
+}  // namespace cpm
