@@ -64,8 +64,6 @@ int move(const Options& o) {
 
 int circle(const Options& o) {
   const bool paper = o.paper;
-  trajectory_command_t m{};
-  m.kind = trajectory_command_t::KIND_CIRCLE;
   ctl::CircleSpec spec;  // Elkady's circle by default
   if (!paper) spec.ramp_time = o.ramp.value_or(0.5);
   if (o.centre) spec.centre = parse_point("--centre", *o.centre);
@@ -75,32 +73,42 @@ int circle(const Options& o) {
   spec.cruise_time = o.time.value_or(spec.cruise_time);
   spec.start_angle = o.start_angle.value_or(spec.start_angle);
   const int pl = o.plane == "xy" ? 0 : o.plane == "yz" ? 1 : 2;
-  const bool approach = !o.no_approach;
-  const double vapp = o.approach_vmax;
-  const bool no_wait = o.no_wait;
+  spec.plane = static_cast<ctl::CirclePlane>(pl);
+  CircleOptions co;
+  co.paper = paper;
+  co.approach = !o.no_approach;
+  co.approach_vmax = o.approach_vmax;
+  co.wait = !o.no_wait;
   const auto l = lcm_options(o.connection);
   auto key = operator_key(o.op);
+  daemon::Client c(l, key);
+  return play_circle(c, spec, co);
+}
+
+}  // namespace
+
+int play_circle(daemon::Client& c, const ctl::CircleSpec& spec, const CircleOptions& o, state_t* end) {
+  trajectory_command_t m{};
+  m.kind = trajectory_command_t::KIND_CIRCLE;
   for (int i = 0; i < 3; ++i) m.centre[i] = spec.centre[i];
   m.radius = spec.radius;
-  m.plane = static_cast<std::int8_t>(pl);
+  m.plane = static_cast<std::int8_t>(spec.plane);
   m.angular_speed = spec.angular_speed;
   m.start_angle = spec.start_angle;
   m.cruise_time = spec.cruise_time;
   m.ramp_time = spec.ramp_time;
   // Elkady's test starts at full speed from rest: cpmd grants the step only
   // on its simulator (or a bench that allows it); every other circle ramps in.
-  m.allow_velocity_step = paper;
-  spec.plane = static_cast<ctl::CirclePlane>(pl);
+  m.allow_velocity_step = o.paper;
   const Vec3 start = ctl::CircleTrajectory(spec).sample(0.0).p;
 
-  daemon::Client c(l, key);
   auto s = c.state(2.0);
   if (!s) throw Error("no state from cpmd within 2 s");
-  const Vec3 end = vec3_of(s->queue_end);
-  if (approach && (end - start).norm() > 1e-6) {
+  const Vec3 qend = vec3_of(s->queue_end);
+  if (o.approach && (qend - start).norm() > 1e-6) {
     std::printf("approach: moving to the circle's start (%.3f, %.3f, %.3f) mm\n", start.x() * 1e3, start.y() * 1e3,
                 start.z() * 1e3);
-    const auto ack = c.trajectory(move_cmd(start, vapp, 1.0, 50.0));
+    const auto ack = c.trajectory(move_cmd(start, o.approach_vmax, 1.0, 50.0));
     if (report("approach move", ack) != 0) return 1;
     const state_t r = wait_segment(c, ack.id, 600.0, false);
     if (r.last_segment_id != ack.id) {
@@ -111,14 +119,13 @@ int circle(const Options& o) {
     std::this_thread::sleep_for(std::chrono::milliseconds(300));
   }
   const auto ack = c.trajectory(m);
-  if (report(paper ? "paper circle" : "circle", ack) != 0) return 1;
-  if (no_wait) return 0;
+  if (report(o.paper ? "paper circle" : "circle", ack) != 0) return 1;
+  if (!o.wait) return 0;
   const state_t r = wait_segment(c, ack.id, 600.0, true);
   print_result(r, ack.id);
+  if (end) *end = r;
   return r.last_segment_id == ack.id ? 0 : 1;
 }
-
-}  // namespace
 
 // The stream file's checks (stream_file.hpp), shared with cpm excite.
 // CSV with columns t,x,y,z and optionally vx,vy,vz (SI).

@@ -5,6 +5,7 @@
 // recorded as cpm record records it (state_log.hpp); then the loop (cpm
 // loop's) on that log, its waterfall, and the new model file.
 #include <cstdio>
+#include <filesystem>
 #include <sstream>
 
 #include "cli.hpp"
@@ -26,7 +27,47 @@ struct Options {
   client::Connection connection;
   client::Operator op;
   int max_steps = 6;
+  bool apply = false;
 };
+
+using cpm_msgs::control_command_t;
+using cpm_msgs::state_t;
+
+// Wait (up to `timeout_s`) for cpmd's mode to be `mode`.
+bool wait_mode(daemon::Client& c, std::int8_t mode, double timeout_s) {
+  for (int i = 0; i < static_cast<int>(timeout_s / 0.2); ++i)
+    if (const auto s = c.state(0.2); s && s->mode == mode) return true;
+  return false;
+}
+
+// The paper's circle (Elkady's, full speed from rest) and its tracking error (m RMS).
+std::optional<double> paper_circle(daemon::Client& c, const char* when) {
+  std::printf("the paper's circle, %s:\n", when);
+  client::CircleOptions co;
+  co.paper = true;
+  state_t end{};
+  if (client::play_circle(c, ctl::CircleSpec{}, co, &end) != 0) return std::nullopt;
+  return end.last_segment_rmse;
+}
+
+// The new model into cpmd: disable, load-model, enable (cpmd loads a model only when disabled).
+bool load_into_cpmd(daemon::Client& c, const std::string& path) {
+  if (!c.control(control_command_t::CMD_DISABLE).accepted || !wait_mode(c, state_t::MODE_DISABLED, 5.0)) {
+    std::printf("apply: cpmd did not disable\n");
+    return false;
+  }
+  control_command_t cmd{};
+  cmd.command = control_command_t::CMD_LOAD_MODEL;
+  cmd.model_path = std::filesystem::absolute(path).lexically_normal().string();
+  const auto ack = c.control(cmd, 10.0);
+  std::printf("load-model %s: %s\n", cmd.model_path.c_str(), ack.accepted ? "accepted" : ack.message.c_str());
+  if (!ack.accepted) return false;
+  if (!c.control(control_command_t::CMD_ENABLE).accepted || !wait_mode(c, state_t::MODE_HOLDING, 10.0)) {
+    std::printf("apply: cpmd did not enable again\n");
+    return false;
+  }
+  return true;
+}
 
 int run(const Options& o) {
   client::StreamRows s = client::read_stream(o.experiment);
@@ -53,6 +94,8 @@ int run(const Options& o) {
   }
   std::printf("%s: %zu rows, %.3f s, within cpmd's limits\n", o.experiment.c_str(), s.rows.size(),
               s.rows.back()[0] - s.rows.front()[0]);
+  std::optional<double> before;
+  if (o.apply && !(before = paper_circle(c, "with the model as given"))) return 1;
 
   // Recorded from the approach's end (at rest at the first row) to the experiment's end.
   StateToMotion rows;
@@ -83,7 +126,16 @@ int run(const Options& o) {
   if (R.steps.size() > 1) note << "; residual RMS " << R.steps.front().rms << " -> " << R.steps.back().rms << " " << R.units;
   record_fit(mf, R.fitted, "cpm identify", o.log.value_or(o.experiment), note.str());
   io::save_model_file(o.out, mf, model_path);
-  std::printf("new model: %s (load it with cpm load-model when the machine is disabled)\n", o.out.c_str());
+  if (!o.apply) {
+    std::printf("new model: %s (load it with cpm load-model when the machine is disabled)\n", o.out.c_str());
+    return 0;
+  }
+  std::printf("new model: %s\n", o.out.c_str());
+  if (!load_into_cpmd(c, o.out)) return 1;
+  const std::optional<double> after = paper_circle(c, "with the new model");
+  if (!after) return 1;
+  std::printf("the paper's circle, tracking error: %.1f um RMS with the model as given, %.1f um RMS with the new "
+              "model (%.1fx lower)\n", *before * 1e6, *after * 1e6, *before / std::max(*after, 1e-12));
   return 0;
 }
 
@@ -96,11 +148,14 @@ Run setup(CLI::App& app) {
   add_new_model_option(app, o->out);
   app.add_option("--log", o->log, "also write the recorded motion log")->type_name("LOG.csv");
   app.add_option("--max-steps", o->max_steps, "the loop's steps at most (1 .. 20)")->check(CLI::Range(1, 20));
+  app.add_flag("--apply", o->apply,
+               "engineer: run the paper's circle, then the experiment and the loop, load the new model into cpmd "
+               "(disable, load-model, enable) and run the circle again; print the tracking error before and after");
   client::add_connection(app, o->connection);
   client::add_operator(app, o->op);
   app.footer("Checks the experiment against the limits cpmd publishes before anything moves, approaches its first\n"
              "point, plays it while recording cpmd's state, runs the loop (cpm loop) on the log and writes the new\n"
-             "model. Not yet: --apply (load the model and run the circle before and after).");
+             "model. --apply loads it and shows the paper's circle before and after.");
   return [o] { return run(*o); };
 }
 

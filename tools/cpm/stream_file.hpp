@@ -8,6 +8,8 @@
 #include <vector>
 
 #include "cpm/control/machine.hpp"
+#include "cpm/control/trajectory.hpp"
+#include "cpm_msgs/state_t.hpp"
 #include "cpm/daemon/client.hpp"
 #include "cpm/daemon/config.hpp"
 #include "cpm_msgs/params_t.hpp"
@@ -45,5 +47,17 @@ struct PlayOptions {
 };
 int play_stream(daemon::Client& c, const StreamRows& s, const std::vector<cpm_msgs::trajectory_command_t>& chunks,
                 const std::vector<std::size_t>& first_row, const PlayOptions& o);
+
+// Run a circle on cpmd (cpm circle): the approach to its start, the circle,
+// and (wait) its end, whose state (`end`) carries the tracking error over it
+// (last_segment_rmse, m). 0 when it ran to its end.
+struct CircleOptions {
+  bool paper = false;          // Elkady's: full speed from rest (cpmd grants the step on its simulator)
+  bool approach = true;
+  double approach_vmax = 0.1;  // m/s
+  bool wait = true;
+};
+int play_circle(daemon::Client& c, const ctl::CircleSpec& spec, const CircleOptions& o,
+                cpm_msgs::state_t* end = nullptr);
 
 }  // namespace cpm::cli::client
