@@ -12,6 +12,9 @@
 #include <cmath>
 #include <numeric>
 
+#include "cpm/calibration/workflow.hpp"
+#include "cpm/identification/kinematic.hpp"
+#include "cpm/identification/loop.hpp"
 #include "kinematic_internal.hpp"
 
 namespace cpm::ident {
@@ -462,6 +465,42 @@ void kinematic_outside_library(const KinematicProblem& P, const Engine& E, const
   if (!T.values.empty()) os << ". Suggested user effect: " << T.text;
   D.verdict_text = os.str();
   D.ambiguous = false;
+}
+
+PitchTableFit fit_pitch_table(const io::DataSet& data, const ctl::MachineModel& model, int axis, int nodes) {
+  if (axis < 0 || axis > 2) throw Error("pitch_table: axis " + std::to_string(axis + 1) + " (must be 1, 2 or 3)");
+  const std::string ax = std::to_string(axis + 1);
+  if (nodes < 4 || nodes > kin::PitchTable::kCapacity)
+    throw Error("pitch_table:" + ax + ": " + std::to_string(nodes) + " nodes (4 to " +
+                std::to_string(kin::PitchTable::kCapacity) + ")");
+  PitchTableFit out;
+  // The table replaces any the axis had: fitted on what the model leaves without it.
+  ctl::MachineModel without = model;
+  const bool had = !without.kinematics.effects[static_cast<std::size_t>(axis)].pitch_table.empty();
+  without.kinematics.effects[static_cast<std::size_t>(axis)].pitch_table = {};
+  const KinematicProblem P = prepare_kinematic(data, without.kinematics);
+  out.before = had ? Engine::rms(prepare_kinematic(data, model.kinematics).residual_given) : Engine::rms(P.residual_given);
+  const Engine E(kinematic_linear_problem(P));
+  out.table = fit_pitch_table(P, E, axis, nodes);
+  if (out.table.values.empty()) {
+    const KinematicSpan sp = span_of(P);
+    throw Error("pitch_table:" + ax + ": the data move axis " + ax + " over " +
+                fmt((sp.hi[axis] - sp.lo[axis]) * 1e3, 3) + " mm only (a table needs at least " +
+                fmt(kMinStroke * 1e3, 2) + " mm of its stroke)");
+  }
+  // The planes recalibrated without and with it (the model file holds them calibrated).
+  io::ModelFile in;
+  in.model = without;
+  out.base_only = cal::calibrate(in, data, "", "", "cpm fit").residual_rms();
+  in.model.kinematics.effects[static_cast<std::size_t>(axis)].pitch_table = pitch_table_of(out.table);
+  const cal::CalibrationResult C = cal::calibrate(in, data, "", "", "cpm fit");
+  out.model = C.model.model;
+  out.after = C.residual_rms();
+  if (had) out.notes.push_back("the model's pitch_table on axis " + ax + " was replaced by the one fitted");
+  if (!(out.after < out.base_only))
+    out.notes.push_back("the table does not lower the residual (" + fmt(out.base_only * 1e6) + " -> " +
+                        fmt(out.after * 1e6) + " µm): these data show no smooth error of d" + ax);
+  return out;
 }
 
 }  // namespace cpm::ident
