@@ -10,8 +10,13 @@
 // from what those candidates left (1.19 µm for a bar whose noise was 0.29 µm).
 #include <algorithm>
 #include <cmath>
+#include <limits>
+#include <numbers>
 #include <numeric>
 
+#include "cpm/calibration/workflow.hpp"
+#include "cpm/identification/kinematic.hpp"
+#include "cpm/identification/loop.hpp"
 #include "kinematic_internal.hpp"
 
 namespace cpm::ident {
@@ -246,6 +251,72 @@ constexpr double kClearlyBetter = 2.0;
 
 }  // namespace
 
+namespace {
+
+// P(chi'^2 > c) for the noncentral chi-square of 2 degrees of freedom and
+// noncentrality lambda: the Poisson mixture of central chi-squares of 2 + 2j
+// degrees of freedom, whose tails are e^(-c/2) sum_{i<=j} (c/2)^i / i!.
+double chi2_2_power(double lambda, double c) {
+  double pois = std::exp(-0.5 * lambda), term = std::exp(-0.5 * c), tail = term, p = pois * tail;
+  for (int j = 1; j < 1000 && pois > 1e-300 * (1 + j); ++j) {
+    pois *= 0.5 * lambda / j;
+    term *= 0.5 * c / j;
+    tail += term;
+    p += pois * std::min(1.0, tail);
+  }
+  return std::min(1.0, p);
+}
+
+// The noncentrality at which the power reaches `power` (bisection; power grows with lambda).
+double noncentrality_for(double power, double c) {
+  double lo = 0.0, hi = 1000.0;
+  for (int k = 0; k < 60; ++k) {
+    const double mid = 0.5 * (lo + hi);
+    (chi2_2_power(mid, c) < power ? lo : hi) = mid;
+  }
+  return 0.5 * (lo + hi);
+}
+
+}  // namespace
+
+Diagnosis::SmoothDetectability smooth_detectability(const KinematicProblem& P, const Engine& E, int axis, double sigma,
+                                                    double alpha, const Eigen::MatrixXd* beside) {
+  Diagnosis::SmoothDetectability out;
+  out.axis = axis;
+  const Eigen::MatrixXd X = smooth_displacement_columns(P, axis);
+  const double w = E.problem().w.size() ? E.problem().w(0) : 0.0;  // kinematic rows: one weight
+  if (X.cols() != 2 || !(sigma > 0.0) || !(w > 0.0)) return out;
+  // The columns' part the base cannot take, in m (the weight is constant).
+  Eigen::MatrixXd G = (E.project_off_base(X) / w).eval();
+  if (beside && beside->rows() == X.rows() && beside->cols() > 0) {
+    // ... and off what the library effect's columns take beyond the base.
+    const Eigen::MatrixXd C = E.project_off_base(*beside) / w;
+    const Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(C);
+    const Eigen::MatrixXd Q = Eigen::MatrixXd(qr.householderQ()).leftCols(qr.rank());
+    G -= Q * (Q.transpose() * G);
+  }
+  const Eigen::Matrix2d GtG = G.transpose() * G;
+  // The test's critical value: F(2, many) at alpha / trials is chi^2_2 / 2, whose tail is e^(-c/2).
+  const double c = -2.0 * std::log(alpha / kSmoothTrials);
+  const double l10 = noncentrality_for(0.10, c), l90 = noncentrality_for(0.90, c);
+  double lo = 1e300, hi = 0.0;
+  for (int k = 0; k < 180; ++k) {
+    const double th = std::numbers::pi * k / 180.0;
+    const Eigen::Vector2d b(std::cos(th), std::sin(th));
+    const double g = b.dot(GtG * b) / (sigma * sigma);  // noncentrality per unit amplitude squared
+    const double ptp = smooth_size(b);
+    if (!(g > 1e-12 * GtG.trace() / (sigma * sigma))) {
+      hi = std::numeric_limits<double>::infinity();  // a shape taken whole: never found
+      continue;
+    }
+    lo = std::min(lo, ptp * std::sqrt(l10 / g));
+    hi = std::max(hi, ptp * std::sqrt(l90 / g));
+  }
+  out.missed_below = lo;
+  out.found_above = hi;
+  return out;
+}
+
 SuggestedUserEffect fit_pitch_table(const KinematicProblem& P, const Engine& E, int axis, int n) {
   SuggestedUserEffect T;
   T.kind = "pitch_table";
@@ -315,6 +386,40 @@ SuggestedUserEffect fit_pitch_table(const KinematicProblem& P, const Engine& E, 
 void kinematic_outside_library(const KinematicProblem& P, const Engine& E, const DiagnoseOptions& opt, Diagnosis& D) {
   const int N = E.rows();
   if (P.samples() < 12 || D.residual_final.size() != N) return;
+  D.smooth_detectability.clear();
+  for (int i = 0; i < 3; ++i) {
+    Diagnosis::SmoothDetectability b = smooth_detectability(P, E, i, D.noise_floor, opt.alpha);
+    if (!(b.found_above > 0.0)) continue;
+    // Told from the library: the effect that imitates it best sets the size.
+    b.told_above = b.found_above;
+    for (const CandidateResult& c : D.candidates) {
+      if (!c.identifiable || c.effect == "actuator_scale" || c.columns.rows() != N || c.columns.cols() == 0) continue;
+      const double t = smooth_detectability(P, E, i, D.noise_floor, opt.alpha, &c.columns).found_above;
+      if (t > b.told_above) {
+        b.told_above = t;
+        b.confused_with = c.label();
+      }
+    }
+    D.smooth_detectability.push_back(b);
+  }
+  // Said when nothing smooth is found: how large a pitch error could hide in these data.
+  auto say_bounds = [&] {
+    if (D.smooth_detectability.empty()) return;
+    std::string t = "a smooth error of an axis' reading (a lead screw's pitch error; peak to peak of its curved part "
+                    "over the stroke covered) is missed by these data below, and found in 90 % of data sets above:";
+    for (const auto& b : D.smooth_detectability) {
+      t += " axis " + std::to_string(b.axis + 1) + " " + fmt(b.missed_below * 1e6) + " .. " + fmt(b.found_above * 1e6) +
+           " µm";
+      if (!b.confused_with.empty())
+        t += " (told from " + b.confused_with + " above " +
+             (std::isfinite(b.told_above) ? fmt(b.told_above * 1e6) + " µm" : std::string("no size: it takes a shape whole")) +
+             ")";
+      t += ";";
+    }
+    t += " one below the first figure cannot be told from the calibration's offset and scale: to find a smaller one, "
+         "spread the poses further along the axis" + std::string(P.kind == "ballbar" ? " (measure a second bar radius)" : "");
+    D.notes.push_back(t);
+  };
   const double lnN = std::log(static_cast<double>(N));
   const std::vector<int> found = D.found();
   int k_lib = 0;
@@ -387,9 +492,11 @@ void kinematic_outside_library(const KinematicProblem& P, const Engine& E, const
     v.alternatives.push_back("outside_library[axis " + ax + "]");
     v.confounded.push_back({"outside_library[axis " + ax + "]", "", tie_axis, 1.0, apart});
     D.verdict_text += ". As well as these, " + f.text;
+    say_bounds();
     return;
   }
   if (axis < 0) {
+    say_bounds();
     if (!found.empty() && !at_floor && !D.noise_floor_upper_bound)
       D.notes.push_back("the residual after the effects named (" + fmt(sigma_lib * 1e6) + " µm) stays " +
                         fmt(sigma_lib / D.noise_floor, 2) + " x the noise floor (" + D.noise_floor_source +
@@ -462,6 +569,42 @@ void kinematic_outside_library(const KinematicProblem& P, const Engine& E, const
   if (!T.values.empty()) os << ". Suggested user effect: " << T.text;
   D.verdict_text = os.str();
   D.ambiguous = false;
+}
+
+PitchTableFit fit_pitch_table(const io::DataSet& data, const ctl::MachineModel& model, int axis, int nodes) {
+  if (axis < 0 || axis > 2) throw Error("pitch_table: axis " + std::to_string(axis + 1) + " (must be 1, 2 or 3)");
+  const std::string ax = std::to_string(axis + 1);
+  if (nodes < 4 || nodes > kin::PitchTable::kCapacity)
+    throw Error("pitch_table:" + ax + ": " + std::to_string(nodes) + " nodes (4 to " +
+                std::to_string(kin::PitchTable::kCapacity) + ")");
+  PitchTableFit out;
+  // The table replaces any the axis had: fitted on what the model leaves without it.
+  ctl::MachineModel without = model;
+  const bool had = !without.kinematics.effects[static_cast<std::size_t>(axis)].pitch_table.empty();
+  without.kinematics.effects[static_cast<std::size_t>(axis)].pitch_table = {};
+  const KinematicProblem P = prepare_kinematic(data, without.kinematics);
+  out.before = had ? Engine::rms(prepare_kinematic(data, model.kinematics).residual_given) : Engine::rms(P.residual_given);
+  const Engine E(kinematic_linear_problem(P));
+  out.table = fit_pitch_table(P, E, axis, nodes);
+  if (out.table.values.empty()) {
+    const KinematicSpan sp = span_of(P);
+    throw Error("pitch_table:" + ax + ": the data move axis " + ax + " over " +
+                fmt((sp.hi[axis] - sp.lo[axis]) * 1e3, 3) + " mm only (a table needs at least " +
+                fmt(kMinStroke * 1e3, 2) + " mm of its stroke)");
+  }
+  // The planes recalibrated without and with it (the model file holds them calibrated).
+  io::ModelFile in;
+  in.model = without;
+  out.base_only = cal::calibrate(in, data, "", "", "cpm fit").residual_rms();
+  in.model.kinematics.effects[static_cast<std::size_t>(axis)].pitch_table = pitch_table_of(out.table);
+  const cal::CalibrationResult C = cal::calibrate(in, data, "", "", "cpm fit");
+  out.model = C.model.model;
+  out.after = C.residual_rms();
+  if (had) out.notes.push_back("the model's pitch_table on axis " + ax + " was replaced by the one fitted");
+  if (!(out.after < out.base_only))
+    out.notes.push_back("the table does not lower the residual (" + fmt(out.base_only * 1e6) + " -> " +
+                        fmt(out.after * 1e6) + " µm): these data show no smooth error of d" + ax);
+  return out;
 }
 
 }  // namespace cpm::ident

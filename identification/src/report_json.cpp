@@ -2,6 +2,8 @@
 // documents the diagnosis' fields). Built with nlohmann::ordered_json, so keys
 // keep the order written here; numbers are written shortest-exact, and a number
 // that is not finite is written as null.
+#include <cmath>
+
 #include <nlohmann/json.hpp>
 
 #include "cpm/identification/kinematic.hpp"
@@ -205,6 +207,15 @@ std::string diagnosis_json(const Diagnosis& D) {
   // Where the floor comes from (repeated poses, the bar's high band, the residual's high band, ...).
   o["noise_floor_source"] = D.noise_floor_source;
   o["noise_floor_upper_bound"] = D.noise_floor_upper_bound;
+  if (!D.smooth_detectability.empty()) {
+    // Kinematic data: the smooth error of each axis' reading these data can show (m, peak to peak).
+    Json sd = Json::array();
+    for (const auto& b : D.smooth_detectability)
+      sd.push_back({{"axis", b.axis + 1}, {"missed_below", b.missed_below}, {"found_above", b.found_above},
+                    {"told_above", std::isfinite(b.told_above) ? Json(b.told_above) : Json(nullptr)},
+                    {"confused_with", b.confused_with}});
+    o["smooth_detectability"] = std::move(sd);
+  }
   if (D.kind == "motion") {
     o["axis_noise_floor"] = vec_json(D.axis_floor);
     o["axis_residual_rms"] = vec_json(D.axis_residual_rms);

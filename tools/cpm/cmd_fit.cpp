@@ -177,6 +177,51 @@ int run_user(const io::MotionData& data, const std::string& add, int refit, cons
   return 0;
 }
 
+// A pitch_table (an error of axis AXIS' effective displacement against its
+// reading) fitted on ball-bar or position data: pitch_table:AXIS[:NODES],
+// NODES evenly over the stroke the data cover (default 11); the planes are
+// recalibrated beside it.
+int run_pitch_table(const io::DataSet& ds, const std::string& add, const std::string& model_path,
+                    const std::string& data_path, const std::string& out_path,
+                    const std::optional<std::string>& json_path) {
+  std::vector<std::string> f;
+  std::string part;
+  std::istringstream is(add);
+  while (std::getline(is, part, ':')) f.push_back(part);
+  int nodes = 11;
+  if (f.size() < 2 || f.size() > 3 || f[1].size() != 1 || f[1][0] < '1' || f[1][0] > '3' ||
+      (f.size() == 3 && !CLI::detail::lexical_cast(f[2], nodes)))
+    throw UsageError("--add " + add + ": expected pitch_table:AXIS[:NODES] on ball-bar or position data (e.g. pitch_table:2:11)");
+  const int axis = f[1][0] - '1';
+  io::ModelFile mf = io::load_model_file(model_path);
+  const ident::PitchTableFit F = ident::fit_pitch_table(ds, mf.model, axis, nodes);
+  mf.model = F.model;
+  std::vector<io::FittedParameter> fitted;
+  const std::string key = "pitch_table[axis " + f[1] + "].values[";
+  for (std::size_t k = 0; k < F.table.values.size(); ++k)
+    fitted.push_back({key + std::to_string(k) + "]", "m", 0.0, F.table.values[k], -1.0});
+  std::ostringstream note;
+  note << "added " << add << " (planes recalibrated with it); residual RMS " << F.base_only * 1e6 << " -> "
+       << F.after * 1e6 << " µm";
+  record_fit(mf, fitted, "cpm fit", data_path, note.str());
+  io::save_model_file(out_path, mf, model_path);
+  std::printf("pitch_table on axis %d, smoothness chosen by cross-validation, its straight line left to the "
+              "calibration:\n%12s  %10s\n", axis + 1, "node (mm)", "error (µm)");
+  for (std::size_t k = 0; k < F.table.nodes.size(); ++k)
+    std::printf("%12.3f  %10.4f\n", F.table.nodes[k] * 1e3, F.table.values[k] * 1e6);
+  std::printf("residual RMS on the fitted data: %.4g µm with the model as given, %.4g µm calibrated without the "
+              "table, %.4g µm with it\n", F.before * 1e6, F.base_only * 1e6, F.after * 1e6);
+  for (const auto& n : F.notes) std::printf("note: %s\n", n.c_str());
+  std::printf("new model: %s\n", out_path.c_str());
+  if (json_path)
+    write_json(*json_path, Json{{"model", model_path}, {"out", out_path}, {"data", data_path}, {"units", "m"},
+                                {"before", {{"rms", F.before}}}, {"base_only", {{"rms", F.base_only}}},
+                                {"after", {{"rms", F.after}}},
+                                {"user_effect", {{"kind", "pitch_table"}, {"axis", axis + 1},
+                                                 {"nodes", F.table.nodes}, {"values", F.table.values}}}});
+  return 0;
+}
+
 struct Options {
   int fit_user = 0;
   MeasurementOptions in;
@@ -201,8 +246,14 @@ int run(const Options& opt) {
     if (adds.size() > (user_add.empty() ? 0u : 1u))
       throw UsageError("a user effect (table, expression, --fit-user) is fitted alone: give no other --add");
     const io::DataSet ds = read_measurements(data_path);
-    if (!std::holds_alternative<io::MotionData>(ds))
-      throw UsageError(std::string("user effects are fitted on motion logs only (not yet on ") + io::kind_name(io::kind_of(ds)) + " data)");
+    const bool motion = std::holds_alternative<io::MotionData>(ds);
+    if (!motion && user_add.rfind("pitch_table", 0) == 0) {
+      if (holdout_path) throw UsageError("--holdout: not yet for a pitch_table (its smoothness is chosen by cross-validation)");
+      return run_pitch_table(ds, user_add, model_path, data_path, out_path, json_path);
+    }
+    if (!motion)
+      throw UsageError(std::string("table and expression effects are fitted on motion logs (not on ") +
+                       io::kind_name(io::kind_of(ds)) + " data; there: pitch_table:AXIS[:NODES])");
     return run_user(std::get<io::MotionData>(ds), user_add, opt.fit_user - 1, model_path, data_path, out_path,
                     json_path, o.motion);
   }
@@ -267,7 +318,8 @@ Run setup(CLI::App& app) {
   app.add_option("--add", o->adds,
                  "an effect to add and fit, with its axis when it acts on one (repeat the option; e.g. --add "
                  "coulomb_friction:2 --add payload_mass; a user effect: table:AXIS:INPUT[:NODES] or "
-                 "expression:AXIS:FORMULA:NAME=START,..., docs/effects.md \"Effects you add\")")
+                 "expression:AXIS:FORMULA:NAME=START,... (motion logs), pitch_table:AXIS[:NODES] (ball-bar, position data), "
+                 "docs/effects.md \"Effects you add\")")
       ->type_name("EFFECT[:AXIS]")
       ->check(effect_name())
       ->allow_extra_args(false);

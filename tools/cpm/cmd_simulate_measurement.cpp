@@ -21,6 +21,7 @@ struct Options {
   bool length_offset_unknown = false;
   std::optional<double> noise;
   long seed = 1;
+  std::vector<std::string> truth_effects;  // user effects added to the true machine
 };
 
 int run(const Options& o) {
@@ -43,7 +44,17 @@ int run(const Options& o) {
   const std::string& order = o.order;
   const std::string& out = o.out;
   if (!(dwell >= 0.0)) throw UsageError("--dwell must be a number of seconds >= 0");
-  const io::ModelFile truth = io::load_model_file(truth_path);
+  io::ModelFile truth = io::load_model_file(truth_path);
+  for (const auto& spec : o.truth_effects) {
+    if (!ctl::is_user_effect_spec(spec))
+      throw UsageError("--truth-effect '" + spec + "': a user effect (pitch_table:AXIS:N1,N2,...:E1,E2,...); library "
+                       "effects go in the --truth model file");
+    try {
+      ctl::add_user_effect(truth.model, spec);
+    } catch (const Error& e) {
+      throw UsageError(std::string("--truth-effect ") + e.what());
+    }
+  }
   const io::ModelFile model = io::load_model_file(model_path);
   std::vector<Vec3> cmd = cal::read_poses_csv(poses_path);
   // Visiting in a shuffled order brings every axis into the poses from both
@@ -93,6 +104,9 @@ Run setup(CLI::App& app) {
       ->check(CLI::IsMember({"uniform", "gaussian"}).description(""))
       ->type_name("uniform|gaussian")
       ->default_str("uniform for ballbar, gaussian for position");
+  app.add_option("--truth-effect", o->truth_effects,
+                 "a user effect added to the true machine (repeat; e.g. pitch_table:1:0.05,0.2,0.35:0,2e-6,8e-6, m)")
+      ->type_name("SPEC");
   app.add_option("--seed", o->seed, "seed of the noise (and of the shuffled order)")->type_name("N");
   add_number(app, "--dwell", o->dwell, "S",
              "visit the poses S seconds apart and write t and dir1..dir3 (what backlash and thermal drift need); "

@@ -178,6 +178,19 @@ struct Diagnosis {
   std::string noise_floor_text;
   // The user effect that would describe an outside_library finding.
   std::vector<SuggestedUserEffect> suggested_user_effects;
+  // Kinematic data: per axis, how large a smooth error of its reading (peak
+  // to peak of its curved part over the stroke covered, m) these poses and
+  // this noise floor let the search find: below `missed_below` no shape is
+  // found in 90 % of data sets, above `found_above` every shape is found in
+  // 90 % (kinematic_outside.cpp smooth_detectability); above `told_above`
+  // it is told in 90 % from the base and from `confused_with`, the library
+  // effect that imitates it best (infinite: that effect takes some shape whole).
+  struct SmoothDetectability {
+    int axis = -1;
+    double missed_below = 0.0, found_above = 0.0, told_above = 0.0;
+    std::string confused_with;
+  };
+  std::vector<SmoothDetectability> smooth_detectability;
   Eigen::VectorXd residual_final;   // after the verdict's effects (or the base refit)
   MotionProblem motion;             // the processed data (plots, summaries), kind motion
   Alignment alignment;              // kind motion: when the logged force acts (align.hpp)

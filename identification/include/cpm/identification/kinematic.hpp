@@ -124,6 +124,24 @@ KinematicFit fit_kinematic(const io::DataSet& data, const kin::KinematicModel& m
                            const std::vector<FitRequest>& requests, const DiagnoseOptions& options = {},
                            const io::DataSet* holdout = nullptr, bool cross_validate = true);
 
+// cpm fit --add pitch_table:AXIS[:NODES] on ball-bar or position data: the
+// table of axis `axis` (0..2; any table it had is replaced) fitted by the
+// diagnosis' own fit (kinematic_stages.hpp fit_pitch_table: `nodes` nodes
+// over the stroke the data cover, least squares with a second-difference
+// penalty chosen by generalised cross-validation, its straight line left to
+// the calibration), then the planes recalibrated beside it. Residuals in m.
+struct PitchTableFit {
+  ctl::MachineModel model;        // the table on `axis`, the planes recalibrated with it
+  SuggestedUserEffect table;      // nodes and values (m), as the model file holds them
+  double before = 0.0;            // the model as given
+  double base_only = 0.0;         // planes recalibrated, no table on the axis
+  double after = 0.0;             // planes recalibrated with the table
+  std::vector<std::string> notes;
+};
+// Throws Error (saying which) for an axis outside 1..3, fewer than 4 or more
+// than kin::PitchTable::kCapacity nodes, or data that barely move the axis.
+PitchTableFit fit_pitch_table(const io::DataSet& data, const ctl::MachineModel& model, int axis, int nodes = 11);
+
 // Residual summary (cpm compare) of a kinematic problem's given residual.
 struct KinematicSummary {
   double rms = 0.0, max = 0.0;         // m

@@ -167,6 +167,18 @@ double local_high_band_sigma(const KinematicProblem& P, const Eigen::VectorXd& r
 // degree 4 too when `degree` >= 4. No columns for an axis covering < 2 mm.
 Eigen::MatrixXd smooth_displacement_columns(const KinematicProblem& P, int axis, int degree = 3);
 
+// How large a smooth error of axis `axis`' reading must be for the search to
+// find it (kinematic_outside.cpp): the F-test of those columns beside the base
+// at level alpha / 3, its power from the noncentrality the error's part off the
+// base span gives at noise `sigma` (m), over every shape b2 P2 + b3 P3. Sizes:
+// peak to peak of the curved part over the stroke covered (m); 0 and 0 for an
+// axis the data do not move. With `beside` (unweighted columns of a library
+// effect), the error's part off the base and those columns: the size above
+// which it is told from that effect (in found_above; infinite when the
+// columns take some shape whole).
+Diagnosis::SmoothDetectability smooth_detectability(const KinematicProblem& P, const Engine& E, int axis, double sigma,
+                                                    double alpha, const Eigen::MatrixXd* beside = nullptr);
+
 // The verdict's rule on kinematic data (kinematic_outside.cpp): a library
 // effect is named only when the residual reaches the noise floor and no
 // significant smooth structure is left; otherwise the verdict leads with
