@@ -14,6 +14,12 @@ std::string amount(double v, const std::string& units) {
   return fmt(v, 3) + " " + units;
 }
 
+std::string floor_after(double rms, double floor, const std::string& units) {
+  if (floor > rms)
+    return "(below the noise floor's estimate, " + amount(floor, units) + ": that estimate is too high)";
+  return "(noise floor about " + amount(floor, units) + ")";
+}
+
 std::string human_value(const ParamEstimate& p) {
   // Scale to the unit a person reads this size in; the standard error in the same unit.
   double k = 1.0;

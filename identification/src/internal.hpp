@@ -87,6 +87,16 @@ void score_candidate(CandidateResult& c, const Engine& E, double rss_parent, int
 
 // "0.123 N" or "1.23 µm" for a value in the diagnosis' units.
 std::string amount(double v, const std::string& units);
+// "(noise floor about F)" after a residual `rms` reached; when the floor's
+// estimate is above it, said so instead of printed as if it were below
+// ("(below the noise floor's estimate F: that estimate is too high)").
+std::string floor_after(double rms, double floor, const std::string& units);
+
+// Plot axes (report.cpp): a "nice" tick step (1, 2 or 5 times a power of
+// ten) for about `n` ticks over `range`, and a tick's label with as many
+// decimals as the step needs (73.190, 73.192, ... never 73.19, 73.19, 73.2).
+double nice_step(double range, int n);
+std::string tick_text(double v, double step);
 // A parameter in the unit a person reads it in, with its standard error:
 // "4.01 ± 0.03 µm", "1.00 ± 0.01 ms", "2.5 ± 0.3 %", "150 ± 20 mN".
 std::string human_value(const ParamEstimate& p);

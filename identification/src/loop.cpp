@@ -11,6 +11,7 @@
 #include "cpm/calibration/workflow.hpp"
 #include "cpm/identification/fit_user.hpp"
 #include "cpm/identification/kinematic.hpp"
+#include "internal.hpp"
 #include "cpm/identification/report.hpp"
 
 namespace cpm::ident {
@@ -388,8 +389,12 @@ std::string loop_text(const LoopResult& R) {
     const LoopStep& s = R.steps[j];
     o << "  " << j << "  " << (s.added.empty() ? "model as given" : "+ " + s.added);
     o << std::string(s.added.empty() ? 16 : std::max<std::size_t>(2, 30 - s.added.size() - 2), ' ') << s.rms * k << " "
-      << u << "  (" << (s.noise_floor > 0.0 ? s.rms / s.noise_floor : 0.0) << " x the noise floor " << s.noise_floor * k
-      << " " << u << ")\n";
+      << u << "  ";
+    if (s.noise_floor > s.rms)  // a floor above what was reached is an estimate too high, not a floor
+      o << "(below the noise floor's estimate " << s.noise_floor * k << " " << u << ": that estimate is too high)\n";
+    else
+      o << "(" << (s.noise_floor > 0.0 ? s.rms / s.noise_floor : 0.0) << " x the noise floor " << s.noise_floor * k << " "
+        << u << ")\n";
   }
   for (const std::string& n : R.notes) o << "note: " << n << "\n";
   o << "stop: " << R.stop << "\n";
@@ -443,11 +448,17 @@ std::string loop_html(const LoopResult& R, const std::string& data_file) {
   const bool m = R.units == "m";
   const double k = m ? 1e6 : 1.0;
   const std::string u = m ? "µm" : "N";
-  // Bars: one per step, the noise floor as a dashed line across them.
-  const double W = 120.0 + 110.0 * static_cast<double>(R.steps.size()), H = 300, l = 70, b = 70, t = 30;
+  // Bars: one per step, the noise floor as a dashed line across them. The
+  // steps' names under the bars slant, so that long names do not overlap;
+  // the bottom margin is sized for the longest.
+  std::size_t longest = 8;  // "as given"
+  for (const auto& s : R.steps) longest = std::max(longest, s.added.size() + 2);
+  const double W = 120.0 + 110.0 * static_cast<double>(R.steps.size()), l = 70, t = 30;
+  const double b = 30.0 + 0.6 * 6.0 * static_cast<double>(longest), H = 230.0 + b;
   double top = 0.0;
   for (const auto& s : R.steps) top = std::max({top, s.rms * k, s.noise_floor * k});
-  top = top > 0.0 ? top * 1.1 : 1.0;
+  const double ystep = detail::nice_step(top > 0.0 ? top * 1.05 : 1.0, 5);
+  top = top > 0.0 ? std::ceil(top * 1.05 / ystep) * ystep : 5.0 * ystep;
   auto Y = [&](double v) { return H - b - (H - t - b) * v / top; };
   std::ostringstream o;
   o << "<!DOCTYPE html><html><head><meta charset='utf-8'><title>cpm loop: " << data_file
@@ -456,6 +467,14 @@ std::string loop_html(const LoopResult& R, const std::string& data_file) {
     << u << ") of the model after each step; the dashed line is the noise floor the diagnosis estimates.</p>";
   o << "<svg xmlns='http://www.w3.org/2000/svg' width='" << W << "' height='" << H
     << "' style='background:#fff;border:1px solid #ddd'>";
+  // The y axis with its ticks and grid.
+  for (double v = 0.0; v <= top + 0.5 * ystep; v += ystep) {
+    o << "<line x1='" << l << "' x2='" << W - 10 << "' y1='" << Y(v) << "' y2='" << Y(v) << "' stroke='#eee'/>";
+    o << "<line x1='" << l - 4 << "' x2='" << l << "' y1='" << Y(v) << "' y2='" << Y(v) << "' stroke='#888'/>";
+    o << "<text x='" << l - 6 << "' y='" << Y(v) + 4 << "' font-size='10' text-anchor='end'>"
+      << detail::tick_text(v, ystep) << "</text>";
+  }
+  o << "<line x1='" << l << "' y1='" << Y(0) << "' x2='" << l << "' y2='" << t << "' stroke='#888'/>";
   o << "<line x1='" << l << "' y1='" << Y(0) << "' x2='" << W - 10 << "' y2='" << Y(0) << "' stroke='#888'/>";
   o << "<text x='14' y='" << (H - b + t) / 2 << "' font-size='11' transform='rotate(-90 14 " << (H - b + t) / 2
     << ")' text-anchor='middle'>residual RMS (" << u << ")</text>";
@@ -466,13 +485,17 @@ std::string loop_html(const LoopResult& R, const std::string& data_file) {
     char buf[64];
     std::snprintf(buf, sizeof buf, "%.4g", v);
     o << "<text x='" << x + 35 << "' y='" << Y(v) - 4 << "' font-size='11' text-anchor='middle'>" << buf << "</text>";
-    o << "<text x='" << x + 35 << "' y='" << H - b + 16 << "' font-size='10' text-anchor='middle'>"
-      << (s.added.empty() ? "as given" : "+ " + s.added) << "</text>";
+    const double lx = x + 40, ly = H - b + 14;
+    o << "<text x='" << lx << "' y='" << ly << "' font-size='10' text-anchor='end' transform='rotate(-35 " << lx << " "
+      << ly << ")'>" << (s.added.empty() ? "as given" : "+ " + s.added) << "</text>";
     const double f = s.noise_floor * k;
     o << "<line x1='" << x - 10 << "' x2='" << x + 80 << "' y1='" << Y(f) << "' y2='" << Y(f)
       << "' stroke='#d33' stroke-dasharray='4 3'/>";
   }
-  o << "<text x='" << W - 12 << "' y='" << t - 10 << "' font-size='11' fill='#d33' text-anchor='end'>noise floor</text>";
+  // The legend: the floor's dashed line beside its name.
+  o << "<line x1='" << W - 100 << "' x2='" << W - 76 << "' y1='" << t - 14 << "' y2='" << t - 14
+    << "' stroke='#d33' stroke-dasharray='4 3' stroke-width='1.5'/>";
+  o << "<text x='" << W - 72 << "' y='" << t - 10 << "' font-size='11' fill='#d33'>noise floor</text>";
   o << "</svg><p><b>Stop:</b> " << R.stop << "</p><ol start='0'>";
   for (const auto& s : R.steps)
     o << "<li>" << (s.added.empty() ? "model as given" : "+ " + s.added) << ": " << s.verdict << "</li>";

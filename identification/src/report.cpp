@@ -11,6 +11,28 @@
 #include "internal.hpp"
 
 namespace cpm::ident {
+
+namespace detail {
+
+double nice_step(double range, int n) {
+  const double raw = range / n;
+  const double mag = std::pow(10.0, std::floor(std::log10(raw)));
+  for (double m : {1.0, 2.0, 5.0})
+    if (m * mag >= raw) return m * mag;
+  return 10.0 * mag;
+}
+
+std::string tick_text(double v, double step) {
+  const int decimals = std::clamp(static_cast<int>(std::ceil(-std::log10(step) - 1e-9)), 0, 12);
+  if (std::fabs(v) < 1e-9 * step) v = 0.0;
+  char b[64];
+  if (std::fabs(v) >= 1e7 || (v != 0.0 && std::fabs(v) < 1e-4 && decimals > 8)) std::snprintf(b, sizeof b, "%.3g", v);
+  else std::snprintf(b, sizeof b, "%.*f", decimals, v);
+  return b;
+}
+
+}  // namespace detail
+
 namespace {
 
 std::string num(double v, int prec = 4) {
@@ -36,16 +58,10 @@ struct Series {
   bool line = false;
 };
 
-// A plot as inline SVG: axes with ticks, labelled, one or more series.
-// A "nice" tick step (1, 2 or 5 times a power of ten) for about `n` ticks.
-double nice_step(double range, int n) {
-  const double raw = range / n;
-  const double mag = std::pow(10.0, std::floor(std::log10(raw)));
-  for (double m : {1.0, 2.0, 5.0})
-    if (m * mag >= raw) return m * mag;
-  return 10.0 * mag;
-}
+using detail::nice_step;
+using detail::tick_text;
 
+// A plot as inline SVG: axes with ticks, labelled, one or more series.
 std::string svg_plot(const std::string& title, const std::string& xlabel, const std::string& ylabel,
                      const std::vector<Series>& series, bool logx = false) {
   // The legend sits in its own row under the title, not over the data.
@@ -80,12 +96,12 @@ std::string svg_plot(const std::string& title, const std::string& xlabel, const 
   for (double yv = y0; yv <= y1 + 0.5 * ystep; yv += ystep) {
     const double yr = std::abs(yv) < 1e-9 * ystep ? 0.0 : yv;
     o << "<line x1='" << l << "' x2='" << W - r << "' y1='" << Y(yr) << "' y2='" << Y(yr) << "' stroke='#eee'/>";
-    o << "<text x='" << l - 4 << "' y='" << Y(yr) + 4 << "' text-anchor='end' font-size='10'>" << num(yr, 4) << "</text>";
+    o << "<text x='" << l - 4 << "' y='" << Y(yr) + 4 << "' text-anchor='end' font-size='10'>" << tick_text(yr, ystep) << "</text>";
   }
   for (double xa = std::ceil(x0 / xstep) * xstep; xa <= x1 + 0.5 * xstep; xa += xstep) {
     const double xr = std::abs(xa) < 1e-9 * xstep ? 0.0 : xa;
     o << "<text x='" << Xa(xr) << "' y='" << H - b + 14 << "' text-anchor='middle' font-size='10'>"
-      << num(logx ? std::pow(10.0, xr) : xr, 4) << "</text>";
+      << (logx ? num(std::pow(10.0, xr), 4) : tick_text(xr, xstep)) << "</text>";
   }
   if (y0 < 0 && y1 > 0)
     o << "<line x1='" << l << "' x2='" << W - r << "' y1='" << Y(0) << "' y2='" << Y(0) << "' stroke='#aaa'/>";
@@ -113,6 +129,20 @@ std::string svg_plot(const std::string& title, const std::string& xlabel, const 
   }
   o << "</svg>";
   return o.str();
+}
+
+// How far coordinate i of `d` travels (m). A coordinate that hardly moves
+// is not a plot's x axis: the points would stack on one tick and what they
+// show belongs to another axis.
+template <class Points>
+double travel(const Points& d, int i) {
+  double mn = 1e300, mx = -1e300;
+  for (const auto& p : d) { mn = std::min(mn, p[i]); mx = std::max(mx, p[i]); }
+  return d.empty() ? 0.0 : mx - mn;
+}
+constexpr double kMinTravel = 1e-3;  // m
+std::string not_plotted(const std::string& name, double span) {
+  return "<p>" + name + " moves over " + num(span * 1e3, 3) + " mm only: not plotted against it.</p>";
 }
 
 // At most `n` evenly spaced rows.
@@ -157,6 +187,10 @@ std::string plots_of(const MotionProblem& P, const Eigen::VectorXd& before, cons
                        : "<h2>Residual against each axis' position, before and after, with what the named effects "
                          "explain</h2><div>");
       for (int i = 0; i < 3; ++i) {
+        if (coord == 1 && travel(P.d, i) < kMinTravel) {
+          o << not_plotted("d" + std::to_string(i + 1), travel(P.d, i));
+          continue;
+        }
         Series sb{{}, {}, "#bbb", "model as given", false}, sa{{}, {}, "#36c", after_label, false},
             sf{{}, {}, "#d33", "named effects", false};
         for (int r : idx) {
@@ -175,6 +209,10 @@ std::string plots_of(const MotionProblem& P, const Eigen::VectorXd& before, cons
   o << "<h2>Residual along each axis' position, by direction of motion</h2><div>";
   const Eigen::VectorXd& show = after ? *after : before;
   for (int i = 0; i < 3; ++i) {
+    if (travel(P.d, i) < kMinTravel) {
+      o << not_plotted("d" + std::to_string(i + 1), travel(P.d, i));
+      continue;
+    }
     Series sp{{}, {}, "#1a7", "moving +", false}, sn{{}, {}, "#d33", "moving -", false};
     for (int r : idx) {
       Series& s = P.v[r][i] >= 0 ? sp : sn;
@@ -220,6 +258,10 @@ std::string kinematic_plots(const KinematicProblem& P, const Eigen::VectorXd& be
   const Eigen::VectorXd& show = after ? *after : before;
   o << "<h2>Measurement − model along each axis' position" << (P.has_dir ? ", by direction of approach" : "") << "</h2><div>";
   for (int i = 0; i < 3; ++i) {
+    if (travel(P.d, i) < kMinTravel) {
+      o << not_plotted("d" + std::to_string(i + 1), travel(P.d, i));
+      continue;
+    }
     Series sp{{}, {}, "#1a7", P.has_dir ? "approached +" : "", false}, sn{{}, {}, "#d33", "approached −", false};
     for (int r = 0; r < P.rows(); ++r) {
       const int j = r / per;
@@ -311,8 +353,136 @@ ResidualSummary summarize(const MotionProblem& P, const Eigen::VectorXd& res, in
     };
     fill(s.along_position[i], [&](int r) { return P.d[r][i]; }, dmin, dmax + 1e-12);
     fill(s.over_time[i], [&](int r) { return P.t[r]; }, P.t.front(), P.t.back() + 1e-12);
+    if (P.model_force.size() == res.size() && R > 1) {
+      // y = residual + model force: the measured force the residual was taken from.
+      double mean = 0.0;
+      for (int r = 0; r < R; ++r) mean += res(3 * r + i) + P.model_force(3 * r + i);
+      mean /= R;
+      double spread = 0.0;
+      for (int r = 0; r < R; ++r) {
+        const double y = res(3 * r + i) + P.model_force(3 * r + i) - mean;
+        spread += y * y;
+      }
+      s.fit_percent[i] = spread > 0.0 ? 100.0 * (1.0 - std::sqrt(ss / spread)) : std::nan("");
+    }
   }
   return s;
+}
+
+ResidualCorrelation residual_correlation(const MotionProblem& P, const Eigen::VectorXd& res, int lags) {
+  ResidualCorrelation c;
+  const int R = P.rows();
+  const int stride = std::max(1, P.stride);
+  c.spacing = std::max(1, (2 * P.half_width + 1 + stride - 1) / stride);
+  std::vector<int> rows;
+  for (int r = 0; r < R; r += c.spacing) rows.push_back(r);
+  const int N = static_cast<int>(rows.size());
+  c.rows = N;
+  c.lags = std::max(0, std::min(lags, N / 4));
+  c.band = N > 0 ? 2.5758 / std::sqrt(static_cast<double>(N)) : 0.0;
+  c.lag_s = N > 1 ? (P.t[static_cast<std::size_t>(rows.back())] - P.t.front()) / (N - 1) : 0.0;
+  auto centred = [&](auto value) {
+    std::vector<double> x(static_cast<std::size_t>(N));
+    double m = 0.0;
+    for (int n = 0; n < N; ++n) m += (x[static_cast<std::size_t>(n)] = value(rows[static_cast<std::size_t>(n)]));
+    m /= std::max(1, N);
+    for (double& v : x) v -= m;
+    return x;
+  };
+  // r_xy(k) = sum_n x(n + k) y(n) / sqrt(sum x^2 sum y^2): x lags y by k rows.
+  auto corr = [&](const std::vector<double>& x, const std::vector<double>& y, int k) {
+    double sxy = 0.0, sxx = 0.0, syy = 0.0;
+    for (int n = 0; n < N; ++n) {
+      sxx += x[static_cast<std::size_t>(n)] * x[static_cast<std::size_t>(n)];
+      syy += y[static_cast<std::size_t>(n)] * y[static_cast<std::size_t>(n)];
+      if (n + k >= 0 && n + k < N) sxy += x[static_cast<std::size_t>(n + k)] * y[static_cast<std::size_t>(n)];
+    }
+    return sxx > 0.0 && syy > 0.0 ? sxy / std::sqrt(sxx * syy) : 0.0;
+  };
+  for (int i = 0; i < 3; ++i) {
+    const std::vector<double> e = centred([&](int r) { return res(3 * r + i); });
+    for (int k = 0; k <= c.lags; ++k) {
+      const double r = corr(e, e, k);
+      c.autocorrelation[i].push_back(r);
+      if (k >= 1 && std::fabs(r) > c.band) ++c.auto_outside[i];
+      if (k >= 1) c.auto_largest[i] = std::max(c.auto_largest[i], std::fabs(r));
+    }
+    const std::array<std::vector<double>, 3> inputs = {centred([&](int r) { return P.d[r][i]; }),
+                                                       centred([&](int r) { return P.v[r][i]; }),
+                                                       centred([&](int r) { return P.f[r][i]; })};
+    for (int u = 0; u < 3; ++u)
+      for (int k = -c.lags; k <= c.lags; ++k) {
+        const double r = corr(e, inputs[static_cast<std::size_t>(u)], k);
+        c.cross[i][u].push_back(r);
+        if (std::fabs(r) > c.band) ++c.cross_outside[i][u];
+      }
+  }
+  return c;
+}
+
+std::string correlation_text(const ResidualCorrelation& c) {
+  std::ostringstream o;
+  o << "residual correlation (as MATLAB's resid): " << c.rows << " rows " << num(c.lag_s * 1e3, 3)
+    << " ms apart (every " << c.spacing << " kept rows: no two share a filtered sample), lags up to " << c.lags
+    << ", 99 % band of a white residual +-" << num(c.band, 3) << "\n";
+  static const char* input[3] = {"position", "velocity", "force"};
+  for (int i = 0; i < 3; ++i) {
+    o << "  axis " << i + 1 << ": autocorrelation outside the band at " << c.auto_outside[i] << " of " << c.lags
+      << " lags (largest |r| " << num(c.auto_largest[i], 3) << "); cross-correlation outside at";
+    for (int u = 0; u < 3; ++u)
+      o << (u ? "," : "") << " " << c.cross_outside[i][u] << " of " << 2 * c.lags + 1 << " lags with " << input[u];
+    o << "\n";
+  }
+  int outside = 0;
+  for (int i = 0; i < 3; ++i) outside += c.auto_outside[i];
+  // At 99 %, about 1 lag in 100 falls outside by chance.
+  const double chance = 0.01 * 3 * c.lags;
+  o << "  " << (outside <= std::max(2.0, 3.0 * chance) ? "the residual is white as far as these lags tell: nothing "
+                                                         "the model misses shows in its correlation"
+                                                       : "the residual is not white: the model misses something "
+                                                         "(cpm diagnose names what)")
+    << "\n";
+  return o.str();
+}
+
+std::string correlation_html(const ResidualCorrelation& c) {
+  std::ostringstream o;
+  o << "<h2>Residual correlation (as MATLAB's resid)</h2><p>" << c.rows << " rows " << num(c.lag_s * 1e3, 3)
+    << " ms apart (every " << c.spacing << " kept rows, so that no two share a filtered sample); the dashed lines are "
+    << "the 99 % band of a white residual, ±" << num(c.band, 3) << ". A model that misses nothing leaves about 1 lag "
+    << "in 100 outside.</p><div>";
+  auto band = [&](double x0, double x1, double sign) {
+    return Series{{x0, x1}, {sign * c.band, sign * c.band}, "#d33", sign > 0 ? "99 % band" : "", true};
+  };
+  for (int i = 0; i < 3; ++i) {
+    Series a{{}, {}, "#36c", "", true};
+    for (int k = 0; k <= c.lags; ++k) {
+      a.x.push_back(k);
+      a.y.push_back(c.autocorrelation[i][static_cast<std::size_t>(k)]);
+    }
+    o << svg_plot("axis " + std::to_string(i + 1) + ": autocorrelation", "lag (rows)", "r(k)",
+                  {a, band(0, c.lags, 1), band(0, c.lags, -1)});
+  }
+  o << "</div><div>";
+  static const char* input[3] = {"position", "velocity", "force"};
+  static const char* colour[3] = {"#1a7", "#36c", "#639"};
+  for (int i = 0; i < 3; ++i) {
+    std::vector<Series> ss;
+    for (int u = 0; u < 3; ++u) {
+      Series x{{}, {}, colour[u], input[u], true};
+      for (int k = -c.lags; k <= c.lags; ++k) {
+        x.x.push_back(k);
+        x.y.push_back(c.cross[i][u][static_cast<std::size_t>(k + c.lags)]);
+      }
+      ss.push_back(x);
+    }
+    ss.push_back(band(-c.lags, c.lags, 1));
+    ss.push_back(band(-c.lags, c.lags, -1));
+    o << svg_plot("axis " + std::to_string(i + 1) + ": cross-correlation with its inputs", "lag (rows; > 0: residual after input)",
+                  "r(k)", ss);
+  }
+  o << "</div>";
+  return o.str();
 }
 
 std::string summary_text(const ResidualSummary& s, const MotionProblem& P) {
@@ -328,6 +498,11 @@ std::string summary_text(const ResidualSummary& s, const MotionProblem& P) {
     o << b;
   }
   for (int i = 0; i < 3; ++i) {
+    if (travel(P.d, i) < kMinTravel) {  // bins 0.004 mm wide would all read 73.2
+      o << "  axis " << i + 1 << " moves over " << num(travel(P.d, i) * 1e3, 3) << " mm only: no breakdown along d"
+        << i + 1 << "\n";
+      continue;
+    }
     o << "  axis " << i + 1 << " mean residual along d" << i + 1 << " (mm: N):";
     const auto& B = s.along_position[i];
     for (std::size_t b = 0; b < B.centre.size(); ++b)
@@ -342,6 +517,9 @@ std::string summary_text(const ResidualSummary& s, const MotionProblem& P) {
     o << "\n";
   }
   o << "  acceleration estimate adds about " << num(P.force_noise.maxCoeff(), 3) << " N (1 sigma) to the residual\n";
+  if (std::isfinite(s.fit_percent.sum()))
+    o << "  fit to the measured force (NRMSE, 100 (1 - |y - yhat| / |y - mean(y)|)): axis 1 " << num(s.fit_percent[0], 4)
+      << " %, axis 2 " << num(s.fit_percent[1], 4) << " %, axis 3 " << num(s.fit_percent[2], 4) << " %\n";
   return o.str();
 }
 
@@ -371,7 +549,8 @@ std::string diagnosis_text(const Diagnosis& D) {
     o << "residual (model - measurement) of the model as given: RMS " << num(D.baseline_rms * k) << " µm, max "
       << num(D.baseline_max * k) << " µm\n";
     o << "after calibrating the base (" << (D.kind == "ballbar" ? "beta', dq, dl when the bar is not calibrated" : "the 12 plane parameters")
-      << "): RMS " << num(D.base_refit_rms * k) << " µm; noise floor about " << num(D.noise_floor * k, 3) << " µm\n\n";
+      << "): RMS " << num(D.base_refit_rms * k) << " µm " << detail::floor_after(D.base_refit_rms, D.noise_floor, D.units)
+      << "\n\n";
   }
   o << "rank effect                      RMS after  explained  p(adj)     dBIC   signif  parameters\n";
   o << "                                 (" << u << ")\n";
@@ -410,7 +589,31 @@ std::string diagnosis_text(const Diagnosis& D) {
   return o.str();
 }
 
-std::string compare_html(const MotionProblem& P, const ResidualSummary& s, const std::string& title) {
+// The alignment the comparison uses, and what it means: the force acts tau
+// after t_k in the log; the model as given may take up to half a period
+// either side of its own actuation_delay (how a log is sampled), so it is
+// compared there; beyond that the model misses a delay.
+std::string alignment_text(const Alignment& A) {
+  char b[640];
+  const double beyond = std::fabs(A.tau - A.reference);
+  if (beyond < 1e-9)
+    std::snprintf(b, sizeof b,
+                  "force alignment: the logged force acts %.3f ms after t_k (%s), within half a sample period (%.3f ms) "
+                  "of the model's actuation_delay %.3f ms: how the log was sampled. Compared there.",
+                  A.tau * 1e3, A.convention().c_str(), 0.5 * A.period * 1e3, A.model_tau * 1e3);
+  else
+    std::snprintf(b, sizeof b,
+                  "force alignment: the logged force acts %.3f ms after t_k (%s); the model's actuation_delay is %.3f "
+                  "ms, and half a sample period (%.3f ms) either side of it is all a log's sampling explains. The model "
+                  "as given is compared at %.3f ms, the nearest it can take: the other %.3f ms is a delay it misses "
+                  "(cpm diagnose names actuation_delay), and part of the residual below.",
+                  A.tau * 1e3, A.convention().c_str(), A.model_tau * 1e3, 0.5 * A.period * 1e3, A.reference * 1e3,
+                  beyond * 1e3);
+  return b;
+}
+
+std::string compare_html(const MotionProblem& P, const ResidualSummary& s, const std::string& title,
+                         const ResidualCorrelation* correlation) {
   std::ostringstream o;
   o << "<!DOCTYPE html><html><head><meta charset='utf-8'><title>" << esc(title) << "</title>" << kStyle
     << "</head><body><h1>" << esc(title) << "</h1>";
@@ -424,6 +627,26 @@ std::string compare_html(const MotionProblem& P, const ResidualSummary& s, const
       << num(s.rms_forward[i]) << "</td><td>" << num(s.rms_backward[i]) << "</td><td>" << num(s.mean_forward[i])
       << "</td><td>" << num(s.mean_backward[i]) << "</td></tr>";
   o << "<tr><th>all</th><th>" << num(s.rms) << "</th><th>" << num(s.max) << "</th><td colspan=4></td></tr></table>";
+  if (std::isfinite(s.fit_percent.sum()) && P.model_force.size() == P.residual.size()) {
+    o << "<h2>Measured against model (as MATLAB's compare)</h2><p>Fit: 100 (1 − ‖y − ŷ‖ / ‖y − mean(y)‖), y the "
+         "measured force, ŷ the model's: axis 1 "
+      << num(s.fit_percent[0], 4) << " %, axis 2 " << num(s.fit_percent[1], 4) << " %, axis 3 "
+      << num(s.fit_percent[2], 4) << " %.</p><div>";
+    const auto idx = thin(P.rows(), 1500);
+    for (int i = 0; i < 3; ++i) {
+      Series y{{}, {}, "#888", "measured", true}, yh{{}, {}, "#36c", "model", true};
+      for (int r : idx) {
+        y.x.push_back(P.t[r]);
+        y.y.push_back(P.residual(3 * r + i) + P.model_force(3 * r + i));
+        yh.x.push_back(P.t[r]);
+        yh.y.push_back(P.model_force(3 * r + i));
+      }
+      o << svg_plot("axis " + std::to_string(i + 1) + ": fit " + num(s.fit_percent[i], 4) + " %", "t (s)", "force (N)",
+                    {y, yh});
+    }
+    o << "</div>";
+  }
+  if (correlation) o << correlation_html(*correlation);
   o << plots_of(P, P.residual, nullptr, "");
   o << "</body></html>\n";
   return o.str();
@@ -440,12 +663,13 @@ std::string diagnosis_html(const Diagnosis& D) {
   const std::string u = motion ? "N" : "µm";
   if (motion)
     o << "<p>Residual of the model as given: RMS " << num(D.baseline_rms) << " N (max " << num(D.baseline_max)
-      << " N); base refitted: " << num(D.base_refit_rms) << " N; noise floor about " << num(D.noise_floor, 3)
-      << " N. Acceleration: " << esc(D.motion.accel_source) << ".</p>";
+      << " N); base refitted: " << num(D.base_refit_rms) << " N "
+      << esc(detail::floor_after(D.base_refit_rms, D.noise_floor, D.units)) << ". Acceleration: " << esc(D.motion.accel_source) << ".</p>";
   else
     o << "<p>Kind " << esc(D.kind) << ", " << D.samples << " samples. Residual of the model as given: RMS "
       << num(D.baseline_rms * k) << " µm (max " << num(D.baseline_max * k) << " µm); calibrated base: "
-      << num(D.base_refit_rms * k) << " µm; noise floor about " << num(D.noise_floor * k, 3) << " µm.</p>";
+      << num(D.base_refit_rms * k) << " µm " << esc(detail::floor_after(D.base_refit_rms, D.noise_floor, D.units))
+      << ".</p>";
   o << "<h2>Candidates, best first</h2><table><tr><th>rank</th><th>effect</th><th>RMS after (" << u << ")</th><th>explained</th>"
        "<th>p (adjusted)</th><th>ΔBIC</th><th>significant</th><th>parameters (± 1σ)</th><th>confounded with</th><th>note</th></tr>";
   int rank = 0;

@@ -194,6 +194,7 @@ std::string summary_json(const ResidualSummary& s, const MotionProblem& P, const
   o["mean_backward"] = vec_json(s.mean_backward);
   o["along_position"] = bins_json(s.along_position);
   o["over_time"] = bins_json(s.over_time);
+  o["fit_percent"] = std::isfinite(s.fit_percent.sum()) ? vec_json(s.fit_percent) : Json();
   return dumped(o);
 }
 

@@ -49,7 +49,7 @@ std::vector<std::string> cannot_tell_apart(Diagnosis& D, const std::vector<int>&
   return alts;
 }
 
-// "label or alternative (p = value ± se unit, ...) [implausible: ...]".
+// "label or alternative (p = value ± se unit, ...)".
 void write_found_effect(std::ostringstream& os, const CandidateResult& v) {
   os << v.label();
   for (const auto& a : v.alternatives) os << " or " << a;
@@ -57,8 +57,6 @@ void write_found_effect(std::ostringstream& os, const CandidateResult& v) {
   for (std::size_t q = 0; q < v.params.size(); ++q)
     os << (q ? ", " : "") << v.params[q].name << " = " << human_value(v.params[q]);
   os << ")";
-  const std::string why = implausible(v);
-  if (!why.empty()) os << " [implausible: " << why << "]";
 }
 
 }  // namespace
@@ -79,15 +77,31 @@ void verdict_text_motion(Diagnosis& D) {
     return;
   }
   const std::vector<std::string> alts = cannot_tell_apart(D, found);
+  // An effect whose value no healthy machine has is not said to be missing
+  // from the model in the same breath: it is said apart, with why.
+  std::vector<int> plausible, doubtful;
+  for (int j : found) (implausible(D.candidates[static_cast<std::size_t>(j)]).empty() ? plausible : doubtful).push_back(j);
   std::ostringstream os;
   os << "missing: ";
-  for (std::size_t j = 0; j < found.size(); ++j) {
+  if (plausible.empty()) os << "no effect with a plausible value";
+  for (std::size_t j = 0; j < plausible.size(); ++j) {
     if (j) os << "; ";
-    write_found_effect(os, D.candidates[static_cast<std::size_t>(found[j])]);
+    write_found_effect(os, D.candidates[static_cast<std::size_t>(plausible[j])]);
   }
-  os << ". " << (found.size() > 1 ? "Together they bring" : "It brings") << " the residual from "
-     << amount(D.baseline_rms, D.units) << " to " << amount(Engine::rms(D.residual_final), D.units)
-     << " RMS (noise floor about " << amount(D.noise_floor, D.units) << ")";
+  os << ". ";
+  if (!doubtful.empty()) {
+    os << "The data " << (plausible.empty() ? "fit " : "also fit ");
+    for (std::size_t j = 0; j < doubtful.size(); ++j) {
+      const CandidateResult& v = D.candidates[static_cast<std::size_t>(doubtful[j])];
+      if (j) os << "; ";
+      write_found_effect(os, v);
+      os << ", a value no healthy machine has (" << implausible(v) << ")";
+    }
+    os << ": check the log before adding " << (doubtful.size() > 1 ? "them" : "it") << " to a model. ";
+  }
+  os << (found.size() > 1 ? "Together they bring" : "It brings") << " the residual from "
+     << amount(D.baseline_rms, D.units) << " to " << amount(Engine::rms(D.residual_final), D.units) << " RMS "
+     << floor_after(Engine::rms(D.residual_final), D.noise_floor, D.units);
   if (D.ambiguous) {
     os << ". These data cannot tell ";
     for (std::size_t j = 0; j < alts.size(); ++j) os << (j ? "; nor " : "") << alts[j];

@@ -1,5 +1,6 @@
 // A program against the machine's workspace, and into the planner's queue (gcode.hpp).
 #include <cmath>
+#include <cstdio>
 #include <sstream>
 
 #include "cpm/path/gcode.hpp"
@@ -31,14 +32,36 @@ std::string point_text(const Vec3& p, Units u) {
 }
 
 // Why machine point q is refused, or "" when it is fine.
-std::string refused(const Vec3& q, const ctl::Machine& m, const SoftLimits& soft) {
+std::string refused(const Vec3& q, const ctl::Machine& m, const SoftLimits& soft, const ProgramFrame& frame) {
   if (Status s = kin::check_pose(m.kinematics(), m.model().strokes, q, kin::KinematicInputs{}); !s) return describe(s);
-  for (int i = 0; i < 3; ++i)
-    if (q[i] < soft.min[i] || q[i] > soft.max[i]) return std::string("outside the soft limits on ") + "xyz"[i];
-  return "";
+  return soft_limit_text(q, soft, &frame);
 }
 
 }  // namespace
+
+std::string soft_limit_text(const Vec3& q, const SoftLimits& soft, const ProgramFrame* frame, double margin) {
+  for (int i = 0; i < 3; ++i) {
+    const bool low = q[i] < soft.min[i] - margin, high = q[i] > soft.max[i] + margin;
+    if (!low && !high) continue;
+    const double limit = low ? soft.min[i] : soft.max[i];
+    char b[200];
+    const char machine_axis = "xyz"[i];
+    if (!frame) {
+      std::snprintf(b, sizeof b, "outside the soft limits on %c: %c = %.3f mm, %s the limit %.3f mm", machine_axis,
+                    machine_axis, q[i] * 1e3, low ? "below" : "above", limit * 1e3);
+      return b;
+    }
+    // The same point and limit in the program's frame (its z may be flipped).
+    Vec3 at_limit = q;
+    at_limit[i] = limit;
+    const double p = frame->to_program(q)[i] * 1e3, lp = frame->to_program(at_limit)[i] * 1e3;
+    const char axis = "XYZ"[i];
+    std::snprintf(b, sizeof b, "outside the soft limits on %c: %c = %.3f mm, %s the limit %c %.3f mm (machine %c %.3f mm)",
+                  axis, axis, p, p < lp ? "below" : "above", axis, lp, machine_axis, limit * 1e3);
+    return b;
+  }
+  return "";
+}
 
 Vec3 ProgramFrame::to_machine(const Vec3& p) const noexcept {
   return origin + Vec3(p.x(), p.y(), z_up ? -p.z() : p.z());
@@ -64,7 +87,7 @@ void check_workspace(const Program& program, const ctl::Machine& machine, const 
     const int n = std::max(1, static_cast<int>(std::ceil(L / step)));
     for (int k = 0; k <= n; ++k) {
       const Vec3 p = pc.at(L * k / n).p;
-      if (const std::string why = refused(frame.to_machine(p), machine, soft); !why.empty()) {
+      if (const std::string why = refused(frame.to_machine(p), machine, soft, frame); !why.empty()) {
         errors.push_back(Diagnostic{mv.line, mv.column, "the move passes " + point_text(p, mv.units) +
                                                             ", outside the workspace: " + why});
         break;

@@ -66,7 +66,9 @@ void repair(Grid& grid, std::vector<double>& caps, const Profile& pr, const std:
 }
 
 // Stretches where the plan runs below the programmed feed, and what holds it there.
-std::vector<LimitedStretch> limited(const Grid& grid, const Profile& pr, const Geometry& g) {
+constexpr double kShortStretch = 1e-3;  // m
+
+std::vector<LimitedStretch> limited(const Grid& grid, const Profile& pr, const Geometry& g, int& short_count) {
   std::vector<LimitedStretch> out;
   const std::size_t n = grid.pts.size();
   for (std::size_t i = 0; i < n;) {
@@ -90,8 +92,27 @@ std::vector<LimitedStretch> limited(const Grid& grid, const Profile& pr, const G
     st.axis = grid.mvc_axis[tight];
     st.feed = grid.pts[tight].feed;
     st.segment = g.pieces[static_cast<std::size_t>(grid.pts[tight].piece)].segment;
+    // A dip broken by a grid point or two is one stretch: join it to the
+    // last when they are this close and held by the same.
+    if (!out.empty() && out.back().by == st.by && st.s_begin - out.back().s_end < kShortStretch) {
+      LimitedStretch& last = out.back();
+      if (st.speed < last.speed) {
+        last.speed = st.speed;
+        last.segment = st.segment;
+        last.feed = st.feed;
+        last.axis = st.axis;
+      }
+      last.s_end = st.s_end;
+      continue;
+    }
     out.push_back(st);
   }
+  // Left out: stretches shorter than kShortStretch but stops (the blend of a
+  // corner dips a few % below the feed for a few tenths of a mm: no news).
+  // The count is kept.
+  short_count = static_cast<int>(std::erase_if(out, [](const LimitedStretch& l) {
+    return l.by != Limit::stop && l.s_end - l.s_begin < kShortStretch;
+  }));
   return out;
 }
 
@@ -128,7 +149,7 @@ Plan plan_path(const PathQueue& q, const ctl::Machine& m, const PlannerOptions& 
   sum.length = g.length();
   sum.filter_time = T;
   sum.tangential_acceleration = a_t;
-  sum.limited = limited(grid, pr, g);
+  sum.limited = limited(grid, pr, g, sum.short_limited);
   return Plan(std::move(g), std::move(knots), o.knot_period, std::move(sum));
 }
 

@@ -26,7 +26,8 @@ int line_of(const Plan& plan, int segment) noexcept {
   return segment >= 0 && static_cast<std::size_t>(segment) < lines.size() ? lines[static_cast<std::size_t>(segment)] : 0;
 }
 
-std::optional<PlanFault> check_plan(const Plan& plan, const ctl::Machine& machine, const SoftLimits& soft) {
+std::optional<PlanFault> check_plan(const Plan& plan, const ctl::Machine& machine, const SoftLimits& soft,
+                                    const ProgramFrame* frame) {
   const auto n = static_cast<long>(plan.knots().size());
   for (long k = 0; k <= n; ++k) {
     const double t = std::min(static_cast<double>(k) * plan.knot_period(), plan.duration());
@@ -35,8 +36,7 @@ std::optional<PlanFault> check_plan(const Plan& plan, const ctl::Machine& machin
     std::string why;
     if (Status st = kin::check_pose(machine.kinematics(), machine.model().strokes, p, kin::KinematicInputs{}); !st)
       why = describe(st);
-    for (int i = 0; i < 3 && why.empty(); ++i)
-      if (p[i] < soft.min[i] - 1e-9 || p[i] > soft.max[i] + 1e-9) why = std::string("outside the soft limits on ") + "xyz"[i];
+    if (why.empty()) why = soft_limit_text(p, soft, frame, 1e-9);
     if (!why.empty()) return PlanFault{t, p, s.segment, line_of(plan, s.segment), why};
   }
   return std::nullopt;
@@ -58,7 +58,7 @@ PreparedProgram prepare_program(std::string_view text, const ctl::Machine& machi
   const auto t0 = std::chrono::steady_clock::now();
   out.plan.emplace(plan_path(out.queue, machine, o.planner));
   out.plan_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  if (const auto f = check_plan(*out.plan, machine, o.soft)) {
+  if (const auto f = check_plan(*out.plan, machine, o.soft, &o.frame)) {
     const Vec3 q = o.frame.to_program(f->p) * 1e3;
     char b[160];
     std::snprintf(b, sizeof b, "the planned path passes X%.4f Y%.4f Z%.4f (mm) at t = %.3f s, outside the workspace: ",

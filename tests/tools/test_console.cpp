@@ -566,3 +566,85 @@ TEST(ConsoleJog, ScreenSaysWhichWayAndWhy) {
 
 }  // namespace
 }  // namespace cpm::cli::console
+
+// ---- the rough edges a newcomer met (issue 29)
+
+namespace cpm::cli::console {
+namespace {
+
+TEST(ConsoleRoughEdges, WorstLatencyIsNoneYetOrSaturatedNeverTheIntegersMaximum) {
+  EXPECT_EQ(worst_us_text(0, false), "none yet");
+  EXPECT_EQ(worst_us_text(45600, true), "45.6 us");
+  const std::string sat = worst_us_text(INT32_MAX, true);
+  EXPECT_EQ(sat.find("2147483.6"), std::string::npos) << sat;
+  EXPECT_NE(sat.find("> 2147483 us"), std::string::npos) << sat;
+  EXPECT_NE(sat.find("stall"), std::string::npos) << sat;
+
+  state_t s = make_state(state_t::MODE_HOLDING);
+  s.cycles = 0;
+  EXPECT_NE(status_lines(s)[0].find("worst wake-up latency none yet"), std::string::npos) << status_lines(s)[0];
+  s.cycles = 5000;
+  s.max_latency_ns = INT32_MAX;
+  EXPECT_NE(status_lines(s)[0].find("worst wake-up latency > 2147483 us"), std::string::npos) << status_lines(s)[0];
+  // The watch's loop panel from the state alone, and from the statistics.
+  const std::string w = joined(render(s, std::nullopt, std::nullopt, 80, 24));
+  EXPECT_EQ(w.find("2147ms"), std::string::npos) << w;
+  EXPECT_TRUE(has(w, "wake-up max +>2\\.1s")) << w;
+  loop_stats_t st{};
+  EXPECT_TRUE(has(joined(render(s, st, std::nullopt, 80, 24)), "wake-up max +none")) << joined(render(s, st, std::nullopt, 80, 24));
+}
+
+TEST(ConsoleRoughEdges, StatusMarksAPositionBeforeHomingAndNamesNoIdNobodySent) {
+  state_t s = make_state(state_t::MODE_MOVING);
+  EXPECT_EQ(not_homed_mark(s), "");
+  s.homed[1] = 0;
+  s.homed[2] = 0;
+  EXPECT_EQ(not_homed_mark(s).rfind("NOT HOMED (actuators 2 3)", 0), 0u) << not_homed_mark(s);
+  s.homed[2] = 1;
+  EXPECT_EQ(not_homed_mark(s).rfind("NOT HOMED (actuator 2)", 0), 0u) << not_homed_mark(s);
+  s.cycles = 1000;
+  const std::string all = joined(status_lines(s));
+  EXPECT_EQ(all.find(std::to_string(s.last_segment_id)), std::string::npos) << all;
+  EXPECT_NE(all.find("last finished segment: tracking error RMS 12.3 um, max 45.6 um"), std::string::npos) << all;
+  s.last_segment_id = -1;  // none finished yet: no line
+  EXPECT_EQ(status_lines(s).size(), 1u);
+}
+
+TEST(ConsoleRoughEdges, GetPrintsEveryDigitNotTwoSignificant) {
+  params_t p{};
+  p.count = 3;
+  p.name = {"limits.force", "limits.following_error", "controller.kp.z"};
+  p.unit = {"N", "m", "N/m"};
+  p.value = {120.0, 0.005, 2550.25};
+  p.minimum = {0.0, 0.0001, 0.0};
+  p.maximum = {1000.0, 0.05, 1e6};
+  p.while_moving = {0, 0, 0};
+  p.description = {"", "", ""};
+  const std::string t = joined(params_table(p, select_params(p, {}), false));
+  EXPECT_EQ(t.find("e+02"), std::string::npos) << t;
+  EXPECT_NE(t.find("limits.force  "), std::string::npos) << t;
+  EXPECT_TRUE(has(t, "limits\\.force +120 N ")) << t;
+  EXPECT_TRUE(has(t, "0 \\.\\. 1000 N")) << t;
+  EXPECT_TRUE(has(t, "2550\\.25 N/m")) << t;
+  EXPECT_TRUE(has(t, "0 \\.\\. 1e\\+06 N/m")) << t;  // the exponent from 1e6 up
+  EXPECT_TRUE(has(t, "0\\.0001 \\.\\. 0\\.05 m")) << t;
+}
+
+TEST(ConsoleRoughEdges, OnceAndPipedBlocksHaveNoKeysLine) {
+  const state_t s = make_state(state_t::MODE_HOLDING);
+  EXPECT_GE(row_of(render(s, std::nullopt, std::nullopt, 80, 100), "keys  q quit"), 0);
+  EXPECT_LT(row_of(render(s, std::nullopt, std::nullopt, 80, 100, "", /*keys=*/false), "keys"), 0);
+  EXPECT_LT(row_of(render(s, std::nullopt, std::nullopt, 80, 100, "", false), "q quit"), 0);
+}
+
+TEST(ConsoleRoughEdges, ScriptedJogSaysWhatCameAfterTheLastCommand) {
+  // 10 mm/s for 2 s on actuator 1: 20 mm while sent, then 0.4 mm of stop ramp.
+  const std::array<double, 3> start{0.100, 0.200, 0.300}, sent{0.120, 0.200, 0.300}, rest{0.1204, 0.200, 0.300};
+  const std::string t = jog_distance_text(start, sent, rest, 2.0, false);
+  EXPECT_NE(t.find("moved 20.400 mm (d1 +20.400, d2 +0.000, d3 +0.000 mm)"), std::string::npos) << t;
+  EXPECT_NE(t.find("20.000 mm in the 2.00 s of jog, then 0.400 mm while stopping"), std::string::npos) << t;
+  EXPECT_NE(jog_distance_text(start, sent, rest, 2.0, true).find("x +20.400"), std::string::npos);
+}
+
+}  // namespace
+}  // namespace cpm::cli::console

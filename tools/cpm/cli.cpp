@@ -145,27 +145,38 @@ void record_fit(io::ModelFile& mf, const std::vector<io::FittedParameter>& fitte
 }
 
 std::string find_default_model(const std::filesystem::path& cwd, const std::filesystem::path& exe,
-                               const std::filesystem::path& system_file) {
+                               const std::filesystem::path& system_file, const std::string& name) {
   namespace fs = std::filesystem;
-  const fs::path published = "config/machine.yaml";
+  const fs::path published = fs::path("config") / name;
   std::error_code ec;
   if (fs::exists(cwd / published, ec)) return published.string();
   if (!exe.empty()) {
     const fs::path exe_dir = exe.parent_path();
     for (const fs::path& candidate :
-         {exe_dir / ".." / ".." / published, exe_dir / ".." / "etc" / "cpmd" / "machine.yaml"})
+         {exe_dir / ".." / ".." / published, exe_dir / ".." / "etc" / "cpmd" / name})
       if (fs::exists(candidate, ec)) return fs::weakly_canonical(candidate, ec).string();
   }
   if (fs::exists(system_file, ec)) return system_file.string();
   return published.string();
 }
 
-std::string default_model_path() {
+namespace {
+std::string default_config_file(const std::string& name) {
   namespace fs = std::filesystem;
   std::error_code ec;
   fs::path exe = fs::read_symlink("/proc/self/exe", ec);
   if (ec) exe.clear();
-  return find_default_model(".", exe, "/etc/cpmd/machine.yaml");
+  return find_default_model(".", exe, "/etc/cpmd/" + name, name);
+}
+}  // namespace
+
+std::string default_model_path() { return default_config_file("machine.yaml"); }
+
+std::optional<std::string> default_daemon_config_path() {
+  const std::string found = default_config_file("cpmd.yaml");
+  std::error_code ec;
+  if (!std::filesystem::exists(found, ec)) return std::nullopt;
+  return found;
 }
 
 std::string model_or_default(const std::optional<std::string>& model) {

@@ -106,9 +106,14 @@ void write_file_atomically(const std::string& path, const std::string& text);
 // error names it.
 std::string default_model_path();
 // The same lookup with its places given: the current folder, this program's
-// path and the system-wide file (for tests).
+// path and the system-wide file (for tests); `name` the file beside
+// machine.yaml that is looked for (cpmd.yaml for the daemon's config).
 std::string find_default_model(const std::filesystem::path& cwd, const std::filesystem::path& exe,
-                               const std::filesystem::path& system_file);
+                               const std::filesystem::path& system_file, const std::string& name = "machine.yaml");
+// The shipped daemon configuration (cpmd.yaml), looked for as the model is
+// (config/cpmd.yaml here or beside the build tree, PREFIX/etc/cpmd/cpmd.yaml,
+// /etc/cpmd/cpmd.yaml); nullopt when there is none.
+std::optional<std::string> default_daemon_config_path();
 // The --model given, else default_model_path(); an Error saying where it
 // looked when there is none.
 std::string model_or_default(const std::optional<std::string>& model);

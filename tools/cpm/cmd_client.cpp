@@ -1,6 +1,7 @@
 // Client subcommands for the state machine: status, enable, disable, stop,
 // reset, controller, load-model, stats. They talk to a running cpmd over LCM.
 #include <cmath>
+#include <cstdint>
 #include <cstring>
 #include <sstream>
 #include <thread>
@@ -104,19 +105,17 @@ int status(const StateOptions& o) {
     std::printf("%s\n", json_text(json_state(*s), -1).c_str());
     return 0;
   }
-  std::printf("%s\n", state_line(*s).c_str());
-  std::printf("controller %s, cycle %lld, overruns %lld, worst wake-up latency %.1f us\n",
-              ctl::law_name(static_cast<ctl::ControlLaw>(s->controller)), static_cast<long long>(s->cycles),
-              static_cast<long long>(s->overruns), s->max_latency_ns * 1e-3);
+  const std::string homed = console::not_homed_mark(*s);
+  std::printf("%s%s%s\n", state_line(*s).c_str(), homed.empty() ? "" : "\n", homed.c_str());
+  const console::Lines more = console::status_lines(*s);
+  std::printf("%s\n", more[0].c_str());
   if (s->faults) std::printf("first fault: %s\n", daemon::fault_report(*s).c_str());
   if (c.verifying())
     std::printf("state signed by cpmd and verified (boot id %lld, counter %lld)\n", static_cast<long long>(s->boot_id),
                 static_cast<long long>(s->sign_counter));
   else
     std::printf("state NOT VERIFIED: no public key of cpmd (--daemon-key)\n");
-  if (s->last_segment_id >= 0)
-    std::printf("last segment %lld: tracking error RMS %.1f um, max %.1f um\n",
-                static_cast<long long>(s->last_segment_id), s->last_segment_rmse * 1e6, s->last_segment_max * 1e6);
+  for (std::size_t i = 1; i < more.size(); ++i) std::printf("%s\n", more[i].c_str());
   return 0;
 }
 
@@ -213,9 +212,14 @@ int stats(const StateOptions& o) {
   std::printf("%-20s %10s %10s %10s %10s %10s   (us; percentiles to the histogram's 1 us bins)\n", "", "min", "mean",
               "p99", "p99.9", "max");
   for (int k = 0; k < daemon::kSeries; ++k)
-    std::printf("%-20s %10.2f %10.2f %10.0f %10.0f %10.2f\n", names[k], s->min_ns[k] * 1e-3,
-                s->count[k] ? s->sum_ns[k] / s->count[k] * 1e-3 : 0.0, pct(k, 0.99), pct(k, 0.999),
-                s->max_ns[k] * 1e-3);
+    if (s->count[k] == 0)
+      std::printf("%-20s %10s %10s %10s %10s %10s\n", names[k], "-", "-", "-", "-", "none yet");
+    else if (s->max_ns[k] >= INT32_MAX)  // saturated: the true maximum is unknown
+      std::printf("%-20s %10.2f %10.2f %10.0f %10.0f %10s\n", names[k], s->min_ns[k] * 1e-3,
+                  s->sum_ns[k] / s->count[k] * 1e-3, pct(k, 0.99), pct(k, 0.999), "> 2.1 s");
+    else
+      std::printf("%-20s %10.2f %10.2f %10.0f %10.0f %10.2f\n", names[k], s->min_ns[k] * 1e-3,
+                  s->sum_ns[k] / s->count[k] * 1e-3, pct(k, 0.99), pct(k, 0.999), s->max_ns[k] * 1e-3);
   if (auto sec = c.security(1.5))
     std::printf("security: %d operators; refused %lld without an operator, %lld with a wrong MAC, %lld beyond the "
                 "role, %lld replayed, %lld not from the holder; %lld undecodable; %lld stops from anyone\n",

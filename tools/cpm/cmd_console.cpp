@@ -70,7 +70,7 @@ int watch_plain(daemon::Client& c, const WatchOptions& o, const std::string& url
     }
     if (o.once) received(c.latest_state(), "state", 1.5, c.config(), c.config().state_channel);
     for (const auto& l : console::render(c.latest_state(), c.latest_stats(), c.latest_drives(), 80, 100,
-                                         fresh.note(c.latest_state())))
+                                         fresh.note(c.latest_state()), /*keys=*/false))
       std::printf("%s\n", l.c_str());
     if (o.once) break;
     std::printf("\n");

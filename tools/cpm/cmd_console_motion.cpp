@@ -123,6 +123,13 @@ int jog_for(const JogOptions& o) {
   const auto l = lcm_options(o.connection);
   daemon::Client c(l, operator_key(o.op));
   console::catch_interrupts();
+  // Where the jog starts, in its frame (actuator displacements or the platform's position).
+  const bool machine = frame == control_command_t::JOG_MACHINE;
+  auto where = [machine](const state_t& s) {
+    const double* p = machine ? s.position : s.d;
+    return std::array<double, 3>{p[0], p[1], p[2]};
+  };
+  const auto s0 = c.state(1.0);
   const auto ack = c.wait_ack(c.jog(frame, v), 2.0);
   if (report("jog", ack) != 0) return 1;
   const auto t0 = Clock::now();
@@ -144,13 +151,22 @@ int jog_for(const JogOptions& o) {
     std::printf("jog: interrupted after %d commands: stopped\n", sent);
     return 1;
   }
-  std::printf("jog: %d commands over %.2f s (20 a second), then no more: cpmd's deadman stops the platform\n", sent,
-              since(t0));
+  // A zero jog ends it now: without it the platform would coast on until
+  // cpmd's deadman (jog.keepalive) and go further than V * S.
+  const double seconds = since(t0);
+  const auto s_end = c.latest_state();
+  const double zero[3] = {0, 0, 0};
+  c.jog(frame, zero);
+  std::printf("jog: %d commands over %.2f s (20 a second), then a stop\n", sent, seconds);
   // Where it came to rest.
   std::optional<state_t> s;
   for (const auto t1 = Clock::now(); since(t1) < 2.0;)
     if ((s = c.state(0.5)) && s->mode != state_t::MODE_JOGGING) break;
-  if (s) std::printf("%s\n", state_line(*s).c_str());
+  if (s) {
+    std::printf("%s\n", state_line(*s).c_str());
+    if (s0 && s_end)
+      std::printf("jog: %s\n", console::jog_distance_text(where(*s0), where(*s_end), where(*s), seconds, machine).c_str());
+  }
   return 0;
 }
 
@@ -232,8 +248,8 @@ const Command r2{"jog",
                                   "for a script: V in m/s with --axis, or VX,VY,VZ in m/s (e.g. 0.01 or 0.01,0,0)")
                        ->type_name("V|VX,VY,VZ");
                    add_number(app, "--for", o->duration, "S",
-                              "for a script: send the jog 20 times a second for S seconds, then stop sending (cpmd's "
-                              "deadman stops the platform)")
+                              "for a script: send the jog 20 times a second for S seconds, then a stop; the distance "
+                              "is printed split into the S seconds and the stop")
                        ->default_str("none: jog from the keyboard");
                    add_connection(app, o->connection);
                    add_operator(app, o->op);

@@ -44,6 +44,7 @@ std::string read_text(const std::string& path) {
 // What the daemon would plan with: its config's limits and model, or the defaults.
 struct Setup {
   std::optional<daemon::DaemonConfig> daemon;
+  std::string config_path;  // where the limits came from ("" none)
   std::string model_path;
   std::unique_ptr<ctl::Machine> machine;
   path::MachineLimits limits;
@@ -52,7 +53,13 @@ struct Setup {
 
 Setup setup(const Options& o) {
   Setup s;
-  if (o.connection.config) s.daemon = daemon::load_config(*o.connection.config);
+  // cpmd's config gives the soft limits it will check: --config, else the
+  // shipped one, so that what the dry run passes cpmd does not refuse.
+  const std::optional<std::string> config = o.connection.config ? o.connection.config : default_daemon_config_path();
+  if (config) {
+    s.daemon = daemon::load_config(*config);
+    s.config_path = *config;
+  }
   s.model_path = o.model ? *o.model : s.daemon ? s.daemon->model_file : model_or_default(std::nullopt);
   ctl::MachineModel model = daemon::load_model(s.model_path);
   if (s.daemon) {
@@ -101,6 +108,15 @@ std::string report_text(const Setup& s, const path::PreparedProgram& p) {
                 "acceleration %.0f mm/s^2\n", m.duration, m.length * 1e3, m.peak_speed * 1e3, m.peak_speed * 6e4,
                 m.peak_acceleration * 1e3);
   o << b;
+  if (s.daemon) {
+    const path::SoftLimits& L = s.limits.soft;
+    std::snprintf(b, sizeof b, "soft limits (cpmd's, %s; machine frame): x %.1f..%.1f, y %.1f..%.1f, z %.1f..%.1f mm\n",
+                  s.config_path.c_str(), L.min.x() * 1e3, L.max.x() * 1e3, L.min.y() * 1e3, L.max.y() * 1e3,
+                  L.min.z() * 1e3, L.max.z() * 1e3);
+  } else {
+    std::snprintf(b, sizeof b, "soft limits NOT checked: no --config and no cpmd.yaml found (strokes only)\n");
+  }
+  o << b;
   o << "actuator                 1 (x)      2 (y)      3 (z)    largest\n";
   const auto row = [&](const char* name, const Vec3& v, double k, const char* unit) {
     std::snprintf(b, sizeof b, "%-18s %10.1f %10.1f %10.1f    %d (%s) %s\n", name, v.x() * k, v.y() * k, v.z() * k,
@@ -122,6 +138,11 @@ std::string report_text(const Setup& s, const path::PreparedProgram& p) {
                     l.axis >= 0 ? std::to_string(l.axis + 1).c_str() : "", l.speed * 6e4, l.feed * 6e4);
       o << b;
     }
+  }
+  if (m.short_limited > 0) {
+    std::snprintf(b, sizeof b, "  (and %d stretches shorter than 1 mm, not listed: corners' blends a little below the feed)\n",
+                  m.short_limited);
+    o << b;
   }
   std::snprintf(b, sizeof b, "planning: %.1f ms (%d repairs)\n", p.plan_seconds * 1e3, m.repairs);
   o << b;
@@ -154,6 +175,7 @@ Json report_json(const Setup& s, const path::PreparedProgram& p) {
           {"peak_actuator_force_n", v3(m.peak_actuator_force)},
           {"actuators_within_limits", m.actuators_within_limits},
           {"limited", limited},
+          {"short_limited", m.short_limited},
           {"repairs", m.repairs},
           {"planning_s", p.plan_seconds}};
 }

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdarg>
+#include <cstdint>
 #include <cstdio>
 #include <cstring>
 
@@ -68,6 +69,14 @@ std::string count(double n) {
 // A time in us in at most 7 columns.
 std::string micros(double us) { return us < 1e5 ? daemon::printf_text("%.1f", us) : daemon::printf_text("%.0fms", us / 1e3); }
 
+// A worst-case time (int32 ns) in at most 7 columns: "none" before the first
+// sample, ">2.1s" where it saturated (the true figure is unknown).
+std::string worst_micros(std::int32_t ns, bool any) {
+  if (!any) return "none";
+  if (ns >= INT32_MAX) return ">2.1s";
+  return micros(ns * 1e-3);
+}
+
 std::string upper(std::string s) {
   for (auto& c : s) c = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
   return s;
@@ -127,13 +136,13 @@ Lines loop_panel(const std::optional<state_t>& s, const std::optional<loop_stats
   std::string p99 = "-", lat = "-", cyc = "-", over = "-", skip = "-";
   if (st) {
     if (st->count[daemon::kSeriesLatency] > 0) p99 = micros(percentile_us(*st, daemon::kSeriesLatency, 0.99));
-    lat = micros(st->max_ns[daemon::kSeriesLatency] * 1e-3);
-    cyc = micros(st->max_ns[daemon::kSeriesCycle] * 1e-3);
+    lat = worst_micros(st->max_ns[daemon::kSeriesLatency], st->count[daemon::kSeriesLatency] > 0);
+    cyc = worst_micros(st->max_ns[daemon::kSeriesCycle], st->count[daemon::kSeriesCycle] > 0);
     over = count(static_cast<double>(st->overruns));
     skip = count(static_cast<double>(st->skipped));
   } else if (s) {  // the state carries the worst figures and the counts
-    lat = micros(s->max_latency_ns * 1e-3);
-    cyc = micros(s->max_cycle_ns * 1e-3);
+    lat = worst_micros(s->max_latency_ns, s->cycles > 0);
+    cyc = worst_micros(s->max_cycle_ns, s->cycles > 0);
   }
   if (s) {  // 1 kHz: fresher than the statistics' 1 Hz
     over = count(static_cast<double>(s->overruns));
@@ -524,7 +533,7 @@ Lines input_lines(const drives_t* d, int /*width*/, bool per_input) {
 }
 
 Lines render(const std::optional<state_t>& s, const std::optional<loop_stats_t>& st,
-             const std::optional<drives_t>& d, int width, int height, const std::string& note) {
+             const std::optional<drives_t>& d, int width, int height, const std::string& note, bool keys) {
   // Blocks in display order; weight 0 is always shown, a higher weight gives
   // way first when the window is short (the fault sentence has weight 0).
   struct Block {
@@ -571,7 +580,7 @@ Lines render(const std::optional<state_t>& s, const std::optional<loop_stats_t>&
     blocks[at].lines = std::move(l);
     return true;
   };
-  add(14, {"keys  q quit"});
+  if (keys) add(14, {"keys  q quit"});  // a plain block (--once, a pipe) reads no key
   if (!add(10, input_lines(dp, width, true))) add(10, input_lines(dp, width, false));
   add(2, table_more(s, width));
   add(7, {""});
@@ -582,7 +591,50 @@ Lines render(const std::optional<state_t>& s, const std::optional<loop_stats_t>&
   return fit(std::move(out), width, height);
 }
 
+// ---- cpm status, stats
+
+std::string worst_us_text(std::int32_t ns, bool any) {
+  if (!any) return "none yet";
+  if (ns >= INT32_MAX) return daemon::printf_text("> %d us (beyond what the statistics hold: a stall of 2.1 s or more)", INT32_MAX / 1000);
+  return daemon::printf_text("%.1f us", ns * 1e-3);
+}
+
+std::string not_homed_mark(const state_t& s) {
+  std::string which;
+  for (int i = 0; i < 3; ++i)
+    if (!s.homed[i]) which += " " + std::to_string(i + 1);
+  if (which.empty()) return "";
+  return "NOT HOMED (actuator" + std::string(which.size() > 2 ? "s" : "") + which +
+         "): the position is not referenced to the machine";
+}
+
+Lines status_lines(const state_t& s) {
+  Lines out;
+  out.push_back(daemon::printf_text("controller %s, cycle %lld, overruns %lld, worst wake-up latency %s",
+                                    law_text(s.controller), static_cast<long long>(s.cycles),
+                                    static_cast<long long>(s.overruns), worst_us_text(s.max_latency_ns, s.cycles > 0).c_str()));
+  if (s.last_segment_id >= 0)
+    out.push_back(daemon::printf_text("last finished segment: tracking error RMS %.1f um, max %.1f um (%d cycles)",
+                                      s.last_segment_rmse * 1e6, s.last_segment_max * 1e6, s.last_segment_cycles));
+  return out;
+}
+
 // ---- cpm jog
+
+std::string jog_distance_text(const std::array<double, 3>& start, const std::array<double, 3>& sent_end,
+                              const std::array<double, 3>& rest, double seconds, bool machine_frame) {
+  auto dist = [](const std::array<double, 3>& a, const std::array<double, 3>& b) {
+    return std::sqrt((b[0] - a[0]) * (b[0] - a[0]) + (b[1] - a[1]) * (b[1] - a[1]) + (b[2] - a[2]) * (b[2] - a[2]));
+  };
+  std::string each;
+  for (int i = 0; i < 3; ++i)
+    each += daemon::printf_text("%s%s %+.3f", i ? ", " : "", machine_frame ? (i == 0 ? "x" : i == 1 ? "y" : "z")
+                                                                           : (i == 0 ? "d1" : i == 1 ? "d2" : "d3"),
+                                (rest[i] - start[i]) * 1e3);
+  return daemon::printf_text("moved %.3f mm (%s mm): %.3f mm in the %.2f s of jog, then %.3f mm while stopping",
+                             dist(start, rest) * 1e3, each.c_str(), dist(start, sent_end) * 1e3, seconds,
+                             dist(sent_end, rest) * 1e3);
+}
 
 JogPad::JogPad() : frame_(control_command_t::JOG_ACTUATOR) {}
 

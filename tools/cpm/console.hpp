@@ -39,9 +39,11 @@ using Lines = std::vector<std::string>;
 // their references, the transfer force, one line per GPIO input). The active
 // fault's sentence (daemon::fault_report) is wrapped and never cut off: rows
 // of less weight give way to it. `note` (e.g. "no state from cpmd for 3 s")
-// is shown on the last line.
+// is shown on the last line. `keys`: the full screen's "keys  q quit" line
+// (a plain block, --once or to a pipe, reads no key and has none).
 Lines render(const std::optional<cpm_msgs::state_t>& state, const std::optional<cpm_msgs::loop_stats_t>& stats,
-             const std::optional<cpm_msgs::drives_t>& drives, int width, int height, const std::string& note = "");
+             const std::optional<cpm_msgs::drives_t>& drives, int width, int height, const std::string& note = "",
+             bool keys = true);
 
 // The drive table (the same rows in watch and `cpm drives`): a header and one
 // row per drive, as wide as `width` allows; placeholders without a message.
@@ -67,6 +69,21 @@ const char* nmt_name(std::int8_t nmt) noexcept;         // "operational", "pre_o
 const char* cia402_name(std::int8_t state) noexcept;    // "operation_enabled", "switch_on_disabled", ...
 const char* bus_state_name(std::int8_t state) noexcept; // "error_active", ..., "none" (simulator)
 const char* homing_phase_name(std::int8_t phase) noexcept;  // "idle", "search", "back_off", ...
+
+// ---- cpm status, stats
+
+// A worst-case time from cpmd's statistics (int32 ns) in us, as the screens
+// show it: "none yet" before the first sample (`any` false), "> 2147483 us"
+// where the figure stopped at the message's 32-bit maximum (a stall of
+// 2.1 s or more: the true figure is unknown), else "45.6 us".
+std::string worst_us_text(std::int32_t ns, bool any);
+// The homed mark after a position: "" when every actuator is homed, else
+// "NOT HOMED (actuators 1 3): the position is not referenced".
+std::string not_homed_mark(const cpm_msgs::state_t& s);
+// `cpm status`'s lines after the state's: controller, cycles, overruns and
+// the worst wake-up latency; the last finished segment's tracking (named by
+// what it was, not by the client's internal command id).
+Lines status_lines(const cpm_msgs::state_t& s);
 
 // ---- cpm drives --json
 
@@ -157,6 +174,14 @@ class JogPad {
   double last_key_ = -1e9;  // when the held key last came
   bool repeating_ = false, stop_pending_ = false, quit_ = false;
 };
+
+// `cpm jog --for`'s account of the distance (mm; in the jog's frame:
+// actuator displacements or the platform's position): `start` when the first
+// jog was sent, `sent_end` when the last one was, `rest` where the platform
+// stopped. The part after the last jog (the stop ramp, or the deadman's
+// coast) is given apart, so that the distance is not read as v * S.
+std::string jog_distance_text(const std::array<double, 3>& start, const std::array<double, 3>& sent_end,
+                              const std::array<double, 3>& rest, double seconds, bool machine_frame);
 
 // The jog screen: mode, space, homed, frame and selection, speed, the keys
 // (which way is which: z is down), position and velocity, what is being

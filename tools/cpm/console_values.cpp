@@ -16,14 +16,15 @@ using cpm_msgs::params_t;
 
 namespace {
 
-// The shortest text that reads back as the same double (12691, 0.005, 1e+06).
+// The shortest text that reads back as the same double: plain from 1e-5 to
+// 1e6 (120, 12691, 0.005, 0.0001; never 1.2e+02, which reads as 2
+// significant digits), the exponent form beyond (1e+06).
 std::string shortest(double v) {
-  char b[32];
-  for (int p = 1; p <= 17; ++p) {
-    std::snprintf(b, sizeof b, "%.*g", p, v);
-    if (std::strtod(b, nullptr) == v) break;
-  }
-  return b;
+  char b[64];
+  const double a = std::fabs(v);
+  const auto r = (v == 0.0 || (a >= 1e-5 && a < 1e6)) ? std::to_chars(b, b + sizeof b, v, std::chars_format::fixed)
+                                                     : std::to_chars(b, b + sizeof b, v);
+  return std::string(b, r.ptr);
 }
 
 std::string si_unit(std::string u) {

@@ -7,7 +7,9 @@
 #include <string>
 
 #include "cli.hpp"
+#include "cpm/identification/align.hpp"
 #include "cpm/identification/motion.hpp"
+#include "cpm/identification/report.hpp"
 
 namespace cpm::cli {
 
@@ -35,6 +37,25 @@ inline void add_new_model_option(CLI::App& app, std::string& out) {
   app.add_option("--out", out, "the new model file (the input model is never overwritten)")
       ->type_name("NEW_MODEL.yaml")
       ->required();
+}
+
+// A model judged on a motion log as compare does it: aligned as far as the
+// model may take (ident::alignment_text says how), the residual's summary
+// with the fit per axis, and its correlation (MATLAB's compare and resid).
+struct MotionJudgement {
+  ident::MotionProblem P;
+  ident::Alignment A;
+  ident::ResidualSummary s;
+  ident::ResidualCorrelation c;
+};
+inline MotionJudgement judge_motion(const io::MotionData& data, const ctl::Machine& model,
+                                    const ident::MotionOptions& mo, int lags) {
+  MotionJudgement m{ident::prepare_motion(data, model, mo), {}, {}, {}};
+  m.A = ident::align_motion(data, model, mo);
+  m.P.set_delay(m.A.reference);
+  m.s = ident::summarize(m.P, m.P.residual);
+  m.c = ident::residual_correlation(m.P, m.P.residual, lags);
+  return m;
 }
 
 }  // namespace cpm::cli

@@ -108,6 +108,14 @@ struct SoftLimits {
   Vec3 min = Vec3::Constant(-1e9), max = Vec3::Constant(1e9);
 };
 
+// Why machine point `q` (m) is outside `soft`, with the figures, "" when it
+// is inside (with `margin` m of slack). With `frame`, the point and the limit
+// in the program's coordinates (mm) first, the machine's after: "outside the
+// soft limits on X: X = 195.000 mm, above the limit X 190.000 mm (machine x
+// 615.000 mm)"; without, the machine's only.
+std::string soft_limit_text(const Vec3& q, const SoftLimits& soft, const ProgramFrame* frame = nullptr,
+                            double margin = 0.0);
+
 // Check every point the program's moves pass (every `step` m along each
 // move, and its ends) against the machine's workspace (kin::check_pose:
 // strokes, limbs' reach, singularity) and the soft limits. Throws

@@ -73,7 +73,10 @@ struct PlanSummary {
   // within (1 - reserve) of the drives'): always true of an actuator_aware
   // plan; a cartesian_only plan may not be.
   bool actuators_within_limits = true;
+  // Stretches along the path; neighbours less than 1 mm apart and held by
+  // the same are one; those shorter than 1 mm (but stops) are only counted.
   std::vector<LimitedStretch> limited;
+  int short_limited = 0;
 };
 
 class Plan final : public ctl::Trajectory {

@@ -42,14 +42,16 @@ struct PlanFault {
   Vec3 p = Vec3::Zero();  // machine frame (m)
   int segment = -1;       // programmed segment (PathQueue::segments())
   int line = 0;           // its program line (0: none)
-  std::string why;        // "outside the soft limits on z", the workspace check's words
+  std::string why;        // soft_limit_text's words, or the workspace check's
 };
 
 // Every knot of the plan (and its end) against the machine's workspace
 // (kin::check_pose: strokes, limbs' reach, singularity) and the soft
 // limits: the blends round corners inside them, but a corner on a limit
-// may still cut it. nullopt when every knot is inside.
-std::optional<PlanFault> check_plan(const Plan& plan, const ctl::Machine& machine, const SoftLimits& soft);
+// may still cut it. nullopt when every knot is inside. With `frame`, a
+// soft-limit fault's words give the program's coordinates (soft_limit_text).
+std::optional<PlanFault> check_plan(const Plan& plan, const ctl::Machine& machine, const SoftLimits& soft,
+                                    const ProgramFrame* frame = nullptr);
 
 struct ProgramOptions {
   std::string name = "program";          // for messages (the file name)
