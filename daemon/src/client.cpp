@@ -273,6 +273,21 @@ void Client::on_seal(const lcm::ReceiveBuffer* rbuf, const std::string&) {
   }
 }
 
+std::string Client::trust_note() const {
+  if (!verifier_) return "NOT VERIFIED: no public key of cpmd (--daemon-key)";
+  if (verifier_->refused_total() == 0) return "";
+  constexpr const char* kCause[] = {"", "unsigned", "bad seal signature", "replayed or reordered", "another boot",
+                                    "no seal lists them", ""};
+  std::string s = "refused as not cpmd's: " + std::to_string(verifier_->refused_total()) + " (";
+  bool first = true;
+  for (int t = 1; t < 6; ++t)
+    if (const auto n = verifier_->refused(static_cast<Trust>(t)); n > 0) {
+      s += (first ? "" : ", ") + std::to_string(n) + " " + kCause[t];
+      first = false;
+    }
+  return s + ")";
+}
+
 void Client::no_seal() {
   if (!verifier_ || verifier_->seals_verified() > 0 || verifier_->waiting() == 0 || std::exchange(told_no_seal_, true))
     return;

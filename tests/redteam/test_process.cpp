@@ -291,6 +291,66 @@ TEST(ForgedState, DoesNotEndAWaitingMoveNorShowInStatus) {
               forged.load(), took);
 }
 
+// Forged "disabled" states and forged drives with the e-stop pressed, every
+// 5 ms, against a signing cpmd holding still: `cpm watch` and the example
+// client, given cpmd's public key, show only what cpmd sealed and say that
+// they refused the rest.
+TEST(ForgedState, WatchAndTheExampleClientShowOnlyVerifiedMessages) {
+  cpm::test::TempDir kd("redteam-forged-view-key");
+  const std::string key = kd / "cpmd.key", pub = kd / "cpmd.pub";
+  const daemon::Key seed = daemon::generate_key();
+  daemon::write_key_file(key, seed);
+  daemon::write_public_key_file(pub, daemon::public_key_of(seed));
+  Rig r("forged-view", {{"refusal_acks_per_second: 20", "refusal_acks_per_second: 20\n  signing_key: " + key}});
+  r.start();
+  Client alice(r.cfg.lcm, r.alice);
+  alice.verify_with(daemon::public_key_of(seed));
+  ASSERT_TRUE(alice.control(C::CMD_ENABLE).accepted);
+  std::optional<state_t> st;
+  for (int i = 0; i < 50 && !(st && st->mode == state_t::MODE_HOLDING); ++i) st = alice.state(0.2);
+  ASSERT_EQ(st->mode, state_t::MODE_HOLDING);
+  std::atomic<bool> forging{true};
+  std::atomic<int> forged{0};
+  std::thread forger([&] {
+    Stranger s(r.cfg.lcm);
+    while (forging) {
+      state_t f = *st;
+      f.mode = state_t::MODE_DISABLED;
+      f.cycle += 1000000;
+      f.sign_counter += 1000000 + forged;
+      s.publish(r.cfg.lcm.state_channel, encode(f));
+      cpm_msgs::drives_t d{};
+      d.cycle = f.cycle;
+      d.estop = true;
+      s.publish(r.cfg.lcm.drives_channel, encode(d));
+      forged += 2;
+      std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    }
+  });
+  std::vector<std::string> watch{"/usr/bin/env", "-i", "HOME=" + (r.dir / "nohome"), CPM_EXE, "watch", "--once",
+                                 "--url", r.cfg.lcm.url, "--daemon-key", pub};
+  cpm::test::Process w(watch, r.dir / "watch.log", /*stdout_log=*/true);
+  EXPECT_EQ(w.wait_exit_for(15).value_or(-1), 0) << w.log();
+#ifdef EXAMPLE_CLIENT_EXE
+  std::vector<std::string> example{"/usr/bin/env", "-i", "HOME=" + (r.dir / "nohome"), "CPM_DAEMON_KEY=" + pub,
+                                   "LCM_DEFAULT_URL=" + r.cfg.lcm.url, EXAMPLE_CLIENT_EXE};
+  cpm::test::Process e(example, r.dir / "example.log", /*stdout_log=*/true);
+  EXPECT_EQ(e.wait_exit_for(15).value_or(-1), 0) << e.log();
+#endif
+  forging = false;
+  forger.join();
+  EXPECT_NE(w.log().find("HOLDING"), std::string::npos) << w.log();
+  EXPECT_EQ(w.log().find("DISABLED"), std::string::npos) << "forged state shown:\n" << w.log();
+  EXPECT_EQ(w.log().find("PRESSED"), std::string::npos) << "forged drives shown:\n" << w.log();
+  EXPECT_NE(w.log().find("refused"), std::string::npos) << w.log();
+#ifdef EXAMPLE_CLIENT_EXE
+  EXPECT_NE(e.log().find("holding"), std::string::npos) << e.log();
+  EXPECT_NE(e.log().find("verified"), std::string::npos) << e.log();
+  EXPECT_EQ(e.log().find("disabled"), std::string::npos) << "forged state shown:\n" << e.log();
+#endif
+  std::printf("forged messages sent while cpm watch and the example client read: %d\n", forged.load());
+}
+
 // Against a cpmd that does not sign (an old one, or no security.signing_key):
 // `cpm status` told to verify refuses its state and says it cannot be
 // verified; without a public key it shows the state marked NOT VERIFIED.

@@ -128,6 +128,10 @@ class Client {
   [[nodiscard]] bool verifying() const noexcept { return verifier_.has_value(); }
   [[nodiscard]] const std::optional<Verifier>& verifier() const noexcept { return verifier_; }
   void on_refused(std::function<void(Trust, const char* what)> f) { refused_cb_ = std::move(f); }
+  // For a view that owns the terminal (cpm watch): "" while nothing was
+  // refused, else "refused as not cpmd's: N (n1 <cause>, ...)"; without a
+  // public key "NOT VERIFIED: no public key of cpmd".
+  [[nodiscard]] std::string trust_note() const;
   // The boot id of verified-signed messages from another start of cpmd (0: none seen).
   [[nodiscard]] std::int64_t restarted() const noexcept { return restarted_; }
 
