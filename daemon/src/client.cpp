@@ -274,8 +274,7 @@ void Client::on_seal(const lcm::ReceiveBuffer* rbuf, const std::string&) {
 }
 
 std::string Client::trust_note() const {
-  if (!verifier_) return "NOT VERIFIED: no public key of cpmd (--daemon-key)";
-  if (verifier_->refused_total() == 0) return "";
+  if (!verifier_ || verifier_->refused_total() == 0) return "";
   constexpr const char* kCause[] = {"", "unsigned", "bad seal signature", "replayed or reordered", "another boot",
                                     "no seal lists them", ""};
   std::string s = "refused as not cpmd's: " + std::to_string(verifier_->refused_total()) + " (";

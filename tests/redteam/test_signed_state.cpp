@@ -286,14 +286,26 @@ TEST(SignedState, ForgedAndReplayedSealsAreRefused) {
   auto flipped = *real_seal;
   flipped.digests[5] ^= 1;
   EXPECT_EQ(r.seal(encode(flipped)), Trust::bad_signature);
-  // Junk on the seal channel.
+  // Junk on the seal channel: noise, every truncation of a genuine seal, one
+  // byte more, and lying digest counts (a negative one, one past the end).
   EXPECT_EQ(r.seal(Bytes(200, 0x5a)), Trust::unsigned_message);
+  const Bytes& g = genuine_seal->bytes;
+  for (std::size_t n = 0; n < g.size(); ++n) EXPECT_EQ(r.seal(Bytes(g.begin(), g.begin() + static_cast<std::ptrdiff_t>(n))), Trust::unsigned_message) << n;
+  Bytes longer = g;
+  longer.push_back(0);
+  EXPECT_EQ(r.seal(longer), Trust::unsigned_message);
+  for (const std::uint32_t n : {0xFFFFFFE0u, 0x80000000u, static_cast<std::uint32_t>(g.size())}) {
+    Bytes lie = g;
+    for (int k = 0; k < 4; ++k) lie[32 + static_cast<std::size_t>(k)] = static_cast<std::uint8_t>(n >> (24 - 8 * k));
+    EXPECT_EQ(r.seal(lie), Trust::unsigned_message) << n;
+  }
   // The genuine stream, then its first seal replayed.
   for (const auto& h : cell.heard) r.feed(h);
   EXPECT_EQ(r.seal(genuine_seal->bytes), Trust::stale);
   for (const auto t : forged) EXPECT_EQ(r.verdict_of(t), Trust::unsealed);
   EXPECT_EQ(r.v.refused(Trust::bad_signature), 3);
   EXPECT_EQ(r.v.refused(Trust::stale), 1);
+  EXPECT_EQ(r.v.refused(Trust::unsigned_message), static_cast<std::int64_t>(g.size()) + 5);
   EXPECT_GE(r.released.size(), 64u);
 }
 

@@ -129,8 +129,8 @@ class Client {
   [[nodiscard]] const std::optional<Verifier>& verifier() const noexcept { return verifier_; }
   void on_refused(std::function<void(Trust, const char* what)> f) { refused_cb_ = std::move(f); }
   // For a view that owns the terminal (cpm watch): "" while nothing was
-  // refused, else "refused as not cpmd's: N (n1 <cause>, ...)"; without a
-  // public key "NOT VERIFIED: no public key of cpmd".
+  // refused (or nothing is verified: the constructor warned), else "refused
+  // as not cpmd's: N (n1 <cause>, ...)".
   [[nodiscard]] std::string trust_note() const;
   // The boot id of verified-signed messages from another start of cpmd (0: none seen).
   [[nodiscard]] std::int64_t restarted() const noexcept { return restarted_; }
