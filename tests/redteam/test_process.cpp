@@ -18,6 +18,7 @@
 #include <sstream>
 #include <chrono>
 #include <cmath>
+#include <cstdlib>
 #include <lcm/lcm-cpp.hpp>
 #include <thread>
 
@@ -668,7 +669,8 @@ double share_at_least(std::int64_t k, std::int64_t n, double p) {
 }
 
 TEST(Flood, TwentyThousandMessagesInTenSecondsMissNoCycleAndGrowNoMemory) {
-  Rig r("flood");
+  // CPM_FLOOD_UNSIGNED=1: against a cpmd without a signing key, to compare (docs/security.md).
+  Rig r("flood", {}, std::getenv("CPM_FLOOD_UNSIGNED") != nullptr);
   const long cpus = ::sysconf(_SC_NPROCESSORS_ONLN);
   r.start(cpus >= 2 ? std::vector<std::string>{"--loop-cpu", std::to_string(cpus - 1)} : std::vector<std::string>{});
   if (cpus >= 2) {
