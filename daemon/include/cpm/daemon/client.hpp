@@ -148,8 +148,10 @@ class Client {
   void on_seal(const lcm::ReceiveBuffer* rbuf, const std::string&);
   // A message as received: taken at once when nothing is verified, else held
   // until a seal decides (then used, or refused and said).
+  // In Stream's order: a held message's index() is its Stream.
   using Held = std::variant<cpm_msgs::state_t, cpm_msgs::ack_t, cpm_msgs::drives_t, cpm_msgs::loop_stats_t,
                             cpm_msgs::params_t, cpm_msgs::security_t>;
+  static_assert(std::variant_size_v<Held> == kStreams);
   void receive(Stream s, const lcm::ReceiveBuffer* rbuf, Held&& m);
   void use(const cpm_msgs::state_t& m);
   void use(const cpm_msgs::ack_t& m);
