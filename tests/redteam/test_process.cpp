@@ -352,6 +352,60 @@ TEST(ForgedState, WatchAndTheExampleClientShowOnlyVerifiedMessages) {
   std::printf("forged messages sent while cpm watch and the example client read: %d\n", forged.load());
 }
 
+// What the seals cost a reader in time (docs/security.md, "Signed state"):
+// a client verifying and one not, reading the same sealing cpmd at once.
+// Asserts counts only (every stop answered, the verifying client's states
+// all verified and in order); the delays are printed, not judged.
+TEST(ForgedState, SealsDelayAVerifyingReaderWithinTheirBound) {
+  Rig r("seal-latency");
+  r.start();
+  Client plain(r.cfg.lcm), verifying(r.cfg.lcm);
+  verifying.verify_with(daemon::public_key_of(r.signing_seed));
+  auto wall_us = [] {
+    return std::chrono::duration_cast<std::chrono::microseconds>(
+               std::chrono::system_clock::now().time_since_epoch())
+        .count();
+  };
+  // The time from cpmd's publishing (state_t.utime) to the client's having it, per state.
+  std::vector<double> d_plain, d_verified;
+  std::int64_t last_cycle = -1;
+  bool ordered = true;
+  plain.on_state([&](const state_t& s) { d_plain.push_back(1e-3 * static_cast<double>(wall_us() - s.utime)); });
+  verifying.on_state([&](const state_t& s) {
+    d_verified.push_back(1e-3 * static_cast<double>(wall_us() - s.utime));
+    ordered = ordered && s.cycle > last_cycle;
+    last_cycle = s.cycle;
+  });
+  {  // each reading all the time, on its own thread
+    std::thread t([&] { plain.handle(1.0); });
+    verifying.handle(1.0);
+    t.join();
+  }
+  // Stops (anyone may send one; disabled, it changes nothing): the answer's round trip.
+  std::vector<double> rt_plain, rt_verified;
+  for (int i = 0; i < 20; ++i)
+    for (auto* c : {&plain, &verifying}) {
+      const auto t0 = Clock::now();
+      (void)c->control(C::CMD_STOP);
+      (c == &plain ? rt_plain : rt_verified).push_back(std::chrono::duration<double, std::milli>(Clock::now() - t0).count());
+    }
+  ASSERT_GT(d_plain.size(), 100u);
+  ASSERT_GT(d_verified.size(), 100u);
+  EXPECT_TRUE(ordered);
+  EXPECT_EQ(verifying.verifier()->refused_total(), 0);
+  EXPECT_EQ(rt_verified.size(), 20u);
+  auto med = [](std::vector<double> v) {
+    std::sort(v.begin(), v.end());
+    return v[v.size() / 2];
+  };
+  auto worst = [](const std::vector<double>& v) { return *std::max_element(v.begin(), v.end()); };
+  std::printf("seal latency: state publish-to-client median %.2f ms (max %.2f) unverified, %.2f ms (max %.2f) "
+              "verified, over %zu and %zu states; stop ack round trip median %.2f ms (max %.2f) unverified, %.2f ms "
+              "(max %.2f) verified, 20 each\n",
+              med(d_plain), worst(d_plain), med(d_verified), worst(d_verified), d_plain.size(), d_verified.size(),
+              med(rt_plain), worst(rt_plain), med(rt_verified), worst(rt_verified));
+}
+
 // Against a cpmd that does not sign (an old one, or no security.signing_key):
 // `cpm status` told to verify refuses its state and says it cannot be
 // verified; without a public key it shows the state marked NOT VERIFIED.
