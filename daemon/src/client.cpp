@@ -55,8 +55,8 @@ std::string daemon_public_key_path(const LcmConfig& cfg) {
 
 std::optional<cpm_msgs::ack_t> decode_ack(const void* data, std::size_t size) {
   // hash, utime, id (8 each), source, command, accepted (1), reason (2): then message.
-  // After it: mode, queue_depth, session, boot_id, sign_counter, signature.
-  constexpr std::size_t kHead = 8 + 8 + 8 + 1 + 1 + 1 + 2, kTail = 1 + 2 + 8 + 8 + 8 + kSignatureBytes;
+  // After it: mode, queue_depth, session, boot_id, sign_counter.
+  constexpr std::size_t kHead = 8 + 8 + 8 + 1 + 1 + 1 + 2, kTail = 1 + 2 + 8 + 8 + 8;
   if (size < kHead + 4 + 1 + kTail || size > (1u << 20)) return std::nullopt;
   const auto* p = static_cast<const std::uint8_t*>(data) + kHead;
   const auto len = static_cast<std::int32_t>((std::uint32_t{p[0]} << 24) | (std::uint32_t{p[1]} << 16) |
@@ -85,6 +85,7 @@ Client::Client(const LcmConfig& cfg, std::optional<Credentials> operator_key)
   lcm_->subscribe(cfg_.security_channel, &Client::on_security_msg, this)->setQueueCapacity(100);
   lcm_->subscribe(cfg_.drives_channel, &Client::on_drives_msg, this)->setQueueCapacity(100);
   lcm_->subscribe(cfg_.params_channel, &Client::on_params, this)->setQueueCapacity(100);
+  lcm_->subscribe(cfg_.seal_channel, &Client::on_seal, this)->setQueueCapacity(kQueuedMessages);
   // Said now, before a full-screen view (cpm watch) takes the terminal.
   if (const std::string pk = daemon_public_key_path(cfg_); !pk.empty())
     verify_with(read_public_key_file(pk));
@@ -215,26 +216,85 @@ void Client::refused(Trust t, const char* what) {
 void Client::unverified() {
   if (std::exchange(told_unverified_, true)) return;
   std::fprintf(stderr,
-               "cpm: warning: no public key of cpmd (--daemon-key, $CPM_DAEMON_KEY, ~/.config/cpm/cpmd.pub): its state "
-               "and acks CANNOT BE VERIFIED and are shown as sent, forged or not (docs/security.md, \"Signed state\")\n");
+               "cpm: warning: no public key of cpmd (--daemon-key, $CPM_DAEMON_KEY, ~/.config/cpm/cpmd.pub): its state, "
+               "acks and the rest CANNOT BE VERIFIED and are shown as sent, forged or not (docs/security.md, \"Signed "
+               "state\")\n");
 }
 
-bool Client::trusted(const cpm_msgs::state_t& m) {
-  if (!verifier_) return true;
-  const Trust t = verifier_->check(m, m.boot_id, 0);
-  if (t == Trust::ok) return true;
-  if (t == Trust::other_boot) restarted_ = m.boot_id;
-  refused(t, "a state");
-  return false;
+namespace {
+const char* what_of(Stream s) noexcept {
+  constexpr const char* kWhat[kStreams] = {"a state", "an ack", "a drives message", "a statistics message",
+                                           "a parameter table", "a security count"};
+  return kWhat[static_cast<int>(s)];
+}
+}  // namespace
+
+void Client::receive(Stream s, const lcm::ReceiveBuffer* rbuf, Held&& m) {
+  if (!verifier_) return std::visit([this](const auto& x) { use(x); }, m);
+  // A state or ack with no counter comes from a cpmd that does not sign (or is forged as one).
+  const bool no_counter = std::visit(
+      [](const auto& x) {
+        if constexpr (requires { x.sign_counter; }) return x.sign_counter == 0;
+        return false;
+      },
+      m);
+  if (no_counter) return refused(verifier_->refuse(Trust::unsigned_message), what_of(s));
+  const std::uint64_t ticket = ++next_ticket_;
+  const Trust t = verifier_->offer(s, rbuf->data, rbuf->data_size, ticket);
+  if (t == Trust::ok) return std::visit([this](const auto& x) { use(x); }, m);
+  if (t == Trust::pending) {
+    held_.emplace(ticket, std::move(m));
+    // The verifier let go of the oldest it held (too many waiting): so does this.
+    while (held_.size() > verifier_->waiting()) {
+      refused(Trust::unsealed, what_of(static_cast<Stream>(held_.begin()->second.index())));
+      held_.erase(held_.begin());
+    }
+    return;
+  }
+  refused(t, what_of(s));
 }
 
-bool Client::trusted(const cpm_msgs::ack_t& m) {
-  if (!verifier_) return true;
-  const Trust t = verifier_->check(m, m.boot_id, 1);
-  if (t == Trust::ok) return true;
-  if (t == Trust::other_boot) restarted_ = m.boot_id;
-  refused(t, "an ack");
-  return false;
+void Client::on_seal(const lcm::ReceiveBuffer* rbuf, const std::string&) {
+  if (!verifier_) return;
+  decided_.clear();
+  const Trust t = verifier_->seal(rbuf->data, rbuf->data_size, decided_);
+  if (t == Trust::other_boot)
+    if (const auto s = decode_seal(rbuf->data, rbuf->data_size)) restarted_ = s->boot_id;
+  if (t != Trust::ok) refused(t, "a seal");
+  for (const auto& v : decided_) {
+    const auto it = held_.find(v.ticket);
+    if (it == held_.end()) continue;
+    Held m = std::move(it->second);
+    held_.erase(it);
+    if (v.trust == Trust::ok)
+      std::visit([this](const auto& x) { use(x); }, m);
+    else
+      refused(v.trust, what_of(v.stream));
+  }
+}
+
+std::string Client::trust_note() const {
+  if (!verifier_ || verifier_->refused_total() == 0) return "";
+  constexpr const char* kCause[] = {"", "unsigned", "bad seal signature", "replayed or reordered", "another boot",
+                                    "no seal lists them", ""};
+  std::string s = "refused as not cpmd's: " + std::to_string(verifier_->refused_total()) + " (";
+  bool first = true;
+  for (int t = 1; t < 6; ++t)
+    if (const auto n = verifier_->refused(static_cast<Trust>(t)); n > 0) {
+      s += (first ? "" : ", ") + std::to_string(n) + " " + kCause[t];
+      first = false;
+    }
+  return s + ")";
+}
+
+void Client::no_seal() {
+  if (!verifier_ || verifier_->seals_verified() > 0 || verifier_->waiting() == 0 || std::exchange(told_no_seal_, true))
+    return;
+  std::fprintf(stderr,
+               "cpm: %zu messages from cpmd wait for a seal and none came: what this cpmd publishes cannot be "
+               "verified (an old cpmd, or one without security.signing_key); nothing unverified is shown "
+               "(docs/security.md, \"Signed state\")\n",
+               verifier_->waiting());
 }
 
 void Client::need_same_boot() const {
@@ -244,10 +304,13 @@ void Client::need_same_boot() const {
 }
 
 void Client::on_ack(const lcm::ReceiveBuffer* rbuf, const std::string&) {
-  const auto a = decode_ack(rbuf->data, rbuf->data_size);
+  auto a = decode_ack(rbuf->data, rbuf->data_size);
   if (!a) return;  // not an ack: somebody else's bytes
-  if (!trusted(*a)) return;
-  const cpm_msgs::ack_t* m = &*a;
+  receive(Stream::ack, rbuf, std::move(*a));
+}
+
+void Client::use(const cpm_msgs::ack_t& a) {
+  const cpm_msgs::ack_t* m = &a;
   if (pings_.erase(m->id)) {
     // A keep-alive refused: the session is gone (daemon restarted, or it
     // expired); the next command acquires a new one.
@@ -264,19 +327,22 @@ void Client::on_ack(const lcm::ReceiveBuffer* rbuf, const std::string&) {
   }
   acks_[m->id] = *m;
 }
-void Client::on_state_msg(const lcm::ReceiveBuffer*, const std::string&, const cpm_msgs::state_t* m) {
-  if (!trusted(*m)) return;
-  last_state_ = *m;
-  if (state_cb_) state_cb_(*m);
+
+void Client::use(const cpm_msgs::state_t& m) {
+  last_state_ = m;
+  if (state_cb_) state_cb_(m);
 }
-void Client::on_stats_msg(const lcm::ReceiveBuffer*, const std::string&, const cpm_msgs::loop_stats_t* m) {
-  last_stats_ = *m;
+void Client::on_state_msg(const lcm::ReceiveBuffer* rbuf, const std::string&, const cpm_msgs::state_t* m) {
+  receive(Stream::state, rbuf, *m);
 }
-void Client::on_security_msg(const lcm::ReceiveBuffer*, const std::string&, const cpm_msgs::security_t* m) {
-  last_security_ = *m;
+void Client::on_stats_msg(const lcm::ReceiveBuffer* rbuf, const std::string&, const cpm_msgs::loop_stats_t* m) {
+  receive(Stream::stats, rbuf, *m);
 }
-void Client::on_drives_msg(const lcm::ReceiveBuffer*, const std::string&, const cpm_msgs::drives_t* m) {
-  last_drives_ = *m;
+void Client::on_security_msg(const lcm::ReceiveBuffer* rbuf, const std::string&, const cpm_msgs::security_t* m) {
+  receive(Stream::security, rbuf, *m);
+}
+void Client::on_drives_msg(const lcm::ReceiveBuffer* rbuf, const std::string&, const cpm_msgs::drives_t* m) {
+  receive(Stream::drives, rbuf, *m);
 }
 void Client::on_params(const lcm::ReceiveBuffer* rbuf, const std::string&) {
   // lcm-gen's decoding takes the counts and string lengths as sent: a
@@ -289,7 +355,7 @@ void Client::on_params(const lcm::ReceiveBuffer* rbuf, const std::string&) {
   } catch (const std::exception&) {
     return;
   }
-  last_params_ = std::move(p);
+  receive(Stream::params, rbuf, std::move(p));
 }
 
 template <class M>
@@ -300,6 +366,7 @@ std::optional<M> Client::next(std::optional<M>& slot, double timeout_s, int poll
     keep_alive();
     lcm_->handleTimeout(poll_ms);
   }
+  if (!slot) no_seal();
   return slot;
 }
 
@@ -335,6 +402,7 @@ cpm_msgs::ack_t Client::wait_ack(std::int64_t id, double timeout_s) {
   }
   if (last_jog_ack_ && last_jog_ack_->id == id) return *last_jog_ack_;
   if (auto it = acks_.find(id); it != acks_.end()) return it->second;
+  no_seal();
   throw Error("no answer from cpmd within " + std::to_string(timeout_s) + " s (is it running? LCM URL " +
               cfg_.url + ", channel " + cfg_.control_channel + ")");
 }

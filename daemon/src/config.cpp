@@ -655,7 +655,7 @@ DaemonConfig parse_config_checked(const std::string& text, const std::string& na
   }
   if (n["channels"]) {
     const auto ch = r.map(n["channels"], "lcm.channels", {},
-                          {"state", "stats", "trajectory", "control", "ack", "security", "drives", "params", "path"});
+                          {"state", "stats", "trajectory", "control", "ack", "security", "drives", "params", "path", "seal"});
     if (ch["state"]) c.lcm.state_channel = r.text(ch["state"], "lcm.channels.state");
     if (ch["stats"]) c.lcm.stats_channel = r.text(ch["stats"], "lcm.channels.stats");
     if (ch["trajectory"]) c.lcm.trajectory_channel = r.text(ch["trajectory"], "lcm.channels.trajectory");
@@ -664,6 +664,7 @@ DaemonConfig parse_config_checked(const std::string& text, const std::string& na
     if (ch["security"]) c.lcm.security_channel = r.text(ch["security"], "lcm.channels.security");
     if (ch["drives"]) c.lcm.drives_channel = r.text(ch["drives"], "lcm.channels.drives");
     if (ch["params"]) c.lcm.params_channel = r.text(ch["params"], "lcm.channels.params");
+    if (ch["seal"]) c.lcm.seal_channel = r.text(ch["seal"], "lcm.channels.seal");
     if (ch["path"]) c.lcm.path_channel = r.text(ch["path"], "lcm.channels.path");
   }
   if (root["security"]) {

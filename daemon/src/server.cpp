@@ -337,9 +337,9 @@ Server::Server(const DaemonConfig& cfg, ControlLoop& loop, ModelStore& models)
   session_salt_ = (std::uint64_t{rd()} << 32) ^ rd();
   boot_id_ = static_cast<std::int64_t>(((std::uint64_t{rd()} << 32) ^ rd()) & 0x7FFFFFFFFFFFFFFFull) | 1;
   if (!cfg_.security.signing_key.empty())
-    signer_ = std::make_unique<Signer>(read_key_file(cfg_.security.signing_key));
+    signer_ = std::make_unique<Signer>(read_key_file(cfg_.security.signing_key), boot_id_);
   else
-    log::warning("security.signing_key is not set: state and acks go out unsigned; clients cannot verify them "
+    log::warning("security.signing_key is not set: what cpmd publishes goes out unsealed; clients cannot verify it "
                  "(docs/security.md, \"Signed state\")");
   lcm_ = std::make_unique<lcm::LCM>(cfg_.lcm.url);
   if (!lcm_->good()) throw Error("lcm: cannot open '" + cfg_.lcm.url + "' (is there a multicast route? see docs/daemon.md)");
@@ -501,8 +501,30 @@ void Server::publish_ack(std::int64_t id, std::int8_t source, std::int8_t code, 
   a.queue_depth = depth;
   a.session = session;
   a.boot_id = boot_id_;
-  if (signer_) signer_->sign(a);
-  lcm_->publish(cfg_.lcm.ack_channel, &a);
+  publish_sealed(cfg_.lcm.ack_channel, a, /*ack=*/true);
+}
+
+template <class M>
+void Server::publish_sealed(const std::string& channel, M& m, bool ack) {
+  if (!signer_) {
+    lcm_->publish(channel, &m);
+    return;
+  }
+  // This thread, never the control cycle: a digest here, one signature per seal.
+  const auto& bytes = signer_->add(m, now_(), ack);
+  lcm_->publish(channel, bytes.data(), static_cast<unsigned>(bytes.size()));
+}
+
+void Server::seal() {
+  if (!signer_) return;
+  const auto& bytes = signer_->seal(std::chrono::duration_cast<std::chrono::microseconds>(
+                                        std::chrono::system_clock::now().time_since_epoch()).count());
+  if (!bytes.empty()) lcm_->publish(cfg_.lcm.seal_channel, bytes.data(), static_cast<unsigned>(bytes.size()));
+}
+
+void Server::set_boot_id(std::int64_t id) noexcept {
+  boot_id_ = id;
+  if (signer_) signer_->set_boot_id(id);
 }
 
 bool Server::send(Command& c) {
@@ -925,7 +947,7 @@ void Server::publish_params(double now) {
   cpm_msgs::params_t m = params_message(cfg_);
   m.utime = std::chrono::duration_cast<std::chrono::microseconds>(
                 std::chrono::system_clock::now().time_since_epoch()).count();
-  lcm_->publish(cfg_.lcm.params_channel, &m);
+  publish_sealed(cfg_.lcm.params_channel, m);
 }
 
 void Server::publish_security(double now) {
@@ -934,7 +956,7 @@ void Server::publish_security(double now) {
   cpm_msgs::security_t s = security();
   s.utime = std::chrono::duration_cast<std::chrono::microseconds>(
                 std::chrono::system_clock::now().time_since_epoch()).count();
-  lcm_->publish(cfg_.lcm.security_channel, &s);
+  publish_sealed(cfg_.lcm.security_channel, s);
 }
 
 std::string Server::not_homed() const {
@@ -1005,8 +1027,7 @@ int Server::drain() {
     st.utime = std::chrono::duration_cast<std::chrono::microseconds>(
                    std::chrono::system_clock::now().time_since_epoch()).count();
     st.boot_id = boot_id_;
-    if (signer_) signer_->sign(st);  // this thread, not the control cycle's
-    lcm_->publish(cfg_.lcm.state_channel, &st);
+    publish_sealed(cfg_.lcm.state_channel, st);
     latest_ = st;
     have_state_ = true;
     journal_fault(st);
@@ -1018,19 +1039,20 @@ int Server::drain() {
   while (loop_.drives().pop(drives)) {
     drives.utime = std::chrono::duration_cast<std::chrono::microseconds>(
                        std::chrono::system_clock::now().time_since_epoch()).count();
-    lcm_->publish(cfg_.lcm.drives_channel, &drives);
+    publish_sealed(cfg_.lcm.drives_channel, drives);
     ++n;
   }
   cpm_msgs::loop_stats_t stats;
   while (loop_.stats().pop(stats)) {
     stats.utime = std::chrono::duration_cast<std::chrono::microseconds>(
                       std::chrono::system_clock::now().time_since_epoch()).count();
-    lcm_->publish(cfg_.lcm.stats_channel, &stats);
+    publish_sealed(cfg_.lcm.stats_channel, stats);
     ++n;
   }
   const double now = now_();
   publish_security(now);
   publish_params(now);
+  if (signer_ && signer_->due(now)) seal();
   log_security(now);
   return n;
 }
@@ -1085,6 +1107,7 @@ void Server::run(const std::atomic<bool>& stop) {
     drain();
   }
   drain();
+  seal();  // the last messages' seal goes out before the end
   listener_quit_ = true;
   if (stop_listener_.joinable()) stop_listener_.join();
 }

@@ -2,6 +2,7 @@
 
 #include <sodium.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <fstream>
 #include <sstream>
@@ -44,17 +45,56 @@ void write_public_key_file(const std::string& path, const PublicKey& k) {
   if (!out) throw Error(path + ": cannot write the public key");
 }
 
+Digest digest_of(const void* data, std::size_t size) {
+  static const bool ready = sodium_init() >= 0;
+  Digest d{};
+  if (ready) crypto_generichash(d.data(), d.size(), static_cast<const unsigned char*>(data), size, nullptr, 0);
+  return d;
+}
+
 Signer::~Signer() { sodium_memzero(secret_.data(), secret_.size()); }
 
-Signer::Signer(const Key& seed) {
+Signer::Signer(const Key& seed, std::int64_t boot_id) : boot_(boot_id) {
   init_sodium();
   PublicKey pk{};
   crypto_sign_seed_keypair(pk.data(), secret_.data(), seed.data());
-  buf_.reserve(2048);
+  buf_.reserve(16384);
+  seal_.digests.reserve(kSealEvery * sizeof(Digest));
+  sealed_.reserve(kSealEvery * sizeof(Digest) + 256);
 }
 
-void Signer::sign_bytes(const std::uint8_t* data, std::size_t size, std::uint8_t (&sig)[kSignatureBytes]) const {
-  crypto_sign_detached(sig, nullptr, data, size, secret_.data());
+void Signer::list(double now, bool ack) {
+  ++counter_;
+  if (unsealed_++ == 0) {
+    oldest_ = now;
+    seal_.first = counter_;
+    seal_.digests.clear();
+  }
+  if (ack && oldest_ack_ < 0.0) oldest_ack_ = now;
+  const Digest d = digest_of(buf_.data(), buf_.size());
+  seal_.digests.insert(seal_.digests.end(), d.begin(), d.end());
+}
+
+bool Signer::due(double now) const noexcept {
+  if (unsealed_ == 0) return false;
+  return unsealed_ >= kSealEvery || now - oldest_ >= kSealWithin || (oldest_ack_ >= 0.0 && now - oldest_ack_ >= kSealAckWithin);
+}
+
+const std::vector<std::uint8_t>& Signer::seal(std::int64_t utime) {
+  sealed_.clear();
+  if (unsealed_ == 0) return sealed_;
+  seal_.utime = utime;
+  seal_.boot_id = boot_;
+  seal_.digest_bytes = static_cast<std::int32_t>(seal_.digests.size());
+  for (auto& b : seal_.signature) b = 0;
+  sealed_.resize(static_cast<std::size_t>(seal_.getEncodedSize()));
+  seal_.encode(sealed_.data(), 0, static_cast<int>(sealed_.size()));
+  crypto_sign_detached(seal_.signature, nullptr, sealed_.data(), sealed_.size(), secret_.data());
+  // The signature is the encoding's last 64 bytes.
+  std::copy(std::begin(seal_.signature), std::end(seal_.signature), sealed_.end() - kSignatureBytes);
+  unsealed_ = 0;
+  oldest_ack_ = -1.0;
+  return sealed_;
 }
 
 bool signature_valid_bytes(const std::uint8_t* data, std::size_t size, const std::uint8_t (&sig)[kSignatureBytes],
@@ -63,13 +103,91 @@ bool signature_valid_bytes(const std::uint8_t* data, std::size_t size, const std
   return ready && crypto_sign_verify_detached(sig, data, size, pk.data()) == 0;
 }
 
+bool seal_valid(const cpm_msgs::seal_t& s, const PublicKey& pk) {
+  cpm_msgs::seal_t z = s;
+  for (auto& b : z.signature) b = 0;
+  std::vector<std::uint8_t> buf(static_cast<std::size_t>(z.getEncodedSize()));
+  z.encode(buf.data(), 0, static_cast<int>(buf.size()));
+  return signature_valid_bytes(buf.data(), buf.size(), s.signature, pk);
+}
+
+std::optional<cpm_msgs::seal_t> decode_seal(const void* data, std::size_t size) {
+  // hash, utime, boot_id, first (8 each), digest_bytes (4), digests, signature (64).
+  constexpr std::size_t kFixed = 8 * 4 + 4 + kSignatureBytes, kMaxDigests = 1024;
+  if (size < kFixed || size > kFixed + kMaxDigests * sizeof(Digest)) return std::nullopt;
+  const auto* p = static_cast<const std::uint8_t*>(data) + 32;
+  const std::uint32_t n = (std::uint32_t{p[0]} << 24) | (std::uint32_t{p[1]} << 16) | (std::uint32_t{p[2]} << 8) | p[3];
+  if (n == 0 || n % sizeof(Digest) != 0 || n != size - kFixed) return std::nullopt;
+  cpm_msgs::seal_t s;
+  if (s.decode(data, 0, static_cast<int>(size)) != static_cast<int>(size)) return std::nullopt;
+  return s;
+}
+
+Trust Verifier::take(Stream s, std::int64_t counter) noexcept {
+  auto& last = last_[static_cast<int>(s)];
+  if (counter <= last) return count(Trust::stale);
+  last = counter;
+  return Trust::ok;
+}
+
+Trust Verifier::offer(Stream s, const void* data, std::size_t size, std::uint64_t ticket) {
+  const Digest d = digest_of(data, size);
+  // Listed by a seal that came first (LCM does not order across channels).
+  for (const Recent& r : recent_)
+    for (std::size_t i = 0; i < r.digests.size(); ++i)
+      if (r.digests[i] == d) return take(s, r.first + static_cast<std::int64_t>(i));
+  if (waiting_.size() >= kMaxWaiting) {
+    waiting_.erase(waiting_.begin());
+    count(Trust::unsealed);
+  }
+  waiting_[ticket] = Waiting{d, s, seals_};
+  return Trust::pending;
+}
+
+Trust Verifier::seal(const void* data, std::size_t size, std::vector<Verdict>& decided) {
+  const auto s = decode_seal(data, size);
+  if (!s) return count(Trust::unsigned_message);
+  if (!seal_valid(*s, pk_)) return count(Trust::bad_signature);
+  if (boot_ == 0) boot_ = s->boot_id;
+  if (s->boot_id != boot_) return count(Trust::other_boot);
+  if (s->first <= last_sealed_) return count(Trust::stale);
+  Recent r{s->first, std::vector<Digest>(s->digests.size() / sizeof(Digest))};
+  for (std::size_t i = 0; i < r.digests.size(); ++i)
+    std::copy_n(s->digests.begin() + static_cast<std::ptrdiff_t>(i * sizeof(Digest)), sizeof(Digest),
+                r.digests[i].begin());
+  last_sealed_ = s->first + static_cast<std::int64_t>(r.digests.size()) - 1;
+  ++seals_;
+  // The waiting messages it lists, in the order cpmd published them.
+  for (std::size_t i = 0; i < r.digests.size(); ++i)
+    for (auto it = waiting_.begin(); it != waiting_.end(); ++it)
+      if (it->second.digest == r.digests[i]) {
+        decided.push_back({it->first, it->second.stream, take(it->second.stream, r.first + static_cast<std::int64_t>(i))});
+        waiting_.erase(it);
+        break;
+      }
+  // Those that waited through kSealsToWait seals without being listed never will be.
+  for (auto it = waiting_.begin(); it != waiting_.end();)
+    if (seals_ - it->second.seals_then >= kSealsToWait) {
+      decided.push_back({it->first, it->second.stream, count(Trust::unsealed)});
+      it = waiting_.erase(it);
+    } else {
+      ++it;
+    }
+  recent_.push_back(std::move(r));
+  if (recent_.size() > 4) recent_.erase(recent_.begin());
+  return Trust::ok;
+}
+
 const char* trust_text(Trust t) noexcept {
   switch (t) {
     case Trust::ok: return "verified";
     case Trust::unsigned_message: return "unsigned (this cpmd does not sign, or the message is forged): cannot be verified";
-    case Trust::bad_signature: return "its signature does not verify (forged or tampered)";
+    case Trust::bad_signature: return "its signature does not verify (forged, or signed by another key)";
     case Trust::stale: return "not newer than the last verified one (replayed or reordered)";
     case Trust::other_boot: return "from another start of cpmd than the one this client began with (cpmd restarted)";
+    case Trust::unsealed:
+      return "no seal signed by cpmd lists it (forged, tampered, or its seal was lost on the way)";
+    case Trust::pending: return "waiting for the seal that lists it";
   }
   return "?";
 }

@@ -86,12 +86,16 @@ int watch(const WatchOptions& o) {
   auto screen = o.once ? nullptr : console::Screen::open();
   if (!screen) return watch_plain(c, o, l.url);
   Freshness fresh(l.url);
+  // Refusals of forged or unverifiable messages go into the note, not over the screen.
+  c.on_refused([](daemon::Trust, const char*) {});
   const auto start = Clock::now();
   while (!console::interrupted()) {
     if (o.duration >= 0 && since(start) > o.duration) break;
     c.handle(0.1);  // ~10 redraws a second; the messages in between are taken as they come
+    std::string note = fresh.note(c.latest_state());
+    if (const std::string t = c.trust_note(); !t.empty()) note += (note.empty() ? "" : "; ") + t;
     screen->draw(console::render(c.latest_state(), c.latest_stats(), c.latest_drives(), screen->width(),
-                                 screen->height(), fresh.note(c.latest_state())));
+                                 screen->height(), note));
     bool quit = false;
     for (int k; (k = screen->key(0)) >= 0;) quit = quit || console::Screen::is_quit(k);
     if (quit) break;

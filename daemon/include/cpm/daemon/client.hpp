@@ -9,6 +9,8 @@
 #include <optional>
 #include <set>
 #include <string>
+#include <variant>
+#include <vector>
 
 #include <cpm_msgs/ack_t.hpp>
 #include <cpm_msgs/control_command_t.hpp>
@@ -115,14 +117,21 @@ class Client {
   int handle(double timeout_s);
   [[nodiscard]] const LcmConfig& config() const noexcept { return cfg_; }
 
-  // Signed state (docs/security.md): from now on only state and acks signed by
-  // `pk`, newer than the last and of the boot of the first verified one are
-  // taken; the rest are dropped, counted, and reported once per cause (to
-  // stderr, or to `on_refused`). Without it everything is taken unverified.
+  // Signed state (docs/security.md): from now on only messages (state, acks,
+  // drives, statistics, parameters, security counts) that a seal signed by
+  // `pk` lists, newer than the last of their kind and of the boot of the
+  // first verified seal, are taken: each is held until its seal verifies
+  // (at most 10 ms, 1 ms for an ack, after cpmd published it); the rest are
+  // dropped, counted, and reported once per cause (to stderr, or to
+  // `on_refused`). Without it everything is taken unverified.
   void verify_with(const PublicKey& pk) { verifier_.emplace(pk); }
   [[nodiscard]] bool verifying() const noexcept { return verifier_.has_value(); }
   [[nodiscard]] const std::optional<Verifier>& verifier() const noexcept { return verifier_; }
   void on_refused(std::function<void(Trust, const char* what)> f) { refused_cb_ = std::move(f); }
+  // For a view that owns the terminal (cpm watch): "" while nothing was
+  // refused (or nothing is verified: the constructor warned), else "refused
+  // as not cpmd's: N (n1 <cause>, ...)".
+  [[nodiscard]] std::string trust_note() const;
   // The boot id of verified-signed messages from another start of cpmd (0: none seen).
   [[nodiscard]] std::int64_t restarted() const noexcept { return restarted_; }
 
@@ -136,6 +145,20 @@ class Client {
   void on_drives_msg(const lcm::ReceiveBuffer*, const std::string&, const cpm_msgs::drives_t* m);
   // Raw: params_t's counts and strings are the sender's word (see on_ack).
   void on_params(const lcm::ReceiveBuffer* rbuf, const std::string&);
+  void on_seal(const lcm::ReceiveBuffer* rbuf, const std::string&);
+  // A message as received: taken at once when nothing is verified, else held
+  // until a seal decides (then used, or refused and said).
+  // In Stream's order: a held message's index() is its Stream.
+  using Held = std::variant<cpm_msgs::state_t, cpm_msgs::ack_t, cpm_msgs::drives_t, cpm_msgs::loop_stats_t,
+                            cpm_msgs::params_t, cpm_msgs::security_t>;
+  static_assert(std::variant_size_v<Held> == kStreams);
+  void receive(Stream s, const lcm::ReceiveBuffer* rbuf, Held&& m);
+  void use(const cpm_msgs::state_t& m);
+  void use(const cpm_msgs::ack_t& m);
+  void use(const cpm_msgs::drives_t& m) { last_drives_ = m; }
+  void use(const cpm_msgs::loop_stats_t& m) { last_stats_ = m; }
+  void use(const cpm_msgs::params_t& m) { last_params_ = m; }
+  void use(const cpm_msgs::security_t& m) { last_security_ = m; }
   // Session, seq and time; then the operator's MAC over all of it.
   template <class M>
   void stamp(M& m);
@@ -149,10 +172,9 @@ class Client {
   std::optional<M> next(std::optional<M>& slot, double timeout_s, int poll_ms);
   void keep_alive();  // a ping when the holder has been silent for 0.25 s
   static bool lost_session(const cpm_msgs::ack_t& a) noexcept;
-  bool trusted(const cpm_msgs::state_t& m);
-  bool trusted(const cpm_msgs::ack_t& m);
   void refused(Trust t, const char* what);
   void need_same_boot() const;
+  void no_seal();  // says once that messages wait and no seal came (an unsigned cpmd)
   void unverified();  // warns once that nothing can be verified  // throws Error once cpmd is seen to have restarted
 
   LcmConfig cfg_;
@@ -179,9 +201,13 @@ class Client {
   std::function<void(const cpm_msgs::state_t&)> state_cb_;
   std::optional<Verifier> verifier_;
   std::function<void(Trust, const char*)> refused_cb_;
-  std::array<bool, 5> told_{};
+  std::map<std::uint64_t, Held> held_;  // waiting for their seal, by ticket
+  std::uint64_t next_ticket_ = 0;
+  std::vector<Verifier::Verdict> decided_;
+  std::array<bool, 7> told_{};
   std::int64_t restarted_ = 0;
   bool told_unverified_ = false;
+  bool told_no_seal_ = false;
 };
 
 // The public key file a client verifies with (LcmConfig::daemon_public_key's

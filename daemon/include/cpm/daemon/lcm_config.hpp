@@ -18,6 +18,7 @@ struct LcmConfig {
   std::string security_channel = "CPMD_SECURITY";  // security_t, 1 Hz
   std::string drives_channel = "CPMD_DRIVES";      // drives_t, 10 Hz
   std::string params_channel = "CPMD_PARAMS";      // params_t, 1 Hz and on change
+  std::string seal_channel = "CPMD_SEAL";          // seal_t: what makes the others trusted
   int state_decimation = 1;  // publish the state every N cycles
   // A commander's session ends after this long without a command or ping
   // from it (s); clients ping every 0.25 s while they hold one.

@@ -119,7 +119,12 @@ class Server {
   // This start's boot id (state_t.boot_id; random, never 0): acquires are
   // signed for it. Tests set a fixed one.
   [[nodiscard]] std::int64_t boot_id() const noexcept { return boot_id_; }
-  void set_boot_id(std::int64_t id) noexcept { boot_id_ = id; }
+  void set_boot_id(std::int64_t id) noexcept;
+  // Publishes the seal of what was published since the last one, now
+  // (docs/security.md, "Signed state"; drain() does it when one is due:
+  // every 32 messages, 10 ms after a message, 1 ms after an ack). Tests on
+  // a stopped clock call it.
+  void seal();
   // The wall clock acquires are checked against (s since the epoch); tests replace it.
   void set_wall_clock(std::function<double()> now) { wall_now_ = std::move(now); }
   // The session held now (0: none, or the holder went silent for
@@ -218,7 +223,10 @@ class Server {
   double last_heard_ = 0.0;         // now_() when the holder last spoke
   std::uint64_t session_salt_ = 0;  // random per daemon start: sessions do not repeat across restarts
   std::int64_t boot_id_ = 0;        // random per daemon start, published in the state
-  std::unique_ptr<Signer> signer_;  // null: no security.signing_key, nothing signed
+  std::unique_ptr<Signer> signer_;  // null: no security.signing_key, nothing sealed
+  // Encoded once, listed for the next seal (when signing), published.
+  template <class M>
+  void publish_sealed(const std::string& channel, M& m, bool ack = false);
   // Security (docs/security.md).
   mutable std::mutex ops_mu_;  // guards ops_ and the reload counters (housekeeping thread vs this one)
   std::shared_ptr<const OperatorTable> ops_;

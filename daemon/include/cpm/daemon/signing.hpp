@@ -1,20 +1,27 @@
-// Signed state and acks (docs/security.md, "Signed state"): cpmd signs every
-// state_t and ack_t it publishes with its Ed25519 key, so that any observer
-// can check them with the public half alone, and a client refuses what does
-// not verify, is not newer than the last one, or comes from another boot.
+// Signed state (docs/security.md, "Signed state"): cpmd seals what it
+// publishes (state, acks, drives, statistics, parameters, security counts)
+// with its Ed25519 key, so that any observer can check it with the public
+// half alone. One signature covers many messages: each message's BLAKE2b
+// digest goes into the next seal_t, which cpmd signs every 32 messages or
+// within 10 ms (1 ms after an ack). A client trusts a message once a seal
+// that lists it has verified, and refuses what no seal lists, what is not
+// newer than the last of its kind, and what comes from another boot.
 #pragma once
 
 #include <array>
 #include <cstdint>
+#include <map>
 #include <optional>
 #include <string>
 #include <vector>
 
 #include <cpm/daemon/auth.hpp>
+#include <cpm_msgs/seal_t.hpp>
 
 namespace cpm::daemon {
 
 using PublicKey = std::array<std::uint8_t, 32>;
+using Digest = std::array<std::uint8_t, 32>;  // BLAKE2b-256
 inline constexpr std::size_t kSignatureBytes = 64;
 
 // The public half of a daemon key (its 32-byte seed, a key file as `cpm keygen` writes).
@@ -23,83 +30,132 @@ PublicKey public_key_of(const Key& seed);
 PublicKey read_public_key_file(const std::string& path);
 void write_public_key_file(const std::string& path, const PublicKey& k);
 
-// Signs in the publishing thread (never the control cycle). One counter for
-// state and acks, so that their order is provable too.
+// BLAKE2b-256 of a message's bytes as published (its whole LCM encoding).
+Digest digest_of(const void* data, std::size_t size);
+
+// When cpmd seals (seal_t): after this many messages, or once the oldest
+// unsealed one is this old (s), or an unsealed ack is (a command waits for it).
+inline constexpr std::size_t kSealEvery = 32;
+inline constexpr double kSealWithin = 0.010;
+inline constexpr double kSealAckWithin = 0.001;
+
+// cpmd's side, in the publishing thread (never the control cycle): encodes
+// each message, gives it the next counter (state_t and ack_t carry it),
+// keeps its digest, and signs one seal_t over the digests when due().
 class Signer {
  public:
-  explicit Signer(const Key& seed);
+  Signer(const Key& seed, std::int64_t boot_id);
   ~Signer();
   Signer(const Signer&) = delete;
   Signer& operator=(const Signer&) = delete;
-  // Sets m.sign_counter (next value) and m.signature; ack_t's boot_id too.
+  void set_boot_id(std::int64_t boot) noexcept { boot_ = boot; }
+  // m encoded (with its sign_counter set when it has one) and listed for the
+  // next seal; the bytes to publish, valid until the next add or seal. `now`:
+  // the publisher's monotonic clock (s); `ack`: a command waits for it.
   template <class M>
-  void sign(M& m) {
-    m.sign_counter = ++counter_;
-    for (auto& b : m.signature) b = 0;
+  const std::vector<std::uint8_t>& add(M& m, double now, bool ack = false) {
+    if constexpr (requires { m.sign_counter; }) m.sign_counter = counter_ + 1;
     buf_.resize(static_cast<std::size_t>(m.getEncodedSize()));
     m.encode(buf_.data(), 0, static_cast<int>(buf_.size()));
-    sign_bytes(buf_.data(), buf_.size(), m.signature);
+    list(now, ack);
+    return buf_;
   }
+  // Whether a seal is due at `now` (kSealEvery, kSealWithin, kSealAckWithin).
+  [[nodiscard]] bool due(double now) const noexcept;
+  [[nodiscard]] std::size_t unsealed() const noexcept { return unsealed_; }
+  // The seal of every message added since the last one, signed and encoded
+  // (empty when there is none); `utime` its wall clock (us).
+  const std::vector<std::uint8_t>& seal(std::int64_t utime);
   [[nodiscard]] std::int64_t counter() const noexcept { return counter_; }
 
  private:
-  void sign_bytes(const std::uint8_t* data, std::size_t size, std::uint8_t (&sig)[kSignatureBytes]) const;
+  void list(double now, bool ack);
   std::array<std::uint8_t, 64> secret_{};
+  std::int64_t boot_ = 0;
   std::int64_t counter_ = 0;
-  std::vector<std::uint8_t> buf_;
+  std::size_t unsealed_ = 0;
+  double oldest_ = 0.0, oldest_ack_ = -1.0;  // -1: no ack waits
+  cpm_msgs::seal_t seal_{};
+  std::vector<std::uint8_t> buf_, sealed_;
 };
 
 // Whether m's signature verifies with `pk` (m's encoding with its signature zeroed).
-template <class M>
-bool signature_valid(const M& m, const PublicKey& pk);
 bool signature_valid_bytes(const std::uint8_t* data, std::size_t size, const std::uint8_t (&sig)[kSignatureBytes],
                            const PublicKey& pk);
+bool seal_valid(const cpm_msgs::seal_t& s, const PublicKey& pk);
+// A seal_t as received: decoded only when its digests are whole (32 bytes
+// each, at most 1024 of them) and the sizes account for the bytes exactly.
+std::optional<cpm_msgs::seal_t> decode_seal(const void* data, std::size_t size);
 
-template <class M>
-bool signature_valid(const M& m, const PublicKey& pk) {
-  M z = m;
-  for (auto& b : z.signature) b = 0;
-  std::vector<std::uint8_t> buf(static_cast<std::size_t>(z.getEncodedSize()));
-  z.encode(buf.data(), 0, static_cast<int>(buf.size()));
-  return signature_valid_bytes(buf.data(), buf.size(), m.signature, pk);
-}
-
-// What a client makes of one signed message.
-enum class Trust { ok, unsigned_message, bad_signature, stale, other_boot };
+// What a client makes of one message or seal. `pending`: no verified seal
+// lists it yet (it is held, not shown). `unsealed`: verified seals came and
+// none listed it (forged, tampered, or its seal was lost).
+enum class Trust { ok, unsigned_message, bad_signature, stale, other_boot, unsealed, pending };
 const char* trust_text(Trust t) noexcept;
 
+// The kinds of message a client keeps apart: each must be newer than the last of its kind.
+enum class Stream { state, ack, drives, stats, params, security };
+inline constexpr int kStreams = 6;
+
 // A client's view of one cpmd: the boot it started with (the first verified
-// message's) and the highest counter seen. Messages that are not `ok` are
-// counted per cause and must be dropped by the caller.
+// seal's), the seals verified, the messages waiting for theirs. The caller
+// holds each waiting message under its `ticket` and acts on the verdicts.
 class Verifier {
  public:
+  // How many waiting messages are kept at most (the oldest is refused as unsealed beyond).
+  static constexpr std::size_t kMaxWaiting = 1024;
+  // A waiting message is refused as unsealed once this many verified seals came without it.
+  static constexpr std::int64_t kSealsToWait = 3;
+
+  struct Verdict {
+    std::uint64_t ticket;
+    Stream stream;
+    Trust trust;
+  };
+
   explicit Verifier(const PublicKey& pk) : pk_(pk) {}
-  // `boot`: the message's boot id. `stream`: 0 state, 1 acks (the counter is
-  // shared, so each stream's rises with gaps; LCM does not order across channels).
-  template <class M>
-  Trust check(const M& m, std::int64_t boot, int stream) {
-    if (m.sign_counter == 0) return count(Trust::unsigned_message);
-    if (!signature_valid(m, pk_)) return count(Trust::bad_signature);
-    if (boot_ == 0) boot_ = boot;
-    if (boot != boot_) return count(Trust::other_boot);
-    if (m.sign_counter <= last_[stream]) return count(Trust::stale);
-    last_[stream] = m.sign_counter;
-    return Trust::ok;
-  }
+  // A message as received (its bytes). ok: a verified seal already lists it
+  // (it may be used now); pending: held under `ticket` until a seal decides
+  // (seal() returns the verdict); otherwise refused (stale).
+  Trust offer(Stream s, const void* data, std::size_t size, std::uint64_t ticket);
+  // A seal as received: its own verdict (ok, bad_signature, stale,
+  // other_boot, unsigned_message for bytes that are no seal). Appends to
+  // `decided` the verdicts of waiting messages it decides: ok in the order
+  // cpmd published them, stale, and unsealed for those waiting too long.
+  Trust seal(const void* data, std::size_t size, std::vector<Verdict>& decided);
+  // Counts a refusal the caller decided itself (a state or ack with counter 0: unsigned).
+  Trust refuse(Trust t) noexcept { return count(t); }
   [[nodiscard]] std::int64_t boot() const noexcept { return boot_; }
+  [[nodiscard]] std::int64_t seals_verified() const noexcept { return seals_; }
+  [[nodiscard]] std::size_t waiting() const noexcept { return waiting_.size(); }
   // Refused so far, by cause (index: Trust), and in all.
   [[nodiscard]] std::int64_t refused(Trust t) const noexcept { return refused_[static_cast<int>(t)]; }
   [[nodiscard]] std::int64_t refused_total() const noexcept;
 
  private:
+  struct Waiting {
+    Digest digest;
+    Stream stream;
+    std::int64_t seals_then;  // seals_ when it arrived
+  };
+  struct Recent {  // a verified seal, for messages that arrive after it
+    std::int64_t first;
+    std::vector<Digest> digests;
+  };
   Trust count(Trust t) noexcept {
     ++refused_[static_cast<int>(t)];
     return t;
   }
+  // ok and the stream's counter raised when `counter` is newer than its last; stale otherwise.
+  Trust take(Stream s, std::int64_t counter) noexcept;
   PublicKey pk_;
   std::int64_t boot_ = 0;
-  std::array<std::int64_t, 2> last_{};
-  std::array<std::int64_t, 5> refused_{};
+  std::int64_t last_sealed_ = 0;  // the highest counter a verified seal listed
+  std::int64_t seals_ = 0;
+  std::array<std::int64_t, kStreams> last_{};
+  std::array<std::int64_t, 7> refused_{};
+  std::map<std::uint64_t, Waiting> waiting_;
+  std::vector<Recent> recent_;  // the last few verified seals, oldest first
 };
 
 }  // namespace cpm::daemon
