@@ -891,10 +891,15 @@ TEST(Flood, TwentyThousandMessagesInTenSecondsMissNoCycleAndGrowNoMemory) {
   EXPECT_GE(refused, kMessages * 3 / 4) << "most of the flood never reached the daemon";
   // No growth. Memory is locked as it is first touched, so the flood's
   // first seconds fault in what its paths use (LCM's receive buffers, the
-  // heap's high-water mark): measured over a minute (CPM_FLOOD_SCALE=6), that
-  // levels off within 25 s at about 300 kB and then stays (+8 kB over the last
-  // 35 s and 70 000 messages). A leak of 20 bytes a message would pass 384 kB.
-  EXPECT_LE(rss1 - rss_warm, 384) << "VmRSS grew from " << rss_warm << " to " << rss1 << " kB under the flood";
+  // heap's high-water mark, the seals' buffers). How long that takes varies
+  // with the host's load: the rise after the first second was 20-424 kB in
+  // four runs (the same with signing off), while a 60 s flood
+  // (CPM_FLOOD_SCALE=6) levels off by its 5th second (+56 kB over the last
+  // 55 s and 118 000 messages). So growth is judged from the 5th second on:
+  // a leak of 25 bytes a message over the 10 000 messages after it would
+  // pass 256 kB.
+  EXPECT_LE(rss1 - rss_mid, 256) << "VmRSS grew from " << rss_mid << " kB (5th second) to " << rss1
+                                 << " kB under the flood (after 1 s: " << rss_warm << " kB)";
   EXPECT_LE(rss1 - rss0, 1024) << "the flood cost " << rss1 - rss0 << " kB of resident memory";
 }
 
