@@ -3,5 +3,12 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash tools/setup.sh
-cmake -S . -B build -DCMAKE_BUILD_TYPE=Release >/dev/null
+# Ninja: one graph for the whole tree, so both cores stay busy across targets
+# (make waits at each target's boundary). A build/ made with another generator
+# keeps it.
+generator=()
+if [ ! -f build/CMakeCache.txt ] && command -v ninja >/dev/null; then
+  generator=(-G Ninja)
+fi
+cmake -S . -B build "${generator[@]}" -DCMAKE_BUILD_TYPE=Release >/dev/null
 cmake --build build -j"$(nproc)"
