@@ -2,6 +2,7 @@
 # Build and run the libFuzzer targets of fuzz/targets (docs/fuzzing.md).
 #   fuzz/run.sh build                     configure and build every fuzzer with clang
 #   fuzz/run.sh run TARGET [SECONDS]      fuzz TARGET for SECONDS (default 20) from its corpus
+#                                         (FUZZ_RUNS=N: the corpus, then N inputs, SECONDS at most)
 #   fuzz/run.sh replay TARGET [FILE...]   run the committed corpus (or the files) once
 #   fuzz/run.sh merge TARGET              add what the runs found to fuzz/corpus/TARGET, minimised
 #   fuzz/run.sh list                      the targets
@@ -68,12 +69,21 @@ case "$cmd" in
     mkdir -p "$work" "$findings"
     log="$build/logs/$target.log"
     mkdir -p "$(dirname "$log")"
+    # CI's form: a fixed number of inputs past the corpus (libFuzzer counts the
+    # corpus's own runs in -runs), the same ones every time with the fixed seed.
+    runs_flag=()
+    if [ "${FUZZ_RUNS:-0}" -gt 0 ]; then
+      corpus_size=$(find "$repo/fuzz/corpus/$target" -type f | wc -l)
+      runs_flag=(-runs=$((corpus_size + FUZZ_RUNS)))
+    fi
+    started=$SECONDS
     set +e
     # A fixed seed (FUZZ_SEED, default 1) keeps CI's runs alike from one to the next.
-    "$exe" -seed="${FUZZ_SEED:-1}" -max_total_time="$seconds" -timeout=10 -error_exitcode=1 -timeout_exitcode=1 -rss_limit_mb=2048 -max_len="$(max_len "$target")" \
+    "$exe" "${runs_flag[@]}" -seed="${FUZZ_SEED:-1}" -max_total_time="$seconds" -timeout=10 -error_exitcode=1 -timeout_exitcode=1 -rss_limit_mb=2048 -max_len="$(max_len "$target")" \
       -print_final_stats=1 -artifact_prefix="$findings/" "$work" "$repo/fuzz/corpus/$target" >"$log" 2>&1
     rc=$?
     set -e
+    elapsed=$((SECONDS - started))
     runs=$(grep -oE '^stat::number_of_executed_units: *[0-9]+' "$log" | grep -oE '[0-9]+$' || echo "?")
     eps=$(grep -oE '^stat::average_exec_per_sec: *[0-9]+' "$log" | grep -oE '[0-9]+$' || echo "?")
     last=$(grep -E '^#[0-9]+' "$log" | tail -1)
@@ -86,7 +96,7 @@ case "$cmd" in
       echo "Reproduce: $exe <file above>; keep the input as fuzz/corpus/$target/regress-<what> once fixed."
       exit 1
     fi
-    line="fuzz $target: ${runs} runs in ${seconds} s (${eps} exec/s), coverage ${cov} edges, ${ft} features, corpus ${corp}; no finding"
+    line="fuzz $target: ${runs} runs in ${elapsed} s (${eps} exec/s), coverage ${cov} edges, ${ft} features, corpus ${corp}; no finding"
     echo "$line"
     echo "$line" >>"$build/summary.txt"
     ;;

@@ -4,6 +4,8 @@
 set -euo pipefail
 packages=(
   build-essential cmake pkg-config
+  ninja-build              # tools/build.sh: the build's generator
+  lintian                  # tests/install: the .deb checked as Debian checks packages
   libeigen3-dev            # linear algebra (fixed-size types in the control cycle)
   libgtest-dev libgmock-dev googletest
   libbenchmark-dev

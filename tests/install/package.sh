@@ -75,6 +75,15 @@ dpkg-deb -f "$DEB" Package Version Depends | sed 's/^/  /'
 [ "$(dpkg-deb -f "$DEB" Version)" = "$DEBVERSION" ] || fail "Version is not $DEBVERSION"
 dpkg-deb -f "$DEB" Depends | grep -q 'libc6' || fail "no libc6 in Depends: dpkg-shlibdeps did not run"
 dpkg-deb -f "$DEB" Depends | grep -q 'liblcm' || fail "no liblcm in Depends"
+# The copyright files as Debian reads them (DEP-5, the licence named, Apache's
+# NOTICE): lintian's copyright checks only, two seconds of CPU; the whole of
+# lintian takes a minute and judges more than this test is about.
+if command -v lintian >/dev/null; then
+  step "lintian, copyright checks"
+  findings=$(lintian -C debian/copyright,debian/copyright/dep5,debian/copyright/apache-notice "$DEB" "$DEV" 2>&1 \
+             | grep -E '^[EW]: ' || true)
+  [ -z "$findings" ] || { echo "$findings"; fail "lintian finds fault with the copyright files"; }
+fi
 dpkg-deb --ctrl-tarfile "$DEB" | tar -xO ./conffiles >"$T/conffiles"
 for c in cpmd sim canopen machine machine-canopen; do
   grep -qx "/etc/cpmd/$c.yaml" "$T/conffiles" || fail "/etc/cpmd/$c.yaml is not a conffile"
