@@ -827,6 +827,20 @@ ctl::GainVerdict Server::check_gains_for(const ctl::Machine& model, ctl::Control
   return check_daemon_gains(cfg_, model, law, g);
 }
 
+std::int16_t ack_reason(Refusal r) noexcept {
+  switch (r) {
+    case Refusal::none: return ack_t::REASON_NONE;
+    case Refusal::illegal_in_mode: return ack_t::REASON_ILLEGAL_IN_MODE;
+    case Refusal::fault_active: return ack_t::REASON_FAULT_ACTIVE;
+    case Refusal::not_homed: return ack_t::REASON_NOT_HOMED;
+    case Refusal::queue_full: return ack_t::REASON_QUEUE_FULL;
+    case Refusal::not_continuous: return ack_t::REASON_NOT_CONTINUOUS;
+    case Refusal::limit: return ack_t::REASON_LIMIT;
+    case Refusal::workspace: return ack_t::REASON_WORKSPACE;
+  }
+  return ack_t::REASON_INVALID;  // not reached: every refusal is named above
+}
+
 ctl::GainVerdict check_daemon_gains(const DaemonConfig& cfg, const ctl::Machine& model, ctl::ControlLaw law,
                                     const ctl::Gains& gains) {
   // The velocity the law sees: differenced positions on drives that send no
@@ -996,7 +1010,7 @@ int Server::drain() {
     // one of a refused load) is freed here, outside the loop.
     if (a.retired) models_.release(a.retired);
     std::string msg = a.message;
-    publish_ack(a.id, a.source, a.code, a.accepted, a.reason, msg, a.mode, a.queue_depth);
+    publish_ack(a.id, a.source, a.code, a.accepted, ack_reason(a.refusal), msg, a.mode, a.queue_depth);
   }
   const auto* s = loop_.snapshots().front();
   while (s) {

@@ -83,6 +83,9 @@ std::string bad_number(const cpm_msgs::trajectory_command_t& cmd);
 std::string bad_number(const cpm_msgs::control_command_t& cmd);
 std::string bad_number(const cpm_msgs::path_command_t& cmd);
 
+// The ack_t.REASON_* code of the loop's refusal (REASON_NONE for none).
+std::int16_t ack_reason(Refusal r) noexcept;
+
 // Whether a law and gains can hold the machine as cpmd runs it (the loop's
 // rate, the velocity its backend gives, limits.following_error for a law
 // without gravity): ctl::check_gains with the daemon's figures.
