@@ -61,8 +61,8 @@ ControlLoop::ControlLoop(const DaemonConfig& config, Backend& backend, const ctl
       homing_(config.homing) {
   ctl::check_delay_fits(machine.actuation_delay(), config.loop.rate_hz);
   ctl::check_delay_fits(controller.lookahead(), config.loop.rate_hz);
-  stats_.rate_hz = config.loop.rate_hz;
-  for (int s = 0; s < kSeries; ++s) stats_.min_ns[s] = 0;
+  stats_.sums.rate_hz = config.loop.rate_hz;
+  for (int s = 0; s < kSeries; ++s) stats_.sums.min_ns[s] = 0;
   pub_.state.mode = static_cast<std::int8_t>(Mode::init);
   pub_.state.segment_id = -1;
   pub_.state.last_segment_id = -1;
@@ -72,8 +72,8 @@ ControlLoop::ControlLoop(const DaemonConfig& config, Backend& backend, const ctl
   // Absolute encoders know their zero from the start (HomingSequence); the
   // others wait for homing, and until then the loop holds and moves each
   // actuator on its own.
-  ramp_active_ = !homing_.all_homed();
-  ramp_task_ = false;
+  ramp_.active = !homing_.all_homed();
+  ramp_.task = false;
 }
 
 StartCheck check_start(const ctl::Trajectory& tr, const Vec3& end_velocity, const LimitsConfig& limits,
@@ -89,18 +89,18 @@ StartCheck check_start(const ctl::Trajectory& tr, const Vec3& end_velocity, cons
 }
 
 void ControlLoop::set_scheduling_info(bool realtime, bool memory_locked) noexcept {
-  stats_.realtime = realtime ? 1 : 0;
-  stats_.memory_locked = memory_locked ? 1 : 0;
+  stats_.sums.realtime = realtime ? 1 : 0;
+  stats_.sums.memory_locked = memory_locked ? 1 : 0;
 }
 
 void ControlLoop::add_sample(int s, std::int64_t ns) noexcept {
   if (ns < 0) ns = 0;
   const auto v = static_cast<std::int32_t>(std::min<std::int64_t>(ns, INT32_MAX));
-  if (stats_.count[s] == 0 || v < stats_.min_ns[s]) stats_.min_ns[s] = v;
-  if (v > stats_.max_ns[s]) stats_.max_ns[s] = v;
-  stats_.count[s]++;
-  stats_.sum_ns[s] += static_cast<double>(v);
-  stats_.histogram[s][histogram_bin(ns)]++;
+  if (stats_.sums.count[s] == 0 || v < stats_.sums.min_ns[s]) stats_.sums.min_ns[s] = v;
+  if (v > stats_.sums.max_ns[s]) stats_.sums.max_ns[s] = v;
+  stats_.sums.count[s]++;
+  stats_.sums.sum_ns[s] += static_cast<double>(v);
+  stats_.sums.histogram[s][histogram_bin(ns)]++;
 }
 
 void ControlLoop::enter(Mode m) noexcept {
@@ -146,7 +146,7 @@ bool ControlLoop::start_next_segment(std::int64_t k) noexcept {
 }
 
 void ControlLoop::start_stop(std::int64_t k) noexcept {
-  if (ramp_active_) {
+  if (ramp_.active) {
     // A ramp motion (homing, a jog, anything before homing): its speed goes
     // to zero at the stop's deceleration (trajectory()); a homing stopped
     // leaves its actuator unhomed.
@@ -179,11 +179,11 @@ void ControlLoop::start_underrun_stop(const Segment& s, std::int64_t k, double l
 
 void ControlLoop::ramp_in_actuators() noexcept {
   jog_.box_ready = false;  // the next actuator jog computes its own
-  if (ramp_active_ && !ramp_task_) return;  // already there
+  if (ramp_.active && !ramp_.task) return;  // already there
   // From the actuator reference the task space last had: nothing jumps.
   ramp_.reset(io_.d_ref);
-  ramp_task_ = false;
-  ramp_active_ = true;
+  ramp_.task = false;
+  ramp_.active = true;
   if (homing_.all_homed()) return;
   // Leaving the task space: the actuator law starts from the force the
   // task law gave.
@@ -195,11 +195,11 @@ void ControlLoop::leave_ramp() noexcept {
   if (!homing_.all_homed()) return;  // the actuator space holds on the ramp itself
   hold_ = io_.ref.p;
   queue_.end_at_rest(hold_);
-  ramp_active_ = false;
+  ramp_.active = false;
 }
 
 void ControlLoop::ramp_box(Vec3& lo, Vec3& hi) const noexcept {
-  if (ramp_task_) {
+  if (ramp_.task) {
     lo = cfg_.limits.workspace_min;
     hi = cfg_.limits.workspace_max;
     return;
@@ -306,8 +306,8 @@ ctl::TrajectorySample ControlLoop::reference_ahead(std::int64_t k, double ahead)
 }
 
 void ControlLoop::record_schedule(bool overrun, std::int64_t skipped) noexcept {
-  stats_.skipped += skipped;
-  if (overrun) stats_.overruns++;
+  stats_.sums.skipped += skipped;
+  if (overrun) stats_.sums.overruns++;
   overruns_.record(overrun, cfg_.loop.max_consecutive_overruns);
 }
 
@@ -343,7 +343,7 @@ void ControlLoop::cycle(std::int64_t k, std::int64_t latency_ns) noexcept {
 
 void ControlLoop::record_latency(std::int64_t latency_ns) noexcept {
   add_sample(kSeriesLatency, latency_ns);
-  latency_us_[static_cast<std::size_t>(std::clamp<std::int64_t>(latency_ns / 1000, 0, kFineLatencyBins - 1))]++;
+  stats_.latency_us[static_cast<std::size_t>(std::clamp<std::int64_t>(latency_ns / 1000, 0, kFineLatencyBins - 1))]++;
 }
 
 bool ControlLoop::drives_on() const noexcept {
@@ -429,7 +429,7 @@ void ControlLoop::jog(std::int64_t k) noexcept {
 }
 
 void ControlLoop::trajectory(std::int64_t k) noexcept {
-  if (!ramp_active_) {
+  if (!ramp_.active) {
     io_.ref = reference(k);
     return;
   }
@@ -474,15 +474,15 @@ void ControlLoop::trajectory(std::int64_t k) noexcept {
     default:
       // Drives off: the reference follows the measurement.
       if (homing_.all_homed()) {
-        ramp_active_ = false;
+        ramp_.active = false;
         io_.ref = reference(k);
         return;
       }
-      ramp_task_ = false;
+      ramp_.task = false;
       ramp_.reset(io_.cin.d);
       break;
   }
-  if (ramp_task_) {
+  if (ramp_.task) {
     io_.ref.p = ramp_.p;
     io_.ref.v = ramp_.v;
     io_.ref.a = ramp_.a;
@@ -505,7 +505,7 @@ void ControlLoop::reference_of_actuators(const Vec3& d, const Vec3& d_dot, const
 }
 
 void ControlLoop::inverse_kinematics() noexcept {
-  if (ramp_active_ && !ramp_task_) {
+  if (ramp_.active && !ramp_.task) {
     // The ramp is the actuator reference itself.
     io_.d_ref = ramp_.p;
     io_.ik_status = Status{};
@@ -527,7 +527,7 @@ void ControlLoop::control(std::int64_t k) noexcept {
       // With an actuation delay in the model the command acts from t + tau:
       // the controller aims at the reference then.
       const double ahead = controller_.lookahead();
-      io_.cin.ref = ahead > 0.0 && !ramp_active_ ? reference_ahead(k, ahead) : io_.ref;
+      io_.cin.ref = ahead > 0.0 && !ramp_.active ? reference_ahead(k, ahead) : io_.ref;
       io_.control_status = controller_.step(io_.cin, ctl_state_, io_.cout);
     }
     fade_transfer(k);
@@ -735,11 +735,11 @@ void ControlLoop::publish_drives(std::int64_t k) noexcept {
 void ControlLoop::finish_cycle(std::int64_t k, const PhaseTimes& t) noexcept {
   for (int s = kSeriesRead; s <= kSeriesPublish; ++s) add_sample(s, t[s] - t[s - 1]);
   add_sample(kSeriesCycle, t[kSeriesPublish] - t[0]);
-  stats_.cycles++;
+  stats_.sums.cycles++;
   // Statistics once a second (copied whole; the ring holds a few).
   const auto per_second = static_cast<std::int64_t>(std::lround(cfg_.loop.rate_hz));
-  if (per_second > 0 && (k + 1) % per_second == 0) (void)ch_.stats.push(stats_);
-  cycles_done_.store(stats_.cycles, std::memory_order_release);
+  if (per_second > 0 && (k + 1) % per_second == 0) (void)ch_.stats.push(stats_.sums);
+  stats_.cycles_done.store(stats_.sums.cycles, std::memory_order_release);
 }
 
 void ControlLoop::fill_state(std::int64_t k) noexcept {
@@ -801,11 +801,11 @@ void ControlLoop::fill_state(std::int64_t k) noexcept {
   s.last_segment_rmse = tracking_.last_rmse();
   s.last_segment_max = tracking_.last_max();
   s.last_segment_cycles = tracking_.last_cycles();
-  s.cycles = stats_.cycles + 1;
-  s.overruns = stats_.overruns;
-  s.skipped = stats_.skipped;
-  s.max_latency_ns = stats_.max_ns[kSeriesLatency];
-  s.max_cycle_ns = stats_.max_ns[kSeriesCycle];
+  s.cycles = stats_.sums.cycles + 1;
+  s.overruns = stats_.sums.overruns;
+  s.skipped = stats_.sums.skipped;
+  s.max_latency_ns = stats_.sums.max_ns[kSeriesLatency];
+  s.max_cycle_ns = stats_.sums.max_ns[kSeriesCycle];
   s.dropped_snapshots = pub_.dropped;
 }
 

@@ -126,7 +126,7 @@ void ControlLoop::handle_select(const Command& c) noexcept {
     return refuse(c, Refusal::illegal_in_mode, "select the controller when disabled or holding");
   // While holding in the task space the new law starts from the force the
   // old one gave: the difference is faded out (bumpless).
-  if (mode_ == Mode::holding && homing_.all_homed() && !ramp_active_) transfer_.request();
+  if (mode_ == Mode::holding && homing_.all_homed() && !ramp_.active) transfer_.request();
   controller_ = *c.controller;
   accept(c, mode_ == Mode::holding ? "controller selected; the force difference fades out" : "controller selected");
 }
@@ -219,20 +219,20 @@ void ControlLoop::handle_jog(const Command& c, std::int64_t k) noexcept {
     refuse(c, Refusal::limit, "the jog is faster than jog.max_velocity");
     return;
   }
-  if (mode_ == Mode::jogging && machine_frame != ramp_task_ && !ramp_.at_rest()) {
+  if (mode_ == Mode::jogging && machine_frame != ramp_.task && !ramp_.at_rest()) {
     refuse(c, Refusal::illegal_in_mode, "the jog in the other frame is still moving: let it stop first");
     return;
   }
   // Where the jog starts from, in its frame.
-  if (mode_ == Mode::holding || machine_frame != ramp_task_ || !ramp_active_) {
+  if (mode_ == Mode::holding || machine_frame != ramp_.task || !ramp_.active) {
     // The ramp starts at rest; a target of the other frame means nothing in
     // this one (and must not drive it if this command is refused).
     jog_.target.setZero();
     if (machine_frame) {
       // From the hold point, or where the other frame's jog came to rest.
       ramp_.reset(mode_ == Mode::holding ? hold_ : io_.ref.p);
-      ramp_task_ = true;
-      ramp_active_ = true;
+      ramp_.task = true;
+      ramp_.active = true;
     } else {
       ramp_in_actuators();
     }
@@ -254,7 +254,7 @@ void ControlLoop::handle_jog(const Command& c, std::int64_t k) noexcept {
     const bool up = v > 0.0 && ramp_.p[i] >= hi[i] - 1e-9, down = v < 0.0 && ramp_.p[i] <= lo[i] + 1e-9;
     if (up || down) {
       if (mode_ == Mode::holding && homing_.all_homed()) {
-        ramp_active_ = false;  // nothing moved: the task space holds as before
+        ramp_.active = false;  // nothing moved: the task space holds as before
       }
       const bool workspace = machine_frame || (by_workspace & (1u << (2 * i + (up ? 1 : 0)))) != 0;
       refuse(c, Refusal::workspace,

@@ -46,6 +46,10 @@
 // the statistics on once a second.
 // The schedule (clock_nanosleep on an absolute time) lives in rt.hpp; tests
 // call cycle() directly, deterministic and without threads.
+// The state the phases share lives in small owners with their own
+// transitions (loop_state.hpp: the fault latch, the stop profile, the
+// segment queue, homing, jog, transfer, ...); the commands' legality and
+// transitions in loop_commands.cpp, the phases in loop.cpp.
 //
 // Spaces (as LinuxCNC's joint and teleop modes): until every actuator is
 // homed the platform's position is unknown, so each actuator is held and
@@ -217,15 +221,15 @@ class ControlLoop {
   // for the server to free. Larger than the queue: it never fills.
   RetiredPlans& retired_plans() noexcept { return ch_.retired_plans; }
   // Cycles completed (the watchdog is fed only while this advances).
-  [[nodiscard]] std::int64_t cycles_done() const noexcept { return cycles_done_.load(std::memory_order_acquire); }
+  [[nodiscard]] std::int64_t cycles_done() const noexcept { return stats_.cycles_done.load(std::memory_order_acquire); }
   // Latest mode (any thread).
   [[nodiscard]] Mode mode() const noexcept { return mode_atomic_.load(std::memory_order_acquire); }
   void set_scheduling_info(bool realtime, bool memory_locked) noexcept;
 
   // Last state as the loop wrote it (test thread only, when no loop thread runs).
   [[nodiscard]] const cpm_msgs::state_t& last_state() const noexcept { return pub_.state; }
-  [[nodiscard]] const cpm_msgs::loop_stats_t& current_stats() const noexcept { return stats_; }
-  [[nodiscard]] const FineLatencyHistogram& fine_latency_histogram() const noexcept { return latency_us_; }
+  [[nodiscard]] const cpm_msgs::loop_stats_t& current_stats() const noexcept { return stats_.sums; }
+  [[nodiscard]] const FineLatencyHistogram& fine_latency_histogram() const noexcept { return stats_.latency_us; }
   [[nodiscard]] double period() const noexcept { return dt_; }
 
  private:
@@ -353,9 +357,10 @@ class ControlLoop {
   StopProfile stop_;
   HomingSequence homing_;
   // The ramp (ramp.hpp): the reference in actuator space, and of any jog.
-  Ramp ramp_;
-  bool ramp_active_ = false;  // the reference comes from the ramp
-  bool ramp_task_ = false;    // its coordinates: machine frame (true) or actuators
+  struct RampReference : Ramp {
+    bool active = false;  // the reference comes from the ramp
+    bool task = false;    // its coordinates: machine frame (true) or actuators
+  } ramp_;
   Jog jog_;
   Transfer transfer_;
   ctl::ControllerState ctl_state_;  // the commands sent since enable (actuation delay)
@@ -383,9 +388,12 @@ class ControlLoop {
     cpm_msgs::drives_t drives{};
     std::int64_t dropped = 0;  // snapshots the full ring lost
   } pub_;
-  cpm_msgs::loop_stats_t stats_{};
-  FineLatencyHistogram latency_us_{};  // series 0 again, in 1 us bins
-  std::atomic<std::int64_t> cycles_done_{0};
+  // The timing statistics (add_sample, record_latency, finish_cycle).
+  struct Statistics {
+    cpm_msgs::loop_stats_t sums{};
+    FineLatencyHistogram latency_us{};  // series 0 again, in 1 us bins
+    std::atomic<std::int64_t> cycles_done{0};
+  } stats_;
 };
 
 }  // namespace cpm::daemon
