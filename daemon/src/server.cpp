@@ -195,6 +195,8 @@ class ModelLoader {
   std::optional<Result> result_;
 };
 
+// Long (about 80 lines) on purpose: one switch over the trajectory kinds,
+// each checked before the segment is built, then the checks every kind shares.
 Validation validate_segment(const trajectory_command_t& c, const Vec3& start, const ctl::Machine& machine,
                             const LimitsConfig& L, double dt) {
   Validation out;
