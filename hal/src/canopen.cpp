@@ -17,11 +17,7 @@ constexpr std::array<NmtNames, 5> kNmtNames = {{
 
 }  // namespace
 
-const NmtNames& names(NmtState s) noexcept {
-  for (const NmtNames& n : kNmtNames)
-    if (n.state == s) return n;
-  return kNmtNames.back();
-}
+const NmtNames& names(NmtState s) noexcept { return find_names(kNmtNames, s); }
 
 const char* nmt_state_name(NmtState s) noexcept { return names(s).full; }
 

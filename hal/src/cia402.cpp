@@ -32,11 +32,7 @@ constexpr std::array<OperationMode, 9> kOperationModes = {{
 
 }  // namespace
 
-const StateNames& names(State s) noexcept {
-  for (const StateNames& n : kStateNames)
-    if (n.state == s) return n;
-  return kStateNames.back();
-}
+const StateNames& names(State s) noexcept { return find_names(kStateNames, s); }
 
 const char* state_name(State s) noexcept { return names(s).full; }
 

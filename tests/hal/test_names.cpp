@@ -17,7 +17,7 @@ TEST(Names, EveryCia402StateHasItsOwnRow) {
   for (int v = 0; v <= static_cast<int>(cia402::State::unknown); ++v) {
     const auto s = static_cast<cia402::State>(v);
     const cia402::StateNames& n = cia402::names(s);
-    EXPECT_EQ(n.state, s) << v;
+    EXPECT_EQ(n.value, s) << v;
     keys.insert(n.key);
     full.insert(n.full);
     EXPECT_STREQ(cia402::state_name(s), n.full);
@@ -25,7 +25,7 @@ TEST(Names, EveryCia402StateHasItsOwnRow) {
   EXPECT_EQ(keys.size(), 9u);
   EXPECT_EQ(full.size(), 9u);
   EXPECT_STREQ(cia402::names(cia402::State::switch_on_disabled).full, "switch on disabled");
-  EXPECT_EQ(cia402::names(static_cast<cia402::State>(200)).state, cia402::State::unknown);
+  EXPECT_EQ(cia402::names(static_cast<cia402::State>(200)).value, cia402::State::unknown);
 }
 
 TEST(Names, NmtStatesByTheirHeartbeatCodes) {
@@ -34,7 +34,7 @@ TEST(Names, NmtStatesByTheirHeartbeatCodes) {
   EXPECT_STREQ(canopen::names(static_cast<NmtState>(0x04)).key, "stopped");
   EXPECT_STREQ(canopen::names(static_cast<NmtState>(0x05)).brief, "op");
   EXPECT_STREQ(canopen::names(static_cast<NmtState>(0x7F)).full, "pre-operational");
-  EXPECT_EQ(canopen::names(static_cast<NmtState>(0x42)).state, NmtState::unknown);  // no NMT state
+  EXPECT_EQ(canopen::names(static_cast<NmtState>(0x42)).value, NmtState::unknown);  // no NMT state
   EXPECT_STREQ(canopen::nmt_state_name(NmtState::unknown), "unknown");
 }
 

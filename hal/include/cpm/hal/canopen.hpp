@@ -7,6 +7,7 @@
 #include <cstdint>
 
 #include "cpm/hal/can.hpp"
+#include "cpm/hal/names.hpp"
 
 namespace cpm::hal::canopen {
 
@@ -51,15 +52,9 @@ enum class NmtState : std::uint8_t {
   preoperational = 0x7F,
   unknown = 0xFF,            // nothing heard yet
 };
-// A state's names, one row per state (the table in canopen.cpp): `key` for
-// JSON and logs, `brief` for a narrow column, `full` for a sentence.
-struct NmtNames {
-  NmtState state;
-  const char* key;
-  const char* brief;
-  const char* full;
-};
-// The unknown state's row for a value outside the enum (a code off the bus).
+// A state's names, one row per state (the table in canopen.cpp); the
+// unknown state's row for a value outside the enum.
+using NmtNames = Names<NmtState>;
 const NmtNames& names(NmtState s) noexcept;
 const char* nmt_state_name(NmtState s) noexcept;  // names(s).full
 CanFrame make_nmt(NmtCommand c, std::uint8_t node) noexcept;   // node 0: all nodes

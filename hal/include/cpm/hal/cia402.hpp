@@ -6,6 +6,8 @@
 
 #include <cstdint>
 
+#include "cpm/hal/names.hpp"
+
 namespace cpm::hal::cia402 {
 
 // Object indices of the profile used here.
@@ -72,15 +74,9 @@ enum class State : std::uint8_t {
   fault,
   unknown,  // a statusword that matches no row of the table
 };
-// A state's names, one row per state (the table in cia402.cpp): `key` for
-// JSON and logs, `brief` for a narrow column, `full` as the standard says it.
-struct StateNames {
-  State state;
-  const char* key;
-  const char* brief;
-  const char* full;
-};
-// The unknown state's row for a value outside the enum (a code off the bus).
+// A state's names, one row per state (the table in cia402.cpp; `full` as
+// the standard says it); the unknown state's row for a value outside the enum.
+using StateNames = Names<State>;
 const StateNames& names(State s) noexcept;
 const char* state_name(State s) noexcept;  // names(s).full
 
