@@ -151,6 +151,16 @@ BackendResult CanopenBackend::read(std::int64_t, BackendInput& in) noexcept {
     note("canopen backend not started");
     return BackendResult::io_error;
   }
+  wait_for_feedback();
+  const hal::Status ms = master_->read(fb_);
+  io_ok_ = io_->read(din_).ok();
+  for (std::size_t i = 0; i < 3; ++i) read_drive(i, in);
+  const bool bus = bus_ok(ms);
+  const bool gpio = read_gpio(in);
+  return bus && gpio ? BackendResult::ok : BackendResult::io_error;
+}
+
+void CanopenBackend::wait_for_feedback() noexcept {
   // Bounded wait for this cycle's TPDOs (slow hosts, SIL): never longer than
   // configured, never more than a few rounds on a fake clock.
   if (feedback_wait_ns_ > 0) {
@@ -163,79 +173,80 @@ BackendResult CanopenBackend::read(std::int64_t, BackendInput& in) noexcept {
       master_->service();
     }
   }
-  const hal::Status ms = master_->read(fb_);
-  io_ok_ = io_->read(din_).ok();
+}
 
-  BackendResult result = BackendResult::ok;
+void CanopenBackend::read_drive(std::size_t i, BackendInput& in) noexcept {
   const auto timeout_ns = std::int64_t{cfg_.master.heartbeat_timeout_ms} * 1'000'000;
-  for (std::size_t i = 0; i < 3; ++i) {
-    const hal::DriveFeedback& d = fb_.drive[i];
-    const hal::DriveConfig& dc = cfg_.master.drives[i];
-    in.position[i] = d.position_m;
-    in.velocity[i] = d.velocity_mps;
-    in.statusword[i] = d.statusword;
-    bool fault = false;
-    if (d.heartbeat_age_ns < 0 || d.heartbeat_age_ns > timeout_ns) {
-      fault = true;
-      note("drive %zu (%s, node %d): heartbeat lost (none for %lld ms)", i + 1, dc.name.c_str(), dc.node_id,
-           static_cast<long long>(d.heartbeat_age_ns < 0 ? -1 : d.heartbeat_age_ns / 1'000'000));
-    } else if (d.nmt != hal::canopen::NmtState::operational) {
-      fault = true;
-      note("drive %zu (%s, node %d): NMT %s, not operational (rebooted? restart cpmd to configure it again)", i + 1,
-           dc.name.c_str(), dc.node_id, hal::canopen::nmt_state_name(d.nmt));
-    }
-    if (d.missed_cycles >= static_cast<std::uint32_t>(cfg_.master.pdo_timeout_cycles)) {
-      fault = true;
-      note("drive %zu (%s, node %d): no TPDO for %u cycles", i + 1, dc.name.c_str(), dc.node_id, d.missed_cycles);
-    }
-    // Every error EMCY since the last cycle, even when the drive's "error
-    // reset" EMCY came after it in the same cycle.
-    if (d.error_emcy_count != emcy_seen_[i]) {
-      emcy_seen_[i] = d.error_emcy_count;
-      fault = true;
-      char e[112];
-      hal::canopen::describe_emcy(static_cast<std::uint8_t>(dc.node_id), d.last_error_emcy, e, sizeof e);
-      note("drive %zu (%s): %s", i + 1, dc.name.c_str(), e);
-    }
-    const std::uint32_t fresh_bits = d.faults & ~faults_seen_[i];
-    faults_seen_[i] = d.faults;
-    if (fresh_bits & hal::kFaultBadPdo) {
-      fault = true;
-      note("drive %zu (%s, node %d): malformed TPDO", i + 1, dc.name.c_str(), dc.node_id);
-    }
-    if (d.state == State::fault || d.state == State::fault_reaction_active) {
-      fault = true;
-      note("drive %zu (%s, node %d): CiA 402 %s (statusword 0x%04X)", i + 1, dc.name.c_str(), dc.node_id,
-           hal::cia402::state_name(d.state), d.statusword);
-    } else if (was_enabled_[i] && enabled_asked_ && d.state != State::operation_enabled) {
-      fault = true;  // e.g. its own quick stop: the loop still expects it to hold the axis
-      note("drive %zu (%s, node %d): left operation enabled on its own, now %s", i + 1, dc.name.c_str(), dc.node_id,
-           hal::cia402::state_name(d.state));
-    } else if (d.state == State::unknown) {
-      fault = true;
-      note("drive %zu (%s, node %d): statusword 0x%04X decodes to no CiA 402 state", i + 1, dc.name.c_str(), dc.node_id,
-           d.statusword);
-    }
-    in.drive_fault[i] = fault;
-    was_enabled_[i] = enabled_asked_ && d.state == State::operation_enabled;
-    in.drive_enabled[i] = !fault && d.state == State::operation_enabled && dout_.drive_enable &&
-                          (i != 2 || dout_.brake_release_z);
-    // Homing: the drive's own (mode 6), and what it needs from the machine.
-    in.drive_homing[i] = loop_homing(d.homing);
-    if (d.homing == hal::cia402::HomingStatus::error)
-      note("drive %zu (%s, node %d): homing error (statusword 0x%04X)", i + 1, dc.name.c_str(), dc.node_id,
-           d.statusword);
-    in.position_lost[i] = d.position_lost;
-    in.home_switch[i] = din_.home[i];
-    in.index_pulse[i] = din_.index[i];
-    // Limit switches: the cycle one trips (an operator may reset, enable and move off it).
-    const bool lim = din_.limit_low[i] || din_.limit_high[i];
-    in.limit_switch[i] = lim && !limit_before_[i];
-    if (in.limit_switch[i])
-      note("limit switch %s of actuator %zu tripped", din_.limit_low[i] ? hal::line_name(static_cast<hal::Line>(1 + i))
-                                                                        : hal::line_name(static_cast<hal::Line>(4 + i)), i + 1);
-    limit_before_[i] = lim;
+  const hal::DriveFeedback& d = fb_.drive[i];
+  const hal::DriveConfig& dc = cfg_.master.drives[i];
+  in.position[i] = d.position_m;
+  in.velocity[i] = d.velocity_mps;
+  in.statusword[i] = d.statusword;
+  bool fault = false;
+  if (d.heartbeat_age_ns < 0 || d.heartbeat_age_ns > timeout_ns) {
+    fault = true;
+    note("drive %zu (%s, node %d): heartbeat lost (none for %lld ms)", i + 1, dc.name.c_str(), dc.node_id,
+         static_cast<long long>(d.heartbeat_age_ns < 0 ? -1 : d.heartbeat_age_ns / 1'000'000));
+  } else if (d.nmt != hal::canopen::NmtState::operational) {
+    fault = true;
+    note("drive %zu (%s, node %d): NMT %s, not operational (rebooted? restart cpmd to configure it again)", i + 1,
+         dc.name.c_str(), dc.node_id, hal::canopen::nmt_state_name(d.nmt));
   }
+  if (d.missed_cycles >= static_cast<std::uint32_t>(cfg_.master.pdo_timeout_cycles)) {
+    fault = true;
+    note("drive %zu (%s, node %d): no TPDO for %u cycles", i + 1, dc.name.c_str(), dc.node_id, d.missed_cycles);
+  }
+  // Every error EMCY since the last cycle, even when the drive's "error
+  // reset" EMCY came after it in the same cycle.
+  if (d.error_emcy_count != emcy_seen_[i]) {
+    emcy_seen_[i] = d.error_emcy_count;
+    fault = true;
+    char e[112];
+    hal::canopen::describe_emcy(static_cast<std::uint8_t>(dc.node_id), d.last_error_emcy, e, sizeof e);
+    note("drive %zu (%s): %s", i + 1, dc.name.c_str(), e);
+  }
+  const std::uint32_t fresh_bits = d.faults & ~faults_seen_[i];
+  faults_seen_[i] = d.faults;
+  if (fresh_bits & hal::kFaultBadPdo) {
+    fault = true;
+    note("drive %zu (%s, node %d): malformed TPDO", i + 1, dc.name.c_str(), dc.node_id);
+  }
+  if (d.state == State::fault || d.state == State::fault_reaction_active) {
+    fault = true;
+    note("drive %zu (%s, node %d): CiA 402 %s (statusword 0x%04X)", i + 1, dc.name.c_str(), dc.node_id,
+         hal::cia402::state_name(d.state), d.statusword);
+  } else if (was_enabled_[i] && enabled_asked_ && d.state != State::operation_enabled) {
+    fault = true;  // e.g. its own quick stop: the loop still expects it to hold the axis
+    note("drive %zu (%s, node %d): left operation enabled on its own, now %s", i + 1, dc.name.c_str(), dc.node_id,
+         hal::cia402::state_name(d.state));
+  } else if (d.state == State::unknown) {
+    fault = true;
+    note("drive %zu (%s, node %d): statusword 0x%04X decodes to no CiA 402 state", i + 1, dc.name.c_str(), dc.node_id,
+         d.statusword);
+  }
+  in.drive_fault[i] = fault;
+  was_enabled_[i] = enabled_asked_ && d.state == State::operation_enabled;
+  in.drive_enabled[i] = !fault && d.state == State::operation_enabled && dout_.drive_enable &&
+                        (i != 2 || dout_.brake_release_z);
+  // Homing: the drive's own (mode 6), and what it needs from the machine.
+  in.drive_homing[i] = loop_homing(d.homing);
+  if (d.homing == hal::cia402::HomingStatus::error)
+    note("drive %zu (%s, node %d): homing error (statusword 0x%04X)", i + 1, dc.name.c_str(), dc.node_id,
+         d.statusword);
+  in.position_lost[i] = d.position_lost;
+  in.home_switch[i] = din_.home[i];
+  in.index_pulse[i] = din_.index[i];
+  // Limit switches: the cycle one trips (an operator may reset, enable and move off it).
+  const bool lim = din_.limit_low[i] || din_.limit_high[i];
+  in.limit_switch[i] = lim && !limit_before_[i];
+  if (in.limit_switch[i])
+    note("limit switch %s of actuator %zu tripped", din_.limit_low[i] ? hal::line_name(static_cast<hal::Line>(1 + i))
+                                                                      : hal::line_name(static_cast<hal::Line>(4 + i)), i + 1);
+  limit_before_[i] = lim;
+}
+
+bool CanopenBackend::bus_ok(const hal::Status& ms) noexcept {
+  bool ok = true;
   if (fb_.error_frames != error_frames_seen_) {
     error_frames_seen_ = fb_.error_frames;
     if (fb_.last_error.bus_off || fb_.last_error.passive) {
@@ -245,15 +256,20 @@ BackendResult CanopenBackend::read(std::int64_t, BackendInput& in) noexcept {
     }
   }
   if (fb_.bus_state == hal::BusState::bus_off || fb_.bus_state == hal::BusState::error_passive) {
-    result = BackendResult::io_error;
+    ok = false;
     note("CAN %s is %s", cfg_.interface.c_str(), hal::bus_state_name(fb_.bus_state));
   } else if (!ms.ok() && ms.code != hal::Code::would_block) {
-    result = BackendResult::io_error;
+    ok = false;
     note("CAN %s: receive failed: %s (%d)", cfg_.interface.c_str(), hal::code_name(ms.code), ms.detail);
   }
+  return ok;
+}
+
+bool CanopenBackend::read_gpio(BackendInput& in) noexcept {
+  bool ok = true;
   in.estop = din_.estop;  // the GPIO reads an error as "e-stop asserted"
   if (!io_ok_) {
-    result = BackendResult::io_error;
+    ok = false;
     note("GPIO read failed (e-stop taken as open)");
   } else if (din_.estop) {
     note("e-stop chain open");
@@ -267,7 +283,7 @@ BackendResult CanopenBackend::read(std::int64_t, BackendInput& in) noexcept {
     if (din_.index[i]) bits |= 1u << (static_cast<unsigned>(hal::Line::index_x) + i);
   }
   in.digital_inputs = bits;
-  return result;
+  return ok;
 }
 
 BackendResult CanopenBackend::write(std::int64_t, const BackendOutput& out) noexcept {

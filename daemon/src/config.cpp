@@ -160,6 +160,39 @@ int milliseconds(const Reader& r, const YAML::Node& n, const std::string& path, 
   return static_cast<int>(r.integer(n, path, lo, hi));
 }
 
+// canopen.heartbeat: the periods and timeouts both ways.
+void parse_heartbeat(const Reader& r, const YAML::Node& node, hal::MasterConfig& m) {
+  const auto h = r.map(node, "canopen.heartbeat", {}, {"master_ms", "drive_ms", "timeout_ms", "drive_consumer_timeout_ms"});
+  if (h["master_ms"]) m.master_heartbeat_ms = milliseconds(r, h["master_ms"], "canopen.heartbeat.master_ms", 1, 65535);
+  if (h["drive_ms"]) m.drive_heartbeat_ms = milliseconds(r, h["drive_ms"], "canopen.heartbeat.drive_ms", 1, 65535);
+  if (h["timeout_ms"]) m.heartbeat_timeout_ms = milliseconds(r, h["timeout_ms"], "canopen.heartbeat.timeout_ms", 1, 65535);
+  if (h["drive_consumer_timeout_ms"])
+    m.drive_consumer_timeout_ms = milliseconds(r, h["drive_consumer_timeout_ms"], "canopen.heartbeat.drive_consumer_timeout_ms", 1, 65535);
+  if (m.heartbeat_timeout_ms <= m.drive_heartbeat_ms)
+    r.fail(h, "canopen.heartbeat.timeout_ms", "must exceed canopen.heartbeat.drive_ms (a drive's heartbeat period)");
+  if (m.drive_consumer_timeout_ms <= m.master_heartbeat_ms)
+    r.fail(h, "canopen.heartbeat.drive_consumer_timeout_ms", "must exceed canopen.heartbeat.master_ms (the master's heartbeat period)");
+}
+
+// canopen.gpio: the machine's safety and auxiliary lines.
+void parse_gpio(const Reader& r, const YAML::Node& node, hal::DigitalIoConfig& gpio) {
+  const auto g = r.map(node, "canopen.gpio", {"estop", "drive_enable"},
+                       {"consumer", "limit_low_x", "limit_low_y", "limit_low_z", "limit_high_x", "limit_high_y",
+                        "limit_high_z", "brake_release_z", "home_x", "home_y", "home_z", "index_x", "index_y",
+                        "index_z"});
+  if (g["consumer"]) gpio.consumer = r.text(g["consumer"], "canopen.gpio.consumer");
+  for (std::size_t k = 0; k < hal::kLineCount; ++k) {
+    const auto line = static_cast<hal::Line>(k);
+    const char* name = hal::line_name(line);
+    if (g[name]) parse_line(r, g[name], std::string("canopen.gpio.") + name, gpio[line]);
+  }
+  try {
+    hal::validate(gpio);
+  } catch (const std::exception& e) {
+    r.fail(g, "canopen.gpio", e.what());
+  }
+}
+
 void parse_canopen(const Reader& r, const YAML::Node& n, double rate_hz, bool skip_late_slots,
                    const HomingConfig& homing, CanopenConfig& c) {
   r.map(n, "canopen", {"interface", "bitrate", "drives", "gpio"},
@@ -185,18 +218,7 @@ void parse_canopen(const Reader& r, const YAML::Node& n, double rate_hz, bool sk
   if (c.feedback_wait >= 1.0 / rate_hz && skip_late_slots)
     r.fail(n["feedback_wait_ms"], "canopen.feedback_wait_ms",
            "must be shorter than the control period (1 / loop.rate_hz), unless loop.skip_late_slots is false");
-  if (n["heartbeat"]) {
-    const auto h = r.map(n["heartbeat"], "canopen.heartbeat", {}, {"master_ms", "drive_ms", "timeout_ms", "drive_consumer_timeout_ms"});
-    if (h["master_ms"]) m.master_heartbeat_ms = milliseconds(r, h["master_ms"], "canopen.heartbeat.master_ms", 1, 65535);
-    if (h["drive_ms"]) m.drive_heartbeat_ms = milliseconds(r, h["drive_ms"], "canopen.heartbeat.drive_ms", 1, 65535);
-    if (h["timeout_ms"]) m.heartbeat_timeout_ms = milliseconds(r, h["timeout_ms"], "canopen.heartbeat.timeout_ms", 1, 65535);
-    if (h["drive_consumer_timeout_ms"])
-      m.drive_consumer_timeout_ms = milliseconds(r, h["drive_consumer_timeout_ms"], "canopen.heartbeat.drive_consumer_timeout_ms", 1, 65535);
-    if (m.heartbeat_timeout_ms <= m.drive_heartbeat_ms)
-      r.fail(h, "canopen.heartbeat.timeout_ms", "must exceed canopen.heartbeat.drive_ms (a drive's heartbeat period)");
-    if (m.drive_consumer_timeout_ms <= m.master_heartbeat_ms)
-      r.fail(h, "canopen.heartbeat.drive_consumer_timeout_ms", "must exceed canopen.heartbeat.master_ms (the master's heartbeat period)");
-  }
+  if (n["heartbeat"]) parse_heartbeat(r, n["heartbeat"], m);
   const YAML::Node ds = n["drives"];
   if (!ds.IsSequence() || ds.size() != 3)
     r.fail(ds, "canopen.drives", "expected a list of three drives (actuators 1, 2, 3)");
@@ -233,22 +255,7 @@ void parse_canopen(const Reader& r, const YAML::Node& n, double rate_hz, bool sk
                                          .offset_m = a.home_position};
     m.drives.push_back(dc);
   }
-  // GPIO: the machine's safety and auxiliary lines.
-  const auto g = r.map(n["gpio"], "canopen.gpio", {"estop", "drive_enable"},
-                       {"consumer", "limit_low_x", "limit_low_y", "limit_low_z", "limit_high_x", "limit_high_y",
-                        "limit_high_z", "brake_release_z", "home_x", "home_y", "home_z", "index_x", "index_y",
-                        "index_z"});
-  if (g["consumer"]) c.gpio.consumer = r.text(g["consumer"], "canopen.gpio.consumer");
-  for (std::size_t k = 0; k < hal::kLineCount; ++k) {
-    const auto line = static_cast<hal::Line>(k);
-    const char* name = hal::line_name(line);
-    if (g[name]) parse_line(r, g[name], std::string("canopen.gpio.") + name, c.gpio[line]);
-  }
-  try {
-    hal::validate(c.gpio);
-  } catch (const std::exception& e) {
-    r.fail(g, "canopen.gpio", e.what());
-  }
+  parse_gpio(r, n["gpio"], c.gpio);
   try {
     hal::validate(m);
   } catch (const std::exception& e) {
@@ -513,6 +520,118 @@ DaemonConfig parse_config(const std::string& text, const std::string& name, cons
 }
 
 namespace {
+// The file's sections, one function each (parse_config_checked reads them in order).
+void parse_sim(const Reader& r, const YAML::Node& node, const std::string& base_dir, SimConfig& sim) {
+  const auto s = r.map(node, "sim", {"truth_model_file", "initial_position"},
+                       {"substeps", "enable_delay", "encoder", "encoder_zero", "home_switch", "index_pitch"});
+  sim.truth_model_file = resolve(base_dir, r.text(s["truth_model_file"], "sim.truth_model_file"));
+  sim.initial_position = r.vec3(s["initial_position"], "sim.initial_position", 0.0, 2.0, "m");
+  if (s["substeps"]) sim.plant.substeps = static_cast<int>(r.integer(s["substeps"], "sim.substeps", 1, 1000));
+  if (s["enable_delay"]) sim.enable_delay = r.number(s["enable_delay"], "sim.enable_delay", 0.0, 10.0, "s");
+  if (s["encoder"]) {
+    const auto e = r.map(s["encoder"], "sim.encoder", {},
+                         {"resolution", "position_noise", "velocity_noise", "seed"});
+    auto& enc = sim.plant.encoder;
+    if (e["resolution"]) enc.resolution = r.number(e["resolution"], "sim.encoder.resolution", 0.0, 1e-3, "m");
+    if (e["position_noise"])
+      enc.position_noise = r.number(e["position_noise"], "sim.encoder.position_noise", 0.0, 1e-3, "m");
+    if (e["velocity_noise"])
+      enc.velocity_noise = r.number(e["velocity_noise"], "sim.encoder.velocity_noise", 0.0, 1.0, "m/s");
+    if (e["seed"]) enc.seed = static_cast<std::uint64_t>(r.integer(e["seed"], "sim.encoder.seed", 0, 1L << 62));
+  }
+  if (s["encoder_zero"]) sim.encoder_zero = r.vec3(s["encoder_zero"], "sim.encoder_zero", -10.0, 10.0, "m");
+  if (s["home_switch"]) {
+    const YAML::Node h = s["home_switch"];
+    r.three(h, "sim.home_switch", "m (null: no switch)");
+    for (int i = 0; i < 3; ++i)
+      sim.home_switch[i] = position_or_none(r, h[i], "sim.home_switch[" + std::to_string(i) + "]", -10.0, 10.0);
+  }
+  if (s["index_pitch"]) {
+    sim.index_pitch = r.number(s["index_pitch"], "sim.index_pitch", 0.0, 1.0, "m");
+    // Marks closer than this would run into one another (the simulator's mark is 10 um wide).
+    if (sim.index_pitch > 0.0 && sim.index_pitch < 1e-4)
+      r.fail(s["index_pitch"], "sim.index_pitch", "must be 0 (no index) or at least 0.1 mm, got " + s["index_pitch"].Scalar());
+  }
+}
+
+void parse_loop(const Reader& r, const YAML::Node& node, LoopConfig& loop) {
+  const auto l = r.map(node, "loop", {"rate_hz"},
+                       {"priority", "cpu", "lock_memory", "max_consecutive_overruns", "skip_late_slots"});
+  loop.rate_hz = r.number(l["rate_hz"], "loop.rate_hz", 10.0, 10000.0, "Hz");
+  if (l["priority"]) loop.priority = static_cast<int>(r.integer(l["priority"], "loop.priority", 0, 99));
+  if (l["cpu"]) loop.cpu = static_cast<int>(r.integer(l["cpu"], "loop.cpu", -1, 1023));
+  if (l["lock_memory"]) loop.lock_memory = r.boolean(l["lock_memory"], "loop.lock_memory");
+  if (l["skip_late_slots"]) loop.skip_late_slots = r.boolean(l["skip_late_slots"], "loop.skip_late_slots");
+  if (l["max_consecutive_overruns"])
+    loop.max_consecutive_overruns =
+        static_cast<int>(r.integer(l["max_consecutive_overruns"], "loop.max_consecutive_overruns", 1, 100000));
+}
+
+void parse_controller(const Reader& r, const YAML::Node& node, ControllerConfig& controller) {
+  const auto k = r.map(node, "controller", {"law"}, {"kp", "kd", "transfer_time"});
+  const std::string law = r.text(k["law"], "controller.law");
+  const auto lw = ctl::law_from_name(law);
+  if (!lw) r.fail(k["law"], "controller.law", "must be pd, pd_gravity, pd_feedforward or computed_torque, got '" + law + "'");
+  controller.law = *lw;
+  controller.gains = ctl::table3_gains(*lw);
+  if (k["kp"].IsDefined() != k["kd"].IsDefined())
+    r.fail(k, "controller", "give both kp and kd, or neither (Table 3 gains)");
+  if (k["kp"]) {
+    controller.gains.kp = r.param3(k["kp"], "controller.kp", "controller.kp", *lw);
+    controller.gains.kd = r.param3(k["kd"], "controller.kd", "controller.kd", *lw);
+  }
+  if (k["transfer_time"])
+    controller.transfer_time = r.param(k["transfer_time"], "controller.transfer_time", "controller.transfer_time");
+  try {
+    controller.gains.validate();
+  } catch (const Error& e) {
+    r.fail(k, "controller", e.what());
+  }
+}
+
+void parse_lcm(const Reader& r, const YAML::Node& node, LcmConfig& lcm) {
+  const auto n = r.map(node, "lcm", {"url"}, {"channels", "state_decimation", "session_timeout"});
+  lcm.url = r.text(n["url"], "lcm.url");
+  if (lcm.url.find("://") == std::string::npos)
+    r.fail(n["url"], "lcm.url", "expected an LCM URL such as udpm://239.255.76.67:7667?ttl=0");
+  if (n["state_decimation"])
+    lcm.state_decimation = static_cast<int>(r.integer(n["state_decimation"], "lcm.state_decimation", 1, 1000));
+  if (n["session_timeout"]) {
+    lcm.session_timeout = r.positive(n["session_timeout"], "lcm.session_timeout", 3600.0, "s");
+    if (lcm.session_timeout < 0.5)
+      r.fail(n["session_timeout"], "lcm.session_timeout", "must be at least 0.5 s (clients ping every 0.25 s)");
+  }
+  if (n["channels"]) {
+    const auto ch = r.map(n["channels"], "lcm.channels", {},
+                          {"state", "stats", "trajectory", "control", "ack", "security", "drives", "params", "path", "seal"});
+    if (ch["state"]) lcm.state_channel = r.text(ch["state"], "lcm.channels.state");
+    if (ch["stats"]) lcm.stats_channel = r.text(ch["stats"], "lcm.channels.stats");
+    if (ch["trajectory"]) lcm.trajectory_channel = r.text(ch["trajectory"], "lcm.channels.trajectory");
+    if (ch["control"]) lcm.control_channel = r.text(ch["control"], "lcm.channels.control");
+    if (ch["ack"]) lcm.ack_channel = r.text(ch["ack"], "lcm.channels.ack");
+    if (ch["security"]) lcm.security_channel = r.text(ch["security"], "lcm.channels.security");
+    if (ch["drives"]) lcm.drives_channel = r.text(ch["drives"], "lcm.channels.drives");
+    if (ch["params"]) lcm.params_channel = r.text(ch["params"], "lcm.channels.params");
+    if (ch["path"]) lcm.path_channel = r.text(ch["path"], "lcm.channels.path");
+    if (ch["seal"]) lcm.seal_channel = r.text(ch["seal"], "lcm.channels.seal");
+  }
+}
+
+void parse_security(const Reader& r, const YAML::Node& node, const std::string& base_dir, SecurityConfig& security) {
+  const auto s = r.map(node, "security", {},
+                       {"operators_dir", "model_dir", "acquire_window", "refusal_acks_per_second", "signing_key"});
+  if (s["operators_dir"])
+    security.operators_dir = resolve(base_dir, r.text(s["operators_dir"], "security.operators_dir"));
+  if (s["model_dir"]) security.model_dir = resolve(base_dir, r.text(s["model_dir"], "security.model_dir"));
+  if (s["signing_key"])
+    security.signing_key = resolve(base_dir, r.text(s["signing_key"], "security.signing_key"));
+  if (s["acquire_window"])
+    security.acquire_window = r.positive(s["acquire_window"], "security.acquire_window", 3600.0, "s");
+  if (s["refusal_acks_per_second"])
+    security.refusal_acks_per_second =
+        r.number(s["refusal_acks_per_second"], "security.refusal_acks_per_second", 0.0, 10000.0, "1/s");
+}
+
 DaemonConfig parse_config_checked(const std::string& text, const std::string& name,
                                   const std::string& base_dir) {
   YAML::Node root;
@@ -535,69 +654,10 @@ DaemonConfig parse_config_checked(const std::string& text, const std::string& na
   if (c.backend == "sim" && !root["sim"]) r.fail(root, "sim", "missing (required with backend: sim)");
   if (c.backend == "canopen" && !root["canopen"]) r.fail(root, "canopen", "missing (required with backend: canopen)");
 
-  if (root["sim"]) {
-    const auto s = r.map(root["sim"], "sim", {"truth_model_file", "initial_position"},
-                         {"substeps", "enable_delay", "encoder", "encoder_zero", "home_switch", "index_pitch"});
-    c.sim.truth_model_file = resolve(base_dir, r.text(s["truth_model_file"], "sim.truth_model_file"));
-    c.sim.initial_position = r.vec3(s["initial_position"], "sim.initial_position", 0.0, 2.0, "m");
-    if (s["substeps"]) c.sim.plant.substeps = static_cast<int>(r.integer(s["substeps"], "sim.substeps", 1, 1000));
-    if (s["enable_delay"]) c.sim.enable_delay = r.number(s["enable_delay"], "sim.enable_delay", 0.0, 10.0, "s");
-    if (s["encoder"]) {
-      const auto e = r.map(s["encoder"], "sim.encoder", {},
-                           {"resolution", "position_noise", "velocity_noise", "seed"});
-      auto& enc = c.sim.plant.encoder;
-      if (e["resolution"]) enc.resolution = r.number(e["resolution"], "sim.encoder.resolution", 0.0, 1e-3, "m");
-      if (e["position_noise"])
-        enc.position_noise = r.number(e["position_noise"], "sim.encoder.position_noise", 0.0, 1e-3, "m");
-      if (e["velocity_noise"])
-        enc.velocity_noise = r.number(e["velocity_noise"], "sim.encoder.velocity_noise", 0.0, 1.0, "m/s");
-      if (e["seed"]) enc.seed = static_cast<std::uint64_t>(r.integer(e["seed"], "sim.encoder.seed", 0, 1L << 62));
-    }
-    if (s["encoder_zero"]) c.sim.encoder_zero = r.vec3(s["encoder_zero"], "sim.encoder_zero", -10.0, 10.0, "m");
-    if (s["home_switch"]) {
-      const YAML::Node h = s["home_switch"];
-      r.three(h, "sim.home_switch", "m (null: no switch)");
-      for (int i = 0; i < 3; ++i)
-        c.sim.home_switch[i] = position_or_none(r, h[i], "sim.home_switch[" + std::to_string(i) + "]", -10.0, 10.0);
-    }
-    if (s["index_pitch"]) {
-      c.sim.index_pitch = r.number(s["index_pitch"], "sim.index_pitch", 0.0, 1.0, "m");
-      // Marks closer than this would run into one another (the simulator's mark is 10 um wide).
-      if (c.sim.index_pitch > 0.0 && c.sim.index_pitch < 1e-4)
-        r.fail(s["index_pitch"], "sim.index_pitch", "must be 0 (no index) or at least 0.1 mm, got " + s["index_pitch"].Scalar());
-    }
-  }
+  if (root["sim"]) parse_sim(r, root["sim"], base_dir, c.sim);
 
-  const auto l = r.map(root["loop"], "loop", {"rate_hz"},
-                       {"priority", "cpu", "lock_memory", "max_consecutive_overruns", "skip_late_slots"});
-  c.loop.rate_hz = r.number(l["rate_hz"], "loop.rate_hz", 10.0, 10000.0, "Hz");
-  if (l["priority"]) c.loop.priority = static_cast<int>(r.integer(l["priority"], "loop.priority", 0, 99));
-  if (l["cpu"]) c.loop.cpu = static_cast<int>(r.integer(l["cpu"], "loop.cpu", -1, 1023));
-  if (l["lock_memory"]) c.loop.lock_memory = r.boolean(l["lock_memory"], "loop.lock_memory");
-  if (l["skip_late_slots"]) c.loop.skip_late_slots = r.boolean(l["skip_late_slots"], "loop.skip_late_slots");
-  if (l["max_consecutive_overruns"])
-    c.loop.max_consecutive_overruns =
-        static_cast<int>(r.integer(l["max_consecutive_overruns"], "loop.max_consecutive_overruns", 1, 100000));
-
-  const auto k = r.map(root["controller"], "controller", {"law"}, {"kp", "kd", "transfer_time"});
-  const std::string law = r.text(k["law"], "controller.law");
-  const auto lw = ctl::law_from_name(law);
-  if (!lw) r.fail(k["law"], "controller.law", "must be pd, pd_gravity, pd_feedforward or computed_torque, got '" + law + "'");
-  c.controller.law = *lw;
-  c.controller.gains = ctl::table3_gains(*lw);
-  if (k["kp"].IsDefined() != k["kd"].IsDefined())
-    r.fail(k, "controller", "give both kp and kd, or neither (Table 3 gains)");
-  if (k["kp"]) {
-    c.controller.gains.kp = r.param3(k["kp"], "controller.kp", "controller.kp", *lw);
-    c.controller.gains.kd = r.param3(k["kd"], "controller.kd", "controller.kd", *lw);
-  }
-  if (k["transfer_time"])
-    c.controller.transfer_time = r.param(k["transfer_time"], "controller.transfer_time", "controller.transfer_time");
-  try {
-    c.controller.gains.validate();
-  } catch (const Error& e) {
-    r.fail(k, "controller", e.what());
-  }
+  parse_loop(r, root["loop"], c.loop);
+  parse_controller(r, root["controller"], c.controller);
 
   const auto m = r.map(root["limits"], "limits",
                        {"workspace_min", "workspace_max", "velocity", "acceleration", "force", "following_error"},
@@ -642,45 +702,8 @@ DaemonConfig parse_config_checked(const std::string& text, const std::string& na
   else
     c.homing.order_count = 0;  // every actuator absolute: nothing to home
 
-  const auto n = r.map(root["lcm"], "lcm", {"url"}, {"channels", "state_decimation", "session_timeout"});
-  c.lcm.url = r.text(n["url"], "lcm.url");
-  if (c.lcm.url.find("://") == std::string::npos)
-    r.fail(n["url"], "lcm.url", "expected an LCM URL such as udpm://239.255.76.67:7667?ttl=0");
-  if (n["state_decimation"])
-    c.lcm.state_decimation = static_cast<int>(r.integer(n["state_decimation"], "lcm.state_decimation", 1, 1000));
-  if (n["session_timeout"]) {
-    c.lcm.session_timeout = r.positive(n["session_timeout"], "lcm.session_timeout", 3600.0, "s");
-    if (c.lcm.session_timeout < 0.5)
-      r.fail(n["session_timeout"], "lcm.session_timeout", "must be at least 0.5 s (clients ping every 0.25 s)");
-  }
-  if (n["channels"]) {
-    const auto ch = r.map(n["channels"], "lcm.channels", {},
-                          {"state", "stats", "trajectory", "control", "ack", "security", "drives", "params", "path", "seal"});
-    if (ch["state"]) c.lcm.state_channel = r.text(ch["state"], "lcm.channels.state");
-    if (ch["stats"]) c.lcm.stats_channel = r.text(ch["stats"], "lcm.channels.stats");
-    if (ch["trajectory"]) c.lcm.trajectory_channel = r.text(ch["trajectory"], "lcm.channels.trajectory");
-    if (ch["control"]) c.lcm.control_channel = r.text(ch["control"], "lcm.channels.control");
-    if (ch["ack"]) c.lcm.ack_channel = r.text(ch["ack"], "lcm.channels.ack");
-    if (ch["security"]) c.lcm.security_channel = r.text(ch["security"], "lcm.channels.security");
-    if (ch["drives"]) c.lcm.drives_channel = r.text(ch["drives"], "lcm.channels.drives");
-    if (ch["params"]) c.lcm.params_channel = r.text(ch["params"], "lcm.channels.params");
-    if (ch["seal"]) c.lcm.seal_channel = r.text(ch["seal"], "lcm.channels.seal");
-    if (ch["path"]) c.lcm.path_channel = r.text(ch["path"], "lcm.channels.path");
-  }
-  if (root["security"]) {
-    const auto s = r.map(root["security"], "security", {},
-                         {"operators_dir", "model_dir", "acquire_window", "refusal_acks_per_second", "signing_key"});
-    if (s["operators_dir"])
-      c.security.operators_dir = resolve(base_dir, r.text(s["operators_dir"], "security.operators_dir"));
-    if (s["model_dir"]) c.security.model_dir = resolve(base_dir, r.text(s["model_dir"], "security.model_dir"));
-    if (s["signing_key"])
-      c.security.signing_key = resolve(base_dir, r.text(s["signing_key"], "security.signing_key"));
-    if (s["acquire_window"])
-      c.security.acquire_window = r.positive(s["acquire_window"], "security.acquire_window", 3600.0, "s");
-    if (s["refusal_acks_per_second"])
-      c.security.refusal_acks_per_second =
-          r.number(s["refusal_acks_per_second"], "security.refusal_acks_per_second", 0.0, 10000.0, "1/s");
-  }
+  parse_lcm(r, root["lcm"], c.lcm);
+  if (root["security"]) parse_security(r, root["security"], base_dir, c.security);
   if (root["canopen"])
     parse_canopen(r, root["canopen"], c.loop.rate_hz, c.loop.skip_late_slots, c.homing, c.canopen);
   check_homing_inputs(r, root, c, homing_nodes);

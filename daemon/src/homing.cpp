@@ -46,6 +46,9 @@ AxisHoming::Outcome AxisHoming::begin_final(const Inputs& in, Request& req) noex
   return step(in, req);
 }
 
+// Long (about 100 lines) on purpose: one switch over the homing phases, each
+// case a row of the sequence docs/daemon.md tables, so that the whole
+// sequence reads in one place.
 AxisHoming::Outcome AxisHoming::step(const Inputs& in, Request& req) noexcept {
   req = Request{};
   if (phase_ == HomingPhase::idle) return Outcome::failed;

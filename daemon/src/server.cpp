@@ -195,6 +195,8 @@ class ModelLoader {
   std::optional<Result> result_;
 };
 
+// Long (about 80 lines) on purpose: one switch over the trajectory kinds,
+// each checked before the segment is built, then the checks every kind shares.
 Validation validate_segment(const trajectory_command_t& c, const Vec3& start, const ctl::Machine& machine,
                             const LimitsConfig& L, double dt) {
   Validation out;
@@ -360,23 +362,19 @@ void Server::drain_model_load() {
   if (!r) return;
   if (!r->machine) {
     log::warning("operator %s: %s", printable(r->operator_name).c_str(), printable(r->journal, 1024).c_str());
-    publish_ack(r->id, 1, control_command_t::CMD_LOAD_MODEL, false, ack_t::REASON_LOAD_FAILED,
+    publish_ack(r->id, kControlSource, control_command_t::CMD_LOAD_MODEL, false, ack_t::REASON_LOAD_FAILED,
                 "load_model: " + r->summary, loop_.mode(), latest_.queue_depth);
     return;
   }
   Command& c = *scratch_;
   c = Command{};
   c.id = r->id;
-  c.source = 1;
+  c.source = kControlSource;
   c.code = control_command_t::CMD_LOAD_MODEL;
   c.kind = CommandKind::load_model;
   c.controller.emplace(*r->machine, law_, gains_);
   c.machine = models_.add(std::move(r->machine));
-  pending_models_[c.id] = c.machine;
-  if (!send(c)) {
-    pending_models_.erase(c.id);
-    models_.release(c.machine);
-  }
+  send(c);
 }
 
 void Server::on_raw(const lcm::ReceiveBuffer* rbuf, const std::string& channel) {
@@ -528,10 +526,52 @@ void Server::set_boot_id(std::int64_t id) noexcept {
 }
 
 bool Server::send(Command& c) {
-  if (loop_.commands().push(c)) return true;
+  if (loop_.commands().push(c)) {
+    record_pending(c);
+    return true;
+  }
   publish_ack(c.id, c.source, c.code, false, ack_t::REASON_BUSY, "the loop's command queue is full; retry",
               loop_.mode(), latest_.queue_depth);
+  if (c.machine) models_.release(c.machine);  // a model load the loop never saw
   return false;
+}
+
+void Server::record_pending(const Command& c) {
+  // (This thread drains the loop's acks too: recorded before any answer.)
+  switch (c.kind) {
+    case CommandKind::load_model: pending_models_[c.id] = c.machine; break;
+    case CommandKind::select_controller: pending_laws_[c.id] = {c.controller->law(), c.controller->gains()}; break;
+    case CommandKind::set_params: pending_settings_[c.id] = c.settings; break;
+    default: break;
+  }
+}
+
+void Server::settle_pending(const Ack& a) {
+  if (a.source != kControlSource) return;
+  if (const auto it = pending_models_.find(a.id);
+      a.code == control_command_t::CMD_LOAD_MODEL && it != pending_models_.end()) {
+    if (a.accepted) models_.make_current(it->second);
+    pending_models_.erase(it);
+  }
+  if (const auto it = pending_laws_.find(a.id); it != pending_laws_.end()) {  // a selection, or gains set
+    if (a.accepted) {
+      law_ = it->second.first;
+      gains_ = it->second.second;
+      cfg_.controller.law = law_;
+      cfg_.controller.gains = gains_;
+      params_changed_ = true;
+    }
+    pending_laws_.erase(it);
+  }
+  if (const auto it = pending_settings_.find(a.id); it != pending_settings_.end()) {
+    if (a.accepted) {
+      cfg_.limits = it->second.limits;
+      cfg_.jog = it->second.jog;
+      cfg_.controller.transfer_time = it->second.transfer_time;
+      params_changed_ = true;
+    }
+    pending_settings_.erase(it);
+  }
 }
 
 std::int64_t Server::session() const {
@@ -651,7 +691,7 @@ void Server::acquire(const control_command_t& m, const Operator& op) {
   auto& last = last_acquire_seq_[op.name];
   if (!(std::abs(skew) <= cfg_.security.acquire_window) || m.seq <= last) {
     ++counts_.refused_replay;
-    refuse_limited(m.id, 1, m.command, ack_t::REASON_STALE_SEQ,
+    refuse_limited(m.id, kControlSource, m.command, ack_t::REASON_STALE_SEQ,
                    m.seq <= last ? "this acquire is not newer than operator " + op.name +
                                        "'s last one: a replayed acquire is not played"
                                  : "the acquire's seq (the sender's clock) is " + seconds(std::abs(skew)) +
@@ -664,7 +704,7 @@ void Server::acquire(const control_command_t& m, const Operator& op) {
   const std::int64_t held = session();
   if (held != 0 && (m.session != session_nonce_ || op.name != session_operator_)) {
     ++counts_.refused_not_holder;
-    publish_ack(m.id, 1, m.command, false, ack_t::REASON_NOT_HOLDER,
+    publish_ack(m.id, kControlSource, m.command, false, ack_t::REASON_NOT_HOLDER,
                 "another commander holds the machine (last heard " + seconds(now - last_heard_) +
                     " ago); it is free again when that commander releases it or after " +
                     seconds(cfg_.lcm.session_timeout) + " of silence",
@@ -687,166 +727,195 @@ void Server::acquire(const control_command_t& m, const Operator& op) {
   }
   // else: the holder's acquire repeated (its ack was lost): the same session.
   last_heard_ = now;
-  publish_ack(m.id, 1, m.command, true, ack_t::REASON_NONE, "", loop_.mode(), latest_.queue_depth, session_);
+  publish_ack(m.id, kControlSource, m.command, true, ack_t::REASON_NONE, "", loop_.mode(), latest_.queue_depth, session_);
 }
 
 void Server::on_control(const std::uint8_t* raw, std::size_t size, const control_command_t* m) {
+  if (!authorize_control(raw, size, *m)) return;
+  Command& c = *scratch_;
+  c = Command{};
+  c.id = m->id;
+  c.source = kControlSource;
+  c.code = m->command;
+  if (const std::optional<Refused> r = decode_control(*m, c)) {
+    publish_ack(m->id, kControlSource, m->command, false, r->reason, r->why, loop_.mode(), latest_.queue_depth);
+    return;
+  }
+  if (c.kind != CommandKind::none) send(c);
+}
+
+bool Server::authorize_control(const std::uint8_t* raw, std::size_t size, const control_command_t& m) {
   const std::shared_ptr<const OperatorTable> table = operators();
-  if (m->command == control_command_t::CMD_STOP) {
+  if (m.command == control_command_t::CMD_STOP) {
     // A stop is taken from anyone: it only brings the platform to rest, and
     // whoever sees a danger must be able to stop it. It does not take the
     // session; from its holder, proven by the MAC, it counts as a sign of life.
     const std::int64_t held = session();
-    const std::string who = operator_name_of(m->operator_name);
+    const std::string who = operator_name_of(m.operator_name);
     const Operator* op = table && !who.empty() ? table->find(who) : nullptr;
-    if (held != 0 && m->session == held && op && op->name == session_operator_ && m->seq > last_seq_ &&
+    if (held != 0 && m.session == held && op && op->name == session_operator_ && m.seq > last_seq_ &&
         verify_encoded(raw, size, op->key, boot_id_)) {
-      last_seq_ = m->seq;
+      last_seq_ = m.seq;
       last_heard_ = now_();
     } else {
       ++counts_.stops_from_anyone;
     }
-  } else {
-    const Operator* op = authenticate(table.get(), raw, size, m->operator_name, m->id, 1, m->command);
-    if (!op) return;
-    if (const auto need = role_needed(m->command); need && op->role < *need) {
-      // The sender proved who it is: it may learn what its role allows.
-      ++counts_.refused_role;
-      publish_ack(m->id, 1, m->command, false, ack_t::REASON_NOT_AUTHORIZED,
-                  std::string("operator ") + op->name + " (role " + role_name(op->role) + ") may not " +
-                      control_name(m->command) + ": that needs role " + role_name(*need),
-                  loop_.mode(), latest_.queue_depth);
-      return;
-    }
-    if (m->command == control_command_t::CMD_ACQUIRE) return acquire(*m, *op);
-    if (!admit(m->id, 1, m->command, m->session, m->seq, *op)) return;
+    return true;
   }
-  if (m->command == control_command_t::CMD_RELEASE) {
+  const Operator* op = authenticate(table.get(), raw, size, m.operator_name, m.id, kControlSource, m.command);
+  if (!op) return false;
+  if (const auto need = role_needed(m.command); need && op->role < *need) {
+    // The sender proved who it is: it may learn what its role allows.
+    ++counts_.refused_role;
+    publish_ack(m.id, kControlSource, m.command, false, ack_t::REASON_NOT_AUTHORIZED,
+                std::string("operator ") + op->name + " (role " + role_name(op->role) + ") may not " +
+                    control_name(m.command) + ": that needs role " + role_name(*need),
+                loop_.mode(), latest_.queue_depth);
+    return false;
+  }
+  if (m.command == control_command_t::CMD_ACQUIRE) {
+    acquire(m, *op);
+    return false;
+  }
+  if (!admit(m.id, kControlSource, m.command, m.session, m.seq, *op)) return false;
+  if (m.command == control_command_t::CMD_RELEASE) {
     session_ = 0;
     session_nonce_ = 0;
     session_operator_.clear();
-    publish_ack(m->id, 1, m->command, true, ack_t::REASON_NONE, "", loop_.mode(), latest_.queue_depth);
-    return;
+    publish_ack(m.id, kControlSource, m.command, true, ack_t::REASON_NONE, "", loop_.mode(), latest_.queue_depth);
+    return false;
   }
-  Command& c = *scratch_;
-  c = Command{};
-  c.id = m->id;
-  c.source = 1;
-  c.code = m->command;
-  auto refuse = [&](std::int16_t reason, const std::string& why) {
-    publish_ack(m->id, 1, m->command, false, reason, why, loop_.mode(), latest_.queue_depth);
-  };
-  if (m->command != control_command_t::CMD_STOP) {
-    if (const std::string b = bad_number(*m); !b.empty())
-      return refuse(ack_t::REASON_INVALID, b + " is not a finite number, zero or normal");
+  return true;
+}
+
+std::optional<Server::Refused> Server::decode_control(const control_command_t& m, Command& c) {
+  if (m.command != control_command_t::CMD_STOP) {
+    if (const std::string b = bad_number(m); !b.empty())
+      return Refused{ack_t::REASON_INVALID, b + " is not a finite number, zero or normal"};
   }
-  switch (m->command) {
-    case control_command_t::CMD_ENABLE: c.kind = CommandKind::enable; break;
-    case control_command_t::CMD_DISABLE: c.kind = CommandKind::disable; break;
-    case control_command_t::CMD_STOP: c.kind = CommandKind::stop; break;
-    case control_command_t::CMD_RESET: c.kind = CommandKind::reset; break;
-    case control_command_t::CMD_PING: c.kind = CommandKind::ping; break;
-    case control_command_t::CMD_HOME:
-      if (m->home_axes < 0 || m->home_axes > 7)
-        return refuse(ack_t::REASON_INVALID, "home_axes must be a mask of actuators 1-3 (bits 0-2), or 0 for all");
-      c.kind = CommandKind::home;
-      c.home_axes = static_cast<std::uint8_t>(m->home_axes);
-      break;
-    case control_command_t::CMD_SET_PARAM: {
-      // The name: NUL-padded printable ASCII, as the operator's name is.
-      std::string name;
-      for (const std::uint8_t b : m->param_name) {
-        if (b == 0) break;
-        if (b < 0x21 || b > 0x7e) return refuse(ack_t::REASON_INVALID, "param_name is not printable ASCII");
-        name.push_back(static_cast<char>(b));
-      }
-      const Param* param = nullptr;
-      DaemonConfig next = cfg_;
-      try {
-        param = &find_param(name);
-        set_param(next, name, m->param_value);
-      } catch (const Error& e) {
-        return refuse(param ? ack_t::REASON_LIMIT : ack_t::REASON_INVALID, std::string("set ") + e.what());
-      }
-      if (next.controller.gains.kp != cfg_.controller.gains.kp || next.controller.gains.kd != cfg_.controller.gains.kd) {
-        // New gains are a new controller: checked as a selection is, taken
-        // as one (when disabled, or bumpless while holding).
-        const ctl::GainVerdict verdict = check_gains_for(models_.current(), next.controller.law, next.controller.gains);
-        if (!verdict.ok) return refuse(ack_t::REASON_LIMIT, "set " + name + ": " + verdict.reason);
-        c.kind = CommandKind::select_controller;
-        c.controller.emplace(models_.current(), next.controller.law, next.controller.gains);
-        if (loop_.commands().size() < loop_.commands().capacity())
-          pending_laws_[c.id] = {next.controller.law, next.controller.gains};
-        break;
-      }
-      c.kind = CommandKind::set_params;
-      c.settings.limits = next.limits;
-      c.settings.jog = next.jog;
-      c.settings.transfer_time = next.controller.transfer_time;
-      c.while_moving = param->while_moving;
-      c.param = param->name;
-      if (loop_.commands().size() < loop_.commands().capacity()) pending_settings_[c.id] = c.settings;
-      break;
-    }
-    case control_command_t::CMD_JOG:
-      if (m->jog_frame != control_command_t::JOG_ACTUATOR && m->jog_frame != control_command_t::JOG_MACHINE)
-        return refuse(ack_t::REASON_INVALID, "jog_frame must be 0 (actuators) or 1 (machine frame)");
-      c.kind = CommandKind::jog;
-      c.jog_frame = m->jog_frame;
-      c.jog_velocity = Vec3(m->jog_velocity[0], m->jog_velocity[1], m->jog_velocity[2]);
-      if (const double v = m->jog_frame == control_command_t::JOG_MACHINE ? c.jog_velocity.norm()
-                                                                            : c.jog_velocity.cwiseAbs().maxCoeff();
-          v > cfg_.jog.max_velocity * (1.0 + 1e-9))
-        return refuse(ack_t::REASON_LIMIT, "jog: " + mm_s(v) + " is faster than jog.max_velocity " +
-                                               mm_s(cfg_.jog.max_velocity));
-      break;
-    case control_command_t::CMD_SELECT_CONTROLLER: {
-      if (m->law < 0 || m->law > 3) return refuse(ack_t::REASON_INVALID, "law must be 0..3");
-      const auto law = static_cast<ctl::ControlLaw>(m->law);
-      ctl::Gains g = ctl::table3_gains(law);
-      if (!m->use_table3_gains) {
-        g.kp = Vec3(m->kp[0], m->kp[1], m->kp[2]);
-        g.kd = Vec3(m->kd[0], m->kd[1], m->kd[2]);
-      }
-      try {
-        g.validate();
-        // A law and gains that cannot hold this machine at this rate are
-        // refused before anything changes, with the figure.
-        const ctl::GainVerdict verdict = check_gains_for(models_.current(), law, g);
-        if (!verdict.ok) return refuse(ack_t::REASON_LIMIT, "select_controller: " + verdict.reason);
-        c.controller.emplace(models_.current(), law, g);
-      } catch (const Error& e) {
-        return refuse(ack_t::REASON_INVALID, std::string("select_controller: ") + e.what());
-      }
-      c.kind = CommandKind::select_controller;
-      if (loop_.commands().size() < loop_.commands().capacity()) pending_laws_[c.id] = {law, g};
-      break;
-    }
-    case control_command_t::CMD_LOAD_MODEL:
-      // Only when disabled, said before the file is touched; then read,
-      // bounded and parsed on the loader's thread (this one must hear the
-      // next stop). Only from the model directory, a regular file of at most
-      // kMaxModelFileBytes; what goes back on the bus names the reason and
-      // the line, never the file's bytes.
-      if (loop_.mode() != Mode::disabled)
-        return refuse(ack_t::REASON_ILLEGAL_IN_MODE,
-                      std::string("load_model: the machine is ") + mode_name(loop_.mode()) +
-                          "; load a model only when it is disabled (cpm disable), nothing was read");
-      if (loader_->busy())
-        return refuse(ack_t::REASON_BUSY, "load_model: another model is being loaded; wait for its answer");
-      loader_->start(m->id, m->model_path, session_operator_, cfg_);
-      return;
-    default:
-      return refuse(ack_t::REASON_INVALID, "unknown command " + std::to_string(m->command));
+  switch (m.command) {
+    case control_command_t::CMD_ENABLE: c.kind = CommandKind::enable; return {};
+    case control_command_t::CMD_DISABLE: c.kind = CommandKind::disable; return {};
+    case control_command_t::CMD_STOP: c.kind = CommandKind::stop; return {};
+    case control_command_t::CMD_RESET: c.kind = CommandKind::reset; return {};
+    case control_command_t::CMD_PING: c.kind = CommandKind::ping; return {};
+    case control_command_t::CMD_HOME: return decode_home(m, c);
+    case control_command_t::CMD_SET_PARAM: return decode_set_param(m, c);
+    case control_command_t::CMD_JOG: return decode_jog(m, c);
+    case control_command_t::CMD_SELECT_CONTROLLER: return decode_select(m, c);
+    case control_command_t::CMD_LOAD_MODEL: return decode_load_model(m);
+    default: return Refused{ack_t::REASON_INVALID, "unknown command " + std::to_string(m.command)};
   }
-  if (!send(c) && c.machine) {
-    pending_models_.erase(c.id);
-    models_.release(c.machine);
+}
+
+std::optional<Server::Refused> Server::decode_home(const control_command_t& m, Command& c) const {
+  if (m.home_axes < 0 || m.home_axes > 7)
+    return Refused{ack_t::REASON_INVALID, "home_axes must be a mask of actuators 1-3 (bits 0-2), or 0 for all"};
+  c.kind = CommandKind::home;
+  c.home_axes = static_cast<std::uint8_t>(m.home_axes);
+  return {};
+}
+
+std::optional<Server::Refused> Server::decode_set_param(const control_command_t& m, Command& c) const {
+  // The name: NUL-padded printable ASCII, as the operator's name is.
+  std::string name;
+  for (const std::uint8_t b : m.param_name) {
+    if (b == 0) break;
+    if (b < 0x21 || b > 0x7e) return Refused{ack_t::REASON_INVALID, "param_name is not printable ASCII"};
+    name.push_back(static_cast<char>(b));
   }
+  const Param* param = nullptr;
+  DaemonConfig next = cfg_;
+  try {
+    param = &find_param(name);
+    set_param(next, name, m.param_value);
+  } catch (const Error& e) {
+    return Refused{param ? ack_t::REASON_LIMIT : ack_t::REASON_INVALID, std::string("set ") + e.what()};
+  }
+  if (next.controller.gains.kp != cfg_.controller.gains.kp || next.controller.gains.kd != cfg_.controller.gains.kd) {
+    // New gains are a new controller: checked as a selection is, taken as
+    // one (when disabled, or bumpless while holding).
+    const ctl::GainVerdict verdict = check_gains_for(models_.current(), next.controller.law, next.controller.gains);
+    if (!verdict.ok) return Refused{ack_t::REASON_LIMIT, "set " + name + ": " + verdict.reason};
+    c.kind = CommandKind::select_controller;
+    c.controller.emplace(models_.current(), next.controller.law, next.controller.gains);
+    return {};
+  }
+  c.kind = CommandKind::set_params;
+  c.settings.limits = next.limits;
+  c.settings.jog = next.jog;
+  c.settings.transfer_time = next.controller.transfer_time;
+  c.while_moving = param->while_moving;
+  c.param = param->name;
+  return {};
+}
+
+std::optional<Server::Refused> Server::decode_jog(const control_command_t& m, Command& c) const {
+  if (m.jog_frame != control_command_t::JOG_ACTUATOR && m.jog_frame != control_command_t::JOG_MACHINE)
+    return Refused{ack_t::REASON_INVALID, "jog_frame must be 0 (actuators) or 1 (machine frame)"};
+  c.kind = CommandKind::jog;
+  c.jog_frame = m.jog_frame;
+  c.jog_velocity = Vec3(m.jog_velocity[0], m.jog_velocity[1], m.jog_velocity[2]);
+  const double v =
+      m.jog_frame == control_command_t::JOG_MACHINE ? c.jog_velocity.norm() : c.jog_velocity.cwiseAbs().maxCoeff();
+  if (v > cfg_.jog.max_velocity * (1.0 + 1e-9))
+    return Refused{ack_t::REASON_LIMIT, "jog: " + mm_s(v) + " is faster than jog.max_velocity " + mm_s(cfg_.jog.max_velocity)};
+  return {};
+}
+
+std::optional<Server::Refused> Server::decode_select(const control_command_t& m, Command& c) const {
+  if (m.law < 0 || m.law > 3) return Refused{ack_t::REASON_INVALID, "law must be 0..3"};
+  const auto law = static_cast<ctl::ControlLaw>(m.law);
+  ctl::Gains g = ctl::table3_gains(law);
+  if (!m.use_table3_gains) {
+    g.kp = Vec3(m.kp[0], m.kp[1], m.kp[2]);
+    g.kd = Vec3(m.kd[0], m.kd[1], m.kd[2]);
+  }
+  try {
+    g.validate();
+    // A law and gains that cannot hold this machine at this rate are
+    // refused before anything changes, with the figure.
+    const ctl::GainVerdict verdict = check_gains_for(models_.current(), law, g);
+    if (!verdict.ok) return Refused{ack_t::REASON_LIMIT, "select_controller: " + verdict.reason};
+    c.controller.emplace(models_.current(), law, g);
+  } catch (const Error& e) {
+    return Refused{ack_t::REASON_INVALID, std::string("select_controller: ") + e.what()};
+  }
+  c.kind = CommandKind::select_controller;
+  return {};
+}
+
+std::optional<Server::Refused> Server::decode_load_model(const control_command_t& m) {
+  // Only when disabled, said before the file is touched; then read, bounded
+  // and parsed on the loader's thread (this one must hear the next stop).
+  // Only from the model directory, a regular file of at most
+  // kMaxModelFileBytes; what goes back on the bus names the reason and the
+  // line, never the file's bytes.
+  if (loop_.mode() != Mode::disabled)
+    return Refused{ack_t::REASON_ILLEGAL_IN_MODE, std::string("load_model: the machine is ") + mode_name(loop_.mode()) +
+                                                      "; load a model only when it is disabled (cpm disable), nothing was read"};
+  if (loader_->busy())
+    return Refused{ack_t::REASON_BUSY, "load_model: another model is being loaded; wait for its answer"};
+  loader_->start(m.id, m.model_path, session_operator_, cfg_);
+  return {};
 }
 
 ctl::GainVerdict Server::check_gains_for(const ctl::Machine& model, ctl::ControlLaw law, const ctl::Gains& g) const {
   return check_daemon_gains(cfg_, model, law, g);
+}
+
+std::int16_t ack_reason(Refusal r) noexcept {
+  switch (r) {
+    case Refusal::none: return ack_t::REASON_NONE;
+    case Refusal::illegal_in_mode: return ack_t::REASON_ILLEGAL_IN_MODE;
+    case Refusal::fault_active: return ack_t::REASON_FAULT_ACTIVE;
+    case Refusal::not_homed: return ack_t::REASON_NOT_HOMED;
+    case Refusal::queue_full: return ack_t::REASON_QUEUE_FULL;
+    case Refusal::not_continuous: return ack_t::REASON_NOT_CONTINUOUS;
+    case Refusal::limit: return ack_t::REASON_LIMIT;
+    case Refusal::workspace: return ack_t::REASON_WORKSPACE;
+  }
+  return ack_t::REASON_INVALID;  // not reached: every refusal is named above
 }
 
 ctl::GainVerdict check_daemon_gains(const DaemonConfig& cfg, const ctl::Machine& model, ctl::ControlLaw law,
@@ -860,23 +929,23 @@ ctl::GainVerdict check_daemon_gains(const DaemonConfig& cfg, const ctl::Machine&
 
 void Server::on_trajectory(const std::uint8_t* raw, std::size_t size, const trajectory_command_t* m) {
   const std::shared_ptr<const OperatorTable> table = operators();
-  const Operator* op = authenticate(table.get(), raw, size, m->operator_name, m->id, 2, m->kind);
+  const Operator* op = authenticate(table.get(), raw, size, m->operator_name, m->id, kTrajectorySource, m->kind);
   if (!op) return;
   if (op->role < Role::operator_) {
     ++counts_.refused_role;
-    publish_ack(m->id, 2, m->kind, false, ack_t::REASON_NOT_AUTHORIZED,
+    publish_ack(m->id, kTrajectorySource, m->kind, false, ack_t::REASON_NOT_AUTHORIZED,
                 "operator " + op->name + " (role " + role_name(op->role) + ") may not move the machine: that needs role operator",
                 loop_.mode(), latest_.queue_depth);
     return;
   }
-  if (!admit(m->id, 2, m->kind, m->session, m->seq, *op)) return;
+  if (!admit(m->id, kTrajectorySource, m->kind, m->session, m->seq, *op)) return;
   if (const std::string b = bad_number(*m); !b.empty()) {
-    publish_ack(m->id, 2, m->kind, false, ack_t::REASON_INVALID, b + " is not a finite number, zero or normal",
+    publish_ack(m->id, kTrajectorySource, m->kind, false, ack_t::REASON_INVALID, b + " is not a finite number, zero or normal",
                 loop_.mode(), latest_.queue_depth);
     return;
   }
   auto refuse = [&](std::int16_t reason, const std::string& why) {
-    publish_ack(m->id, 2, m->kind, false, reason, why, loop_.mode(), latest_.queue_depth);
+    publish_ack(m->id, kTrajectorySource, m->kind, false, reason, why, loop_.mode(), latest_.queue_depth);
   };
   if (const std::string why = not_homed(); !why.empty()) return refuse(ack_t::REASON_NOT_HOMED, why);
   // Where and how the queue will end when this segment arrives.
@@ -908,7 +977,7 @@ void Server::on_trajectory(const std::uint8_t* raw, std::size_t size, const traj
   c = Command{};
   c.kind = CommandKind::segment;
   c.id = m->id;
-  c.source = 2;
+  c.source = kTrajectorySource;
   c.code = m->kind;
   c.segment = v.segment;
   if (send(c)) {
@@ -983,42 +1052,17 @@ int Server::drain() {
   Ack a;
   while (loop_.acks().pop(a)) {
     ++n;
-    if (a.source == 2 || a.source == kPathAckSource) inflight_segments_ = std::max(0, inflight_segments_ - 1);
+    if (a.source == kTrajectorySource || a.source == kPathAckSource) inflight_segments_ = std::max(0, inflight_segments_ - 1);
     if (a.source == kPathAckSource) paths_->answered(a.id, a.accepted);
     ack_newer_than_state_ = true;
     ack_end_ = a.queue_end;
     ack_end_v_ = a.queue_end_velocity;
-    if (a.source == 1 && a.code == control_command_t::CMD_LOAD_MODEL) {
-      const auto it = pending_models_.find(a.id);
-      if (a.accepted && it != pending_models_.end()) models_.make_current(it->second);
-      if (it != pending_models_.end()) pending_models_.erase(it);
-    }
-    if (a.source == 1 && !pending_laws_.empty()) {  // a selection, or gains set
-      const auto it = pending_laws_.find(a.id);
-      if (a.accepted && it != pending_laws_.end()) {
-        law_ = it->second.first;
-        gains_ = it->second.second;
-        cfg_.controller.law = law_;
-        cfg_.controller.gains = gains_;
-        params_changed_ = true;
-      }
-      if (it != pending_laws_.end()) pending_laws_.erase(it);
-    }
-    if (a.source == 1 && !pending_settings_.empty()) {
-      const auto it = pending_settings_.find(a.id);
-      if (a.accepted && it != pending_settings_.end()) {
-        cfg_.limits = it->second.limits;
-        cfg_.jog = it->second.jog;
-        cfg_.controller.transfer_time = it->second.transfer_time;
-        params_changed_ = true;
-      }
-      if (it != pending_settings_.end()) pending_settings_.erase(it);
-    }
+    settle_pending(a);
     // A model the loop no longer uses (the old one after a load, or the new
     // one of a refused load) is freed here, outside the loop.
     if (a.retired) models_.release(a.retired);
     std::string msg = a.message;
-    publish_ack(a.id, a.source, a.code, a.accepted, a.reason, msg, a.mode, a.queue_depth);
+    publish_ack(a.id, a.source, a.code, a.accepted, ack_reason(a.refusal), msg, a.mode, a.queue_depth);
   }
   const auto* s = loop_.snapshots().front();
   while (s) {

@@ -1,19 +1,25 @@
 #include "cpm/hal/canopen.hpp"
 
+#include <array>
 #include <cstdio>
 
 namespace cpm::hal::canopen {
 
-const char* nmt_state_name(NmtState s) noexcept {
-  switch (s) {
-    case NmtState::boot_up: return "boot-up";
-    case NmtState::stopped: return "stopped";
-    case NmtState::operational: return "operational";
-    case NmtState::preoperational: return "pre-operational";
-    case NmtState::unknown: return "unknown";
-  }
-  return "invalid";
-}
+namespace {
+
+constexpr std::array<NmtNames, 5> kNmtNames = {{
+    {NmtState::boot_up, "boot_up", "boot-up", "boot-up"},
+    {NmtState::stopped, "stopped", "stopped", "stopped"},
+    {NmtState::operational, "operational", "op", "operational"},
+    {NmtState::preoperational, "pre_operational", "pre-op", "pre-operational"},
+    {NmtState::unknown, "unknown", "-", "unknown"},
+}};
+
+}  // namespace
+
+const NmtNames& names(NmtState s) noexcept { return find_names(kNmtNames, s); }
+
+const char* nmt_state_name(NmtState s) noexcept { return names(s).full; }
 
 CanFrame make_nmt(NmtCommand c, std::uint8_t node) noexcept {
   CanFrame f;

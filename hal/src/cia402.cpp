@@ -1,20 +1,45 @@
 #include "cpm/hal/cia402.hpp"
 
+#include <array>
+
 namespace cpm::hal::cia402 {
 
-const char* state_name(State s) noexcept {
-  switch (s) {
-    case State::not_ready_to_switch_on: return "not ready to switch on";
-    case State::switch_on_disabled: return "switch on disabled";
-    case State::ready_to_switch_on: return "ready to switch on";
-    case State::switched_on: return "switched on";
-    case State::operation_enabled: return "operation enabled";
-    case State::quick_stop_active: return "quick stop active";
-    case State::fault_reaction_active: return "fault reaction active";
-    case State::fault: return "fault";
-    case State::unknown: return "unknown";
-  }
-  return "invalid";
+namespace {
+
+constexpr std::array<StateNames, 9> kStateNames = {{
+    {State::not_ready_to_switch_on, "not_ready_to_switch_on", "not ready", "not ready to switch on"},
+    {State::switch_on_disabled, "switch_on_disabled", "sw-on disabled", "switch on disabled"},
+    {State::ready_to_switch_on, "ready_to_switch_on", "ready", "ready to switch on"},
+    {State::switched_on, "switched_on", "switched on", "switched on"},
+    {State::operation_enabled, "operation_enabled", "op enabled", "operation enabled"},
+    {State::quick_stop_active, "quick_stop_active", "quick stop", "quick stop active"},
+    {State::fault_reaction_active, "fault_reaction_active", "fault reaction", "fault reaction active"},
+    {State::fault, "fault", "fault", "fault"},
+    {State::unknown, "unknown", "unknown", "unknown"},
+}};
+
+constexpr std::array<OperationMode, 9> kOperationModes = {{
+    {1, "PP", "profile position"},
+    {2, "VL", "velocity"},
+    {3, "PV", "profile velocity"},
+    {4, "PT", "profile torque"},
+    {kModeHoming, "home", "homing"},
+    {7, "IP", "interpolated position"},
+    {8, "CSP", "cyclic synchronous position"},
+    {9, "CSV", "cyclic synchronous velocity"},
+    {kModeCyclicSyncTorque, "CST", "cyclic synchronous torque"},
+}};
+
+}  // namespace
+
+const StateNames& names(State s) noexcept { return find_names(kStateNames, s); }
+
+const char* state_name(State s) noexcept { return names(s).full; }
+
+const OperationMode* operation_mode(std::int8_t code) noexcept {
+  for (const OperationMode& m : kOperationModes)
+    if (m.code == code) return &m;
+  return nullptr;
 }
 
 State decode_statusword(std::uint16_t sw) noexcept {
@@ -67,13 +92,13 @@ std::uint16_t controlword(Command c) noexcept {
     case Command::enable_operation: return 0x0F;
     case Command::disable_voltage: return 0x00;
     case Command::quick_stop: return 0x02;
-    case Command::fault_reset: return 0x80;
+    case Command::fault_reset: return kCwFaultReset;
   }
   return 0x00;
 }
 
 Command decode_controlword(std::uint16_t cw) noexcept {
-  if (cw & 0x80) return Command::fault_reset;
+  if (cw & kCwFaultReset) return Command::fault_reset;
   if (!(cw & 0x02)) return Command::disable_voltage;  // enable voltage = 0
   if (!(cw & 0x04)) return Command::quick_stop;       // quick stop is active low
   if (!(cw & 0x01)) return Command::shutdown;

@@ -431,15 +431,15 @@ void Master::disable_unused_pdos(Drive& d) {
 }
 
 void Master::configure_drive(Drive& d) {
-  const std::uint32_t type = sdo_read_u32(d.node, 0x1000, 0);
-  if ((type & 0xFFFF) != 402)
+  const std::uint32_t type = sdo_read_u32(d.node, kDeviceType, 0);
+  if ((type & 0xFFFF) != kProfileDrive)
     throw Error(who(d.node) + ": device type 0x1000 = " + hex(type, 8) + " is not a CiA 402 drive (profile 402 expected)");
-  sdo_write_u16(d.node, 0x1017, 0, static_cast<std::uint16_t>(cfg_.drive_heartbeat_ms));
-  check_u32(d, 0x1017, 0, static_cast<std::uint32_t>(cfg_.drive_heartbeat_ms), "producer heartbeat time");
+  sdo_write_u16(d.node, kProducerHeartbeatTime, 0, static_cast<std::uint16_t>(cfg_.drive_heartbeat_ms));
+  check_u32(d, kProducerHeartbeatTime, 0, static_cast<std::uint32_t>(cfg_.drive_heartbeat_ms), "producer heartbeat time");
   const std::uint32_t consumer = (static_cast<std::uint32_t>(cfg_.master_node_id) << 16) |
                                  static_cast<std::uint32_t>(cfg_.drive_consumer_timeout_ms);
-  sdo_write_u32(d.node, 0x1016, 1, consumer);
-  check_u32(d, 0x1016, 1, consumer, "consumer heartbeat time");
+  sdo_write_u32(d.node, kConsumerHeartbeatTime, 1, consumer);
+  check_u32(d, kConsumerHeartbeatTime, 1, consumer, "consumer heartbeat time");
   sdo_write_u16(d.node, cia402::kAbortConnectionOption, 0, static_cast<std::uint16_t>(cfg_.abort_connection_option));
   check_u32(d, cia402::kAbortConnectionOption, 0, static_cast<std::uint32_t>(cfg_.abort_connection_option),
             "abort connection option code");
@@ -615,7 +615,7 @@ Status Master::write(const Commands& in) noexcept {
     const DriveCommand& c = in.drive[i];
     cia402::Command cmd = cia402::next_command(d.fb.state, c.target, c.reset_fault);
     // Fault reset acts on the rising edge of bit 7: drop it for a cycle first.
-    if (cmd == cia402::Command::fault_reset && (d.fb.controlword & 0x80)) cmd = cia402::Command::disable_voltage;
+    if (cmd == cia402::Command::fault_reset && (d.fb.controlword & cia402::kCwFaultReset)) cmd = cia402::Command::disable_voltage;
     std::uint16_t cw = cia402::controlword(cmd);
     const bool driving = d.fb.state == State::operation_enabled && c.target == cia402::Target::enabled &&
                          cmd == cia402::Command::enable_operation;

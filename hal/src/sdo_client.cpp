@@ -106,6 +106,9 @@ void SdoClient::send_download_segment(CanBus& bus, std::int64_t now_ns) noexcept
   send(bus, f, now_ns);
 }
 
+// Long (about 90 lines) on purpose: one switch over the transfer phases,
+// each answering the server's frame as CiA 301 §7.2.4.3 orders it; split,
+// the protocol's order would be spread over several functions.
 bool SdoClient::on_frame(CanBus& bus, const CanFrame& f, std::int64_t now_ns) noexcept {
   if (f.is_error() || f.is_rtr() || f.cob_id() != kSdoTxBase + node_) return false;
   if (state_ != State::busy) return true;  // late or stray answer: ignore

@@ -34,6 +34,22 @@ std::size_t point_at(const Grid& grid, double s) {
   return it == grid.pts.begin() ? 0 : static_cast<std::size_t>(it - grid.pts.begin() - 1);
 }
 
+// The repair's factors. The profile's variable is the squared speed x = v^2.
+// A speed limit (feed, velocity, actuator velocity) passed by value/limit is
+// met by scaling x by (limit/value)^2, less a 2 % margin for what the filter
+// and the grid's interpolation add back (kSpeedMargin), and by at least
+// kLeastSpeedCut so that a limit passed by a hair still costs a round its
+// worth; a force or acceleration limit depends on the path's curvature
+// too, not on the speed alone: x is cut by a fixed kOtherCut and the rows'
+// bounds tightened by kBoundTighten per round, never below kLeastBoundScale
+// of the original (a limit that needs more is a path the machine cannot
+// follow: refused after limits.max_repairs rounds).
+constexpr double kSpeedMargin = 0.98;
+constexpr double kLeastSpeedCut = 0.9;
+constexpr double kOtherCut = 0.85;
+constexpr double kBoundTighten = 0.97;
+constexpr double kLeastBoundScale = 0.5;
+
 // Lower the speed (and for force and acceleration limits the bounds too)
 // around every violation, over the distance the filter reaches.
 void repair(Grid& grid, std::vector<double>& caps, const Profile& pr, const std::vector<Violation>& vs, double T,
@@ -43,14 +59,15 @@ void repair(Grid& grid, std::vector<double>& caps, const Profile& pr, const std:
     const std::size_t i = point_at(grid, v.s);
     const double reach = T * std::sqrt(pr.x[i]) + 2.0 * step;
     const bool speed = v.by == Limit::feed || v.by == Limit::velocity || v.by == Limit::actuator_velocity;
-    const double f = speed ? std::min(0.9, 0.98 * (v.limit / v.value) * (v.limit / v.value)) : 0.85;
+    const double f =
+        speed ? std::min(kLeastSpeedCut, kSpeedMargin * (v.limit / v.value) * (v.limit / v.value)) : kOtherCut;
     for (std::size_t j = point_at(grid, v.s - reach); j < grid.pts.size() && grid.pts[j].s <= v.s + reach; ++j) {
       caps[j] = std::min(caps[j], f * pr.x[j]);
       if (!speed) tighten[j] = 1;
     }
   }
   for (std::size_t j = 0; j < grid.pts.size(); ++j)
-    if (tighten[j]) grid.pts[j].scale = std::max(0.5, grid.pts[j].scale * 0.97);
+    if (tighten[j]) grid.pts[j].scale = std::max(kLeastBoundScale, grid.pts[j].scale * kBoundTighten);
 }
 
 [[noreturn]] void refuse(const Geometry& g, const Violation& v) {
@@ -65,6 +82,10 @@ void repair(Grid& grid, std::vector<double>& caps, const Profile& pr, const std:
   throw Error(o.str());
 }
 
+// Below this share of the programmed feed a stretch is reported as limited
+// (a smaller dip is the filter's rounding, not a limit).
+constexpr double kLimitedBelowFeed = 0.98;
+
 // Stretches where the plan runs below the programmed feed, and what holds it there.
 constexpr double kShortStretch = 1e-3;  // m
 
@@ -72,7 +93,9 @@ std::vector<LimitedStretch> limited(const Grid& grid, const Profile& pr, const G
   std::vector<LimitedStretch> out;
   const std::size_t n = grid.pts.size();
   for (std::size_t i = 0; i < n;) {
-    const auto slow = [&](std::size_t k) { return std::sqrt(pr.x[k]) * grid.pts[k].speed < 0.98 * grid.pts[k].feed; };
+    const auto slow = [&](std::size_t k) {
+      return std::sqrt(pr.x[k]) * grid.pts[k].speed < kLimitedBelowFeed * grid.pts[k].feed;
+    };
     if (!slow(i)) {
       ++i;
       continue;

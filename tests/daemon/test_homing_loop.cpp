@@ -54,7 +54,7 @@ TEST(HomingLoop, ColdStartRefusesMotionHomesThenRunsThePapersCircleAsInProcess) 
   h.to_holding();
   const Ack refused = h.command(h.move_to(Vec3(0.45, 0.40, 0.35)));
   EXPECT_FALSE(refused.accepted);
-  EXPECT_EQ(refused.reason, ack_t::REASON_NOT_HOMED);
+  EXPECT_EQ(refused.refusal, Refusal::not_homed);
   std::printf("before homing, a move: %s\n", refused.message);
 
   ASSERT_TRUE(h.command(home_all()).accepted);

@@ -88,7 +88,7 @@ TEST(Jog, StopsAtTheWorkspaceEdgeAndAJogOutwardThereIsRefused) {
   ASSERT_EQ(h.mode(), Mode::holding);
   const Ack out = h.command(jog_command(control_command_t::JOG_MACHINE, Vec3(0.01, 0.0, 0)));
   EXPECT_FALSE(out.accepted);
-  EXPECT_EQ(out.reason, ack_t::REASON_WORKSPACE);
+  EXPECT_EQ(out.refusal, Refusal::workspace);
   std::printf("jog outward at the edge: %s\n", out.message);
   EXPECT_EQ(h.mode(), Mode::holding);
   const Ack in = h.command(jog_command(control_command_t::JOG_MACHINE, Vec3(-0.01, 0.0, 0)));
@@ -149,7 +149,7 @@ TEST(Jog, AnActuatorJogOnceHomedStopsAtTheWorkspaceEdgeNotAtTheStroke) {
   ASSERT_EQ(h.mode(), Mode::holding);
   const Ack out = h.command(jog_command(control_command_t::JOG_ACTUATOR, Vec3(0.01, 0, 0)));
   EXPECT_FALSE(out.accepted);
-  EXPECT_EQ(out.reason, ack_t::REASON_WORKSPACE);
+  EXPECT_EQ(out.refusal, Refusal::workspace);
   EXPECT_NE(std::string(out.message).find("workspace"), std::string::npos) << out.message;
   std::printf("actuator jog outward at the edge: %s\n", out.message);
   EXPECT_EQ(h.mode(), Mode::holding);
@@ -195,7 +195,7 @@ TEST(Jog, ARefusedActuatorJogAtTheEdgeDoesNotTakeOverTheMachineJogsMotion) {
   // changes, even though the actuator jog itself is refused.
   const Ack out = h.command(jog_command(control_command_t::JOG_ACTUATOR, Vec3(0.01, 0, 0)));
   EXPECT_FALSE(out.accepted);
-  EXPECT_EQ(out.reason, ack_t::REASON_WORKSPACE);
+  EXPECT_EQ(out.refusal, Refusal::workspace);
   double farthest = 0.0;
   for (int i = 0; i < 500; ++i) {
     h.run(1);
@@ -236,7 +236,7 @@ TEST(Jog, AnActuatorWhosePlaneIsNotSquareToItsAxisIsStoppedWhereThePlatformMeets
   ASSERT_EQ(h.mode(), Mode::holding);
   const Ack out = h.command(jog_command(control_command_t::JOG_ACTUATOR, Vec3(0, -0.01, 0)));
   EXPECT_FALSE(out.accepted);
-  EXPECT_EQ(out.reason, ack_t::REASON_WORKSPACE);
+  EXPECT_EQ(out.refusal, Refusal::workspace);
   const Ack in = h.command(jog_command(control_command_t::JOG_ACTUATOR, Vec3(0, 0.01, 0)));
   EXPECT_TRUE(in.accepted) << in.message;
 }
@@ -246,7 +246,7 @@ TEST(Jog, FasterThanTheJogLimitIsRefused) {
   h.to_holding();
   const Ack a = h.command(jog_command(control_command_t::JOG_MACHINE, Vec3(0, -2 * h.cfg.jog.max_velocity, 0)));
   EXPECT_FALSE(a.accepted);
-  EXPECT_EQ(a.reason, ack_t::REASON_LIMIT);
+  EXPECT_EQ(a.refusal, Refusal::limit);
   EXPECT_EQ(h.mode(), Mode::holding);
 }
 
@@ -259,10 +259,10 @@ TEST(Homed, BeforeHomingOnlyActuatorJogsAreTakenAndTheyMoveOneActuator) {
   h.to_holding();
   const Ack seg = h.command(h.move_to(h.queue_end() + Vec3(-0.01, 0, 0)));
   EXPECT_FALSE(seg.accepted);
-  EXPECT_EQ(seg.reason, ack_t::REASON_NOT_HOMED);
+  EXPECT_EQ(seg.refusal, Refusal::not_homed);
   const Ack cart = h.command(jog_command(control_command_t::JOG_MACHINE, Vec3(-0.01, 0, 0)));
   EXPECT_FALSE(cart.accepted);
-  EXPECT_EQ(cart.reason, ack_t::REASON_NOT_HOMED);
+  EXPECT_EQ(cart.refusal, Refusal::not_homed);
   const Vec3 d0(h.state().d[0], h.state().d[1], h.state().d[2]);
   const Ack jog = h.command(jog_command(control_command_t::JOG_ACTUATOR, Vec3(0, 0.01, 0)));
   ASSERT_TRUE(jog.accepted) << jog.message;
@@ -295,7 +295,7 @@ TEST(StartCheck, AVelocityStepIsRefusedByTheLoopUnlessGranted) {
   // Elkady's circle: 275 mm/s at t = 0, from rest.
   const Ack refused = h.command(circle_segment(h.queue_end(), ctl::CircleSpec{}, false));
   EXPECT_FALSE(refused.accepted);
-  EXPECT_EQ(refused.reason, ack_t::REASON_NOT_CONTINUOUS);
+  EXPECT_EQ(refused.refusal, Refusal::not_continuous);
   EXPECT_EQ(h.mode(), Mode::holding);
   EXPECT_TRUE(h.command(circle_segment(h.queue_end(), ctl::CircleSpec{}, true)).accepted);
   // A ramped circle starts at rest: no grant needed.

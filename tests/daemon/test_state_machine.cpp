@@ -90,7 +90,7 @@ TEST(StateMachine, EveryCommandInEveryState) {
       EXPECT_EQ(h->mode(), expect.after);
       EXPECT_STRNE(a.message, "");
       if (!a.accepted) {
-        EXPECT_NE(a.reason, 0);
+        EXPECT_NE(a.refusal, Refusal::none);
         // A refused command changes nothing: same faults, same queue.
         EXPECT_EQ(h->state().faults, before.faults);
         EXPECT_EQ(h->state().queue_depth, before.queue_depth);
@@ -159,7 +159,7 @@ TEST(StateMachine, SegmentNotStartingAtQueueEndIsRefused) {
   c.segment.start += Vec3(0.001, 0, 0);  // planned from a stale point
   const Ack a = h.command(c);
   EXPECT_FALSE(a.accepted);
-  EXPECT_EQ(a.reason, cpm_msgs::ack_t::REASON_NOT_CONTINUOUS);
+  EXPECT_EQ(a.refusal, Refusal::not_continuous);
   EXPECT_EQ(h.mode(), Mode::holding);
 }
 

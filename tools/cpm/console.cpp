@@ -16,6 +16,8 @@
 #include "cpm/daemon/fault_report.hpp"
 #include "cpm/daemon/text.hpp"
 #include "cpm/daemon/loop.hpp"
+#include "cpm/hal/canopen.hpp"
+#include "cpm/hal/cia402.hpp"
 
 namespace cpm::cli::console {
 
@@ -261,91 +263,32 @@ struct Column {
   bool left_aligned;
 };
 
-const char* nmt_short(std::int8_t n) {
-  switch (n) {
-    case drives_t::NMT_BOOT_UP: return "boot-up";
-    case drives_t::NMT_STOPPED: return "stopped";
-    case drives_t::NMT_OPERATIONAL: return "op";
-    case drives_t::NMT_PRE_OPERATIONAL: return "pre-op";
-    default: return "-";
-  }
+// The drives' codes off the bus (drives_t.NMT_*, CIA402_*, equal to hal's
+// enums: canopen_backend.cpp asserts it) to hal's one table of names.
+const hal::canopen::NmtNames& nmt_names(std::int8_t n) {
+  return hal::canopen::names(static_cast<hal::canopen::NmtState>(static_cast<std::uint8_t>(n)));
 }
-const char* nmt_long(std::int8_t n) {
-  switch (n) {
-    case drives_t::NMT_BOOT_UP: return "boot-up";
-    case drives_t::NMT_STOPPED: return "stopped";
-    case drives_t::NMT_OPERATIONAL: return "operational";
-    case drives_t::NMT_PRE_OPERATIONAL: return "pre-operational";
-    default: return "unknown";
-  }
+const hal::cia402::StateNames& cia402_names(std::int8_t c) {
+  return hal::cia402::names(static_cast<hal::cia402::State>(static_cast<std::uint8_t>(c)));
 }
-const char* cia402_short(std::int8_t c) {
-  switch (c) {
-    case drives_t::CIA402_NOT_READY: return "not ready";
-    case drives_t::CIA402_SWITCH_ON_DISABLED: return "sw-on disabled";
-    case drives_t::CIA402_READY: return "ready";
-    case drives_t::CIA402_SWITCHED_ON: return "switched on";
-    case drives_t::CIA402_OPERATION_ENABLED: return "op enabled";
-    case drives_t::CIA402_QUICK_STOP: return "quick stop";
-    case drives_t::CIA402_FAULT_REACTION: return "fault reaction";
-    case drives_t::CIA402_FAULT: return "FAULT";
-    default: return "unknown";
-  }
+// The drives screen: a fault in capitals, to be seen at a glance.
+const char* cia402_shown(std::int8_t c, bool long_names) {
+  if (c == drives_t::CIA402_FAULT) return "FAULT";
+  return long_names ? cia402_names(c).full : cia402_names(c).brief;
 }
-const char* cia402_long(std::int8_t c) {
-  switch (c) {
-    case drives_t::CIA402_NOT_READY: return "not ready to switch on";
-    case drives_t::CIA402_SWITCH_ON_DISABLED: return "switch on disabled";
-    case drives_t::CIA402_READY: return "ready to switch on";
-    case drives_t::CIA402_SWITCHED_ON: return "switched on";
-    case drives_t::CIA402_OPERATION_ENABLED: return "operation enabled";
-    case drives_t::CIA402_QUICK_STOP: return "quick stop active";
-    case drives_t::CIA402_FAULT_REACTION: return "fault reaction active";
-    case drives_t::CIA402_FAULT: return "FAULT";
-    default: return "unknown";
-  }
-}
-// 0x6061, modes of operation display (CiA 402).
+// 0x6061, modes of operation display: "-" before a mode is set, the number
+// of a manufacturer's mode.
 std::string op_mode(std::int8_t m) {
-  switch (m) {
-    case 0: return "-";
-    case 1: return "PP";
-    case 3: return "PV";
-    case 4: return "PT";
-    case 6: return "home";
-    case 7: return "IP";
-    case 8: return "CSP";
-    case 9: return "CSV";
-    case 10: return "CST";
-    default: return std::to_string(m);
-  }
+  if (m == 0) return "-";
+  const hal::cia402::OperationMode* mode = hal::cia402::operation_mode(m);
+  return mode ? mode->brief : std::to_string(m);
 }
 
 }  // namespace
 
-const char* nmt_name(std::int8_t n) noexcept {
-  switch (n) {
-    case drives_t::NMT_BOOT_UP: return "boot_up";
-    case drives_t::NMT_STOPPED: return "stopped";
-    case drives_t::NMT_OPERATIONAL: return "operational";
-    case drives_t::NMT_PRE_OPERATIONAL: return "pre_operational";
-    default: return "unknown";
-  }
-}
+const char* nmt_name(std::int8_t n) noexcept { return nmt_names(n).key; }
 
-const char* cia402_name(std::int8_t c) noexcept {
-  switch (c) {
-    case drives_t::CIA402_NOT_READY: return "not_ready_to_switch_on";
-    case drives_t::CIA402_SWITCH_ON_DISABLED: return "switch_on_disabled";
-    case drives_t::CIA402_READY: return "ready_to_switch_on";
-    case drives_t::CIA402_SWITCHED_ON: return "switched_on";
-    case drives_t::CIA402_OPERATION_ENABLED: return "operation_enabled";
-    case drives_t::CIA402_QUICK_STOP: return "quick_stop_active";
-    case drives_t::CIA402_FAULT_REACTION: return "fault_reaction_active";
-    case drives_t::CIA402_FAULT: return "fault";
-    default: return "unknown";
-  }
-}
+const char* cia402_name(std::int8_t c) noexcept { return cia402_names(c).key; }
 
 const char* bus_state_name(std::int8_t b) noexcept {
   switch (b) {
@@ -464,8 +407,8 @@ Lines drive_table(const drives_t* d, int width) {
     std::vector<std::string> cells = {
         std::to_string(i + 1),
         d->node_id[i] == 0 ? std::string("sim") : std::to_string(d->node_id[i]),
-        long_names ? nmt_long(d->nmt_state[i]) : nmt_short(d->nmt_state[i]),
-        long_names ? cia402_long(d->cia402_state[i]) : cia402_short(d->cia402_state[i]),
+        long_names ? nmt_names(d->nmt_state[i]).full : nmt_names(d->nmt_state[i]).brief,
+        cia402_shown(d->cia402_state[i], long_names),
         op_mode(d->mode_display[i]),
         d->homed[i] ? "yes" : "no",
         d->enabled[i] ? "yes" : "no",

@@ -79,6 +79,13 @@ class CanopenBackend final : public Backend {
 
  private:
   void note(const char* fmt, ...) noexcept __attribute__((format(printf, 2, 3)));
+  // read()'s steps: the bounded wait for this cycle's TPDOs; one drive's
+  // feedback and faults into `in`; the bus's state after the master's read
+  // `ms`; the GPIO inputs into `in` (false: GPIO read failed).
+  void wait_for_feedback() noexcept;
+  void read_drive(std::size_t i, BackendInput& in) noexcept;
+  [[nodiscard]] bool bus_ok(const hal::Status& ms) noexcept;
+  [[nodiscard]] bool read_gpio(BackendInput& in) noexcept;
   void open_devices();
 
   CanopenConfig cfg_;

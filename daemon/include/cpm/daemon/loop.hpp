@@ -46,6 +46,10 @@
 // the statistics on once a second.
 // The schedule (clock_nanosleep on an absolute time) lives in rt.hpp; tests
 // call cycle() directly, deterministic and without threads.
+// The state the phases share lives in small owners with their own
+// transitions (loop_state.hpp: the fault latch, the stop profile, the
+// segment queue, homing, jog, transfer, ...); the commands' legality and
+// transitions in loop_commands.cpp, the phases in loop.cpp.
 //
 // Spaces (as LinuxCNC's joint and teleop modes): until every actuator is
 // homed the platform's position is unknown, so each actuator is held and
@@ -81,29 +85,13 @@
 #include "cpm/daemon/backend.hpp"
 #include "cpm/daemon/config.hpp"
 #include "cpm/daemon/homing.hpp"
+#include "cpm/daemon/loop_state.hpp"
 #include "cpm/daemon/modes.hpp"
 #include "cpm/daemon/ramp.hpp"
 #include "cpm/daemon/spsc.hpp"
 #include "cpm/daemon/stream_trajectory.hpp"
 
-namespace cpm::path {
-class Plan;
-}  // namespace cpm::path
-
 namespace cpm::daemon {
-
-// A queued trajectory segment: one of the trajectory kinds, by value, or a
-// planned program (path_command_t) by pointer: the server owns the plan and
-// frees it only after the loop hands it back (retired_plans()).
-struct Segment {
-  std::int64_t id = -1;
-  std::variant<std::monostate, ctl::CircleTrajectory, ctl::PointToPoint, StreamTrajectory, const path::Plan*> traj;
-  Vec3 start = Vec3::Zero(), end = Vec3::Zero();
-  // Accept a start whose velocity or acceleration steps from the queue's end
-  // (granted by the server: the simulator, or limits.allow_velocity_step).
-  bool allow_step = false;
-  [[nodiscard]] const ctl::Trajectory* get() const noexcept;
-};
 
 // How a segment's start meets the motion it follows: the step in velocity
 // from the queue's end (m/s), which must be within what the acceleration
@@ -119,9 +107,6 @@ struct StartCheck {
     return velocity_step <= velocity_allowed && acceleration <= acceleration_allowed;
   }
 };
-// The velocity and acceleration a queued segment ends with: a stream chunk
-// the velocity it was given (the stream goes on), every other kind at rest.
-void segment_end_motion(const Segment& s, Vec3& velocity, Vec3& acceleration) noexcept;
 StartCheck check_start(const ctl::Trajectory& tr, const Vec3& end_velocity, const LimitsConfig& limits,
                        double dt) noexcept;
 
@@ -139,6 +124,10 @@ struct Settings {
   double transfer_time = 0.5;
 };
 
+// Command::jog_frame of a jog in the machine frame (= control_command_t.JOG_MACHINE);
+// 0 jogs the actuators.
+inline constexpr std::int8_t kJogMachineFrame = 1;
+
 // A command the non-real-time side has decoded and validated, for the loop.
 struct Command {
   CommandKind kind = CommandKind::none;
@@ -149,7 +138,7 @@ struct Command {
   const ctl::Machine* machine = nullptr;      // load_model
   Segment segment;                            // segment
   std::uint8_t home_axes = 0;                 // home: bit i = actuator i + 1; 0 = all, in order
-  std::int8_t jog_frame = 0;                  // jog: control_command_t.JOG_*
+  std::int8_t jog_frame = 0;                  // jog: control_command_t.JOG_* (kJogMachineFrame)
   Vec3 jog_velocity = Vec3::Zero();           // jog: m/s
   Settings settings;                          // set_params
   bool while_moving = false;                  // set_params: the parameter may change while moving
@@ -161,7 +150,7 @@ struct Ack {
   std::int64_t id = 0;
   std::int8_t source = 1, code = 0;
   bool accepted = false;
-  std::int16_t reason = 0;        // ack_t.REASON_*
+  Refusal refusal = Refusal::none;  // why not (the server maps it to ack_t.REASON_*)
   const char* message = "";
   Mode mode = Mode::init;
   std::int16_t queue_depth = 0;
@@ -187,7 +176,7 @@ using FineLatencyHistogram = std::array<std::int32_t, kFineLatencyBins>;
 
 class ControlLoop {
  public:
-  static constexpr int kQueueCapacity = 32;  // trajectory segments
+  static constexpr int kQueueCapacity = SegmentQueue::kCapacity;  // trajectory segments
   // A stream chunk ending slower than this (m/s) ends the stream; faster,
   // it owes a next chunk (stream_underrun when none has come).
   static constexpr double kStreamRestSpeed = 1e-6;
@@ -215,32 +204,32 @@ class ControlLoop {
   // after the next slot began) and how many slots it skipped.
   void record_schedule(bool overrun, std::int64_t skipped) noexcept;
   // Shut down: disable the drives on the next cycle (from any thread).
-  void request_shutdown() noexcept { shutdown_.store(true, std::memory_order_release); }
+  void request_shutdown() noexcept { requests_.shutdown(); }
   // A stop heard on the bus (any thread, lock-free): the next cycle brakes
   // a motion (moving, homing, jogging) before it takes any command. The
   // stop's ack comes through the command queue as before; this is the path
   // no other command's work can delay (docs/security.md).
-  void request_stop() noexcept { stop_requests_.fetch_add(1, std::memory_order_release); }
+  void request_stop() noexcept { requests_.stop(); }
 
   // --- queues to and from the other threads ----------------------------
-  SpscRing<Command, 16>& commands() noexcept { return commands_; }
-  SpscRing<Ack, 64>& acks() noexcept { return acks_; }
-  SpscRing<cpm_msgs::state_t, 4096>& snapshots() noexcept { return snapshots_; }
-  SpscRing<cpm_msgs::loop_stats_t, 4>& stats() noexcept { return stats_out_; }
-  SpscRing<cpm_msgs::drives_t, 8>& drives() noexcept { return drives_out_; }
+  SpscRing<Command, 16>& commands() noexcept { return ch_.commands; }
+  SpscRing<Ack, 64>& acks() noexcept { return ch_.acks; }
+  SpscRing<cpm_msgs::state_t, 4096>& snapshots() noexcept { return ch_.snapshots; }
+  SpscRing<cpm_msgs::loop_stats_t, 4>& stats() noexcept { return ch_.stats; }
+  SpscRing<cpm_msgs::drives_t, 8>& drives() noexcept { return ch_.drives; }
   // Plans the loop no longer holds (played, flushed by a stop or a fault),
   // for the server to free. Larger than the queue: it never fills.
-  SpscRing<const path::Plan*, 2 * kQueueCapacity>& retired_plans() noexcept { return retired_plans_; }
+  RetiredPlans& retired_plans() noexcept { return ch_.retired_plans; }
   // Cycles completed (the watchdog is fed only while this advances).
-  [[nodiscard]] std::int64_t cycles_done() const noexcept { return cycles_done_.load(std::memory_order_acquire); }
+  [[nodiscard]] std::int64_t cycles_done() const noexcept { return stats_.cycles_done.load(std::memory_order_acquire); }
   // Latest mode (any thread).
   [[nodiscard]] Mode mode() const noexcept { return mode_atomic_.load(std::memory_order_acquire); }
   void set_scheduling_info(bool realtime, bool memory_locked) noexcept;
 
   // Last state as the loop wrote it (test thread only, when no loop thread runs).
-  [[nodiscard]] const cpm_msgs::state_t& last_state() const noexcept { return state_; }
-  [[nodiscard]] const cpm_msgs::loop_stats_t& current_stats() const noexcept { return stats_; }
-  [[nodiscard]] const FineLatencyHistogram& fine_latency_histogram() const noexcept { return latency_us_; }
+  [[nodiscard]] const cpm_msgs::state_t& last_state() const noexcept { return pub_.state; }
+  [[nodiscard]] const cpm_msgs::loop_stats_t& current_stats() const noexcept { return stats_.sums; }
+  [[nodiscard]] const FineLatencyHistogram& fine_latency_histogram() const noexcept { return stats_.latency_us; }
   [[nodiscard]] double period() const noexcept { return dt_; }
 
  private:
@@ -270,15 +259,33 @@ class ControlLoop {
   // jogging or stopping.
   [[nodiscard]] bool drives_on() const noexcept;
   // Every actuator homed: the task space.
-  [[nodiscard]] bool all_homed() const noexcept { return homed_[0] && homed_[1] && homed_[2]; }
+  // The clamped force and its saturation flags of `f` (N) into this cycle's output.
+  void limit_force(const Vec3& f) noexcept;
 
-  // Commands, one function each where they grew (handle() dispatches).
+  // Commands (loop_commands.cpp): handle() dispatches, one function each.
+  void handle_commands(std::int64_t k) noexcept;
+  void handle(const Command& c, std::int64_t k) noexcept;
+  void handle_enable(const Command& c, std::int64_t k) noexcept;
+  void handle_disable(const Command& c, std::int64_t k) noexcept;
+  void handle_stop(const Command& c, std::int64_t k) noexcept;
+  void handle_reset(const Command& c) noexcept;
+  void handle_select(const Command& c) noexcept;
+  void handle_load(const Command& c) noexcept;
   void handle_home(const Command& c, std::int64_t k) noexcept;
   void handle_jog(const Command& c, std::int64_t k) noexcept;
   void handle_segment(const Command& c, std::int64_t k) noexcept;
   void handle_settings(const Command& c) noexcept;
+  // The answer; `retired`: a model the loop no longer uses (load_model).
+  void reply(const Command& c, Refusal refusal, const char* msg, const ctl::Machine* retired = nullptr) noexcept;
+  void accept(const Command& c, const char* msg, const ctl::Machine* retired = nullptr) noexcept {
+    reply(c, Refusal::none, msg, retired);
+  }
+  void refuse(const Command& c, Refusal why, const char* msg, const ctl::Machine* retired = nullptr) noexcept {
+    reply(c, why, msg, retired);
+  }
+  // Resynchronise on enable and reset: hold where the platform is measured.
+  void hold_where_measured() noexcept;
   void begin_axis_homing(std::int64_t k) noexcept;
-  void end_homing(bool completed, std::int64_t k) noexcept;
   // The ramp drives the reference in actuator coordinates from where the
   // reference is now (entering the actuator space, or an actuator jog).
   void ramp_in_actuators() noexcept;
@@ -300,10 +307,6 @@ class ControlLoop {
   void reference_of_actuators(const Vec3& d, const Vec3& d_dot, const Vec3& d_dd) noexcept;
   void publish_drives(std::int64_t k) noexcept;
 
-  void handle_commands(std::int64_t k) noexcept;
-  void handle(const Command& c, std::int64_t k) noexcept;
-  void reply(const Command& c, bool ok, std::int16_t reason, const char* msg,
-             const ctl::Machine* retired = nullptr) noexcept;
   // `cause`: a string literal for fault_text when the backend has no words
   // for the fault (the kinematic fault's name).
   void latch(std::uint32_t bit, int axis, double value, double limit, std::int64_t k,
@@ -314,7 +317,6 @@ class ControlLoop {
   void start_underrun_stop(const Segment& s, std::int64_t k, double late) noexcept;
   bool start_next_segment(std::int64_t k) noexcept;
   void finish_segment() noexcept;
-  void clear_slot(Segment& s) noexcept;  // empty it; a plan goes to retired_plans()
   ctl::TrajectorySample reference(std::int64_t k) noexcept;
   ctl::TrajectorySample reference_ahead(std::int64_t k, double ahead) const noexcept;
   void fill_state(std::int64_t k) noexcept;
@@ -326,109 +328,72 @@ class ControlLoop {
   ctl::Controller controller_;
   double dt_;
 
-  // Queues.
-  SpscRing<Command, 16> commands_;
-  SpscRing<Ack, 64> acks_;
-  SpscRing<cpm_msgs::state_t, 4096> snapshots_;
-  SpscRing<cpm_msgs::loop_stats_t, 4> stats_out_;
-  SpscRing<cpm_msgs::drives_t, 8> drives_out_;
-  SpscRing<const path::Plan*, 2 * kQueueCapacity> retired_plans_;
+  // Queues to and from the other threads.
+  struct Channels {
+    SpscRing<Command, 16> commands;
+    SpscRing<Ack, 64> acks;
+    SpscRing<cpm_msgs::state_t, 4096> snapshots;
+    SpscRing<cpm_msgs::loop_stats_t, 4> stats;
+    SpscRing<cpm_msgs::drives_t, 8> drives;
+    RetiredPlans retired_plans;
+  } ch_;
+  LoopRequests requests_;
 
-  // State machine.
+  // State machine (the owners' transitions: loop_state.hpp).
   Mode mode_ = Mode::init;
   std::atomic<Mode> mode_atomic_{Mode::init};
-  std::uint32_t faults_ = 0;
-  std::uint32_t first_fault_ = 0;
-  int fault_axis_ = -1;
-  double fault_value_ = 0, fault_limit_ = 0;
-  std::int64_t fault_cycle_ = -1;
-  char fault_text_[96] = {};       // the backend's words for the first fault, or its kinematic cause
+  FaultLatch fault_;
   std::int64_t enabling_since_ = 0;
   bool disable_after_stop_ = false;
-  std::atomic<bool> shutdown_{false};
-  std::atomic<std::uint64_t> stop_requests_{0};
-  std::uint64_t stops_taken_ = 0;  // stop_requests_ as last acted on (loop thread)
-  int consecutive_overruns_ = 0;
-  bool overrun_fault_pending_ = false;
-  bool backend_ok_ = true, backend_write_ok_ = true;  // last read / write: reset waits for both
+  OverrunCount overruns_;
   std::array<std::int64_t, 3> saturated_cycles_{};  // consecutive cycles at the force limit
-  // A stream ran dry: latched once the stop it started is at rest.
-  bool underrun_pending_ = false;
-  std::int64_t underrun_cycle_ = -1;
-  double underrun_speed_ = 0;
+  Underrun underrun_;
 
-  // Trajectory queue (owned by the loop): a ring of segments.
-  std::unique_ptr<std::array<Segment, kQueueCapacity>> queue_;
-  int q_head_ = 0, q_count_ = 0;  // q_head_ = the playing (or next) segment
-  bool playing_ = false;
-  std::int64_t segment_start_cycle_ = 0;
-  Vec3 hold_ = Vec3::Zero();      // hold point = end of the queue when idle
-  Vec3 queue_end_ = Vec3::Zero();
-  Vec3 queue_end_v_ = Vec3::Zero(), queue_end_a_ = Vec3::Zero();  // the motion the queue ends with
+  // The reference's sources.
+  SegmentQueue queue_{ch_.retired_plans};
+  SegmentTracking tracking_;
   std::int32_t program_line_ = 0;  // of the playing plan (state_t.program_line)
-  // Stop profile.
-  Vec3 stop_p0_ = Vec3::Zero(), stop_dir_ = Vec3::Zero();
-  double stop_v0_ = 0, stop_T_ = 0;
-  double stop_t0_ = 0;  // s of the stop profile already elapsed at stop_start_cycle_
-  std::int64_t stop_start_cycle_ = 0;
-  // Tracking of the playing segment.
-  double seg_sum_e2_ = 0, seg_max_e_ = 0;
-  std::int32_t seg_n_ = 0;
-  std::int64_t last_seg_id_ = -1;
-  double last_seg_rmse_ = 0, last_seg_max_ = 0;
-  std::int32_t last_seg_n_ = 0;
-
-  // Homing (homing.hpp). The offset is added to the backend's positions:
-  // the zero each actuator's homing found (m); an absolute actuator's is 0.
-  std::array<bool, 3> homed_{};
-  Vec3 offset_ = Vec3::Zero();
-  AxisHoming axis_homing_;
-  std::array<int, 3> home_queue_{};  // the actuators to home, in order
-  int home_count_ = 0, home_next_ = 0;
-  int homing_axis_ = -1;             // the one homing now, -1 none
-  AxisHoming::Request homing_request_{};
+  Vec3 hold_ = Vec3::Zero();       // hold point = end of the queue when idle
+  StopProfile stop_;
+  HomingSequence homing_;
   // The ramp (ramp.hpp): the reference in actuator space, and of any jog.
-  Ramp ramp_;
-  bool ramp_active_ = false;        // the reference comes from the ramp
-  bool ramp_task_ = false;          // its coordinates: machine frame (true) or actuators
-  // Jogging.
-  std::int8_t jog_frame_ = 0;
-  Vec3 jog_target_ = Vec3::Zero();  // commanded velocity (m/s), zero after the deadman
-  // The box of the actuator jog taken last once homed (actuator_jog_box).
-  Vec3 actuator_box_lo_ = Vec3::Zero(), actuator_box_hi_ = Vec3::Zero();
-  bool actuator_box_ready_ = false;
-  std::int64_t jog_deadline_ = 0;   // the cycle the last jog command stops holding
-  // A law switched while the drives hold the platform: the force difference
-  // at the switch, faded out over transfer_time from transfer_start_.
-  bool transfer_pending_ = false;
-  bool actuator_law_ = false;       // the actuator law ran last cycle
-  Vec3 transfer_force_ = Vec3::Zero();
-  Vec3 transfer_now_ = Vec3::Zero();
-  std::int64_t transfer_start_ = 0;
-  // The drives' view (drives_t), every rate/10 cycles.
-  BackendDiagnostics diagnostics_{};
-  cpm_msgs::drives_t drives_msg_{};
-
-  // Per-cycle data.
-  BackendInput in_;
-  BackendOutput out_;
-  ctl::ControlInput cin_;
-  ctl::ControlOutput cout_;
+  struct RampReference : Ramp {
+    bool active = false;  // the reference comes from the ramp
+    bool task = false;    // its coordinates: machine frame (true) or actuators
+  } ramp_;
+  Jog jog_;
+  Transfer transfer_;
   ctl::ControllerState ctl_state_;  // the commands sent since enable (actuation delay)
-  ctl::TaskState est_;
-  ctl::TrajectorySample ref_;
-  Vec3 d_ref_ = Vec3::Zero();
-  Vec3 raw_ = Vec3::Zero();        // the backend's actuator positions, before the homing offset (m)
-  bool estimate_ok_ = false;
+
   // What one phase hands the later ones within a cycle.
-  BackendResult read_result_ = BackendResult::ok;
-  Status estimate_status_, ik_status_, control_status_;
-  bool powered_ = false;  // the drives were on when the controller ran
-  cpm_msgs::state_t state_{};
-  cpm_msgs::loop_stats_t stats_{};
-  FineLatencyHistogram latency_us_{};  // series 0 again, in 1 us bins
-  std::int64_t dropped_ = 0;
-  std::atomic<std::int64_t> cycles_done_{0};
+  struct CycleData {
+    BackendInput in;
+    BackendOutput out;
+    ctl::ControlInput cin;
+    ctl::ControlOutput cout;
+    ctl::TaskState est;
+    ctl::TrajectorySample ref;
+    Vec3 d_ref = Vec3::Zero();
+    Vec3 raw = Vec3::Zero();  // the backend's actuator positions, before the homing offset (m)
+    bool estimate_ok = false;
+    BackendResult read_result = BackendResult::ok;
+    bool backend_ok = true, backend_write_ok = true;  // last read / write: reset waits for both
+    Status estimate_status, ik_status, control_status;
+    bool powered = false;  // the drives were on when the controller ran
+  } io_;
+  // What goes out: the state snapshot, the drives' view (every rate/10 cycles).
+  struct Publication {
+    cpm_msgs::state_t state{};
+    BackendDiagnostics diagnostics{};
+    cpm_msgs::drives_t drives{};
+    std::int64_t dropped = 0;  // snapshots the full ring lost
+  } pub_;
+  // The timing statistics (add_sample, record_latency, finish_cycle).
+  struct Statistics {
+    cpm_msgs::loop_stats_t sums{};
+    FineLatencyHistogram latency_us{};  // series 0 again, in 1 us bins
+    std::atomic<std::int64_t> cycles_done{0};
+  } stats_;
 };
 
 }  // namespace cpm::daemon

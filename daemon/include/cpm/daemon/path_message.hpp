@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include <cpm_msgs/ack_t.hpp>
 #include <cpm_msgs/path_command_t.hpp>
 
 #include "cpm/path/path.hpp"
@@ -22,7 +23,7 @@ inline constexpr int kMaxProgramSegments = 100000;   // segments per program (10
 // limits.velocity and dwells (s): the plan holds a knot per 1 ms (32 bytes:
 // 115 MB for an hour) in memory that cpmd locks.
 inline constexpr double kMaxProgramDuration = 3600.0;
-inline constexpr std::int8_t kPathAckSource = 3;     // ack_t.source of path_command_t's acks
+inline constexpr std::int8_t kPathAckSource = cpm_msgs::ack_t::SOURCE_PATH;  // of path_command_t's acks
 
 // The queue's segments as chunks of program `program` (ids, session, seq and
 // the MAC are the sender's to set).

@@ -12,6 +12,7 @@
 #include <map>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <string>
 #include <thread>
 #include <vector>
@@ -82,6 +83,13 @@ Validation validate_segment(const cpm_msgs::trajectory_command_t& cmd, const Vec
 std::string bad_number(const cpm_msgs::trajectory_command_t& cmd);
 std::string bad_number(const cpm_msgs::control_command_t& cmd);
 std::string bad_number(const cpm_msgs::path_command_t& cmd);
+
+// ack_t.source of the acks of control and trajectory commands (path_message.hpp: of paths).
+inline constexpr std::int8_t kControlSource = cpm_msgs::ack_t::SOURCE_CONTROL;
+inline constexpr std::int8_t kTrajectorySource = cpm_msgs::ack_t::SOURCE_TRAJECTORY;
+
+// The ack_t.REASON_* code of the loop's refusal (REASON_NONE for none).
+std::int16_t ack_reason(Refusal r) noexcept;
 
 // Whether a law and gains can hold the machine as cpmd runs it (the loop's
 // rate, the velocity its backend gives, limits.following_error for a law
@@ -177,7 +185,29 @@ class Server {
   // replay: counted always, answered within security.refusal_acks_per_second.
   void refuse_limited(std::int64_t id, std::int8_t source, std::int8_t code, std::int16_t reason,
                       const std::string& message);
+  // To the loop (false: its queue is full, answered REASON_BUSY, a model it
+  // carried freed); what the loop's ack settles is recorded as pending.
   bool send(Command& c);
+  // The server's side of a command the loop may still refuse: a model, a
+  // law and gains, limits, kept by the command's id until its ack
+  // (record_pending, when sent; settle_pending, when answered).
+  void record_pending(const Command& c);
+  void settle_pending(const Ack& a);
+  // on_control's steps: authorize (false: refused, or a session command
+  // answered here), then decode into the loop's command or a refusal, then send.
+  struct Refused {
+    std::int16_t reason = 0;  // ack_t.REASON_*
+    std::string why;
+  };
+  bool authorize_control(const std::uint8_t* raw, std::size_t size, const cpm_msgs::control_command_t& m);
+  // Fills `c`; c.kind stays none when nothing goes to the loop now (a model
+  // load: the loader's thread answers).
+  std::optional<Refused> decode_control(const cpm_msgs::control_command_t& m, Command& c);
+  std::optional<Refused> decode_home(const cpm_msgs::control_command_t& m, Command& c) const;
+  std::optional<Refused> decode_set_param(const cpm_msgs::control_command_t& m, Command& c) const;
+  std::optional<Refused> decode_jog(const cpm_msgs::control_command_t& m, Command& c) const;
+  std::optional<Refused> decode_select(const cpm_msgs::control_command_t& m, Command& c) const;
+  std::optional<Refused> decode_load_model(const cpm_msgs::control_command_t& m);
   // The operator whose key made the message's MAC; nullptr (after the
   // counted, rate-limited refusal "not authorized") for anyone else.
   const Operator* authenticate(const OperatorTable* table, const std::uint8_t* raw, std::size_t size,

@@ -7,6 +7,7 @@
 #include <cstdint>
 
 #include "cpm/hal/can.hpp"
+#include "cpm/hal/names.hpp"
 
 namespace cpm::hal::canopen {
 
@@ -27,6 +28,12 @@ inline constexpr std::uint32_t kSdoRxBase = 0x600;    // client -> server
 inline constexpr std::uint32_t kHeartbeatBase = 0x700;
 inline constexpr std::uint32_t kCobIdInvalid = 0x80000000U;  // bit 31 of a PDO COB-ID: PDO not valid
 
+// Communication objects (CiA 301 §7.5.2) the master sets up in each drive.
+inline constexpr std::uint16_t kDeviceType = 0x1000;              // u32: bits 0-15 the device profile
+inline constexpr std::uint16_t kConsumerHeartbeatTime = 0x1016;   // u32 array: node id << 16 | timeout ms
+inline constexpr std::uint16_t kProducerHeartbeatTime = 0x1017;   // u16, ms
+inline constexpr std::uint32_t kProfileDrive = 402;               // kDeviceType's profile of a CiA 402 drive
+
 constexpr bool valid_node_id(int id) noexcept { return id >= 1 && id <= 127; }
 
 // ---- NMT
@@ -45,7 +52,11 @@ enum class NmtState : std::uint8_t {
   preoperational = 0x7F,
   unknown = 0xFF,            // nothing heard yet
 };
-const char* nmt_state_name(NmtState s) noexcept;
+// A state's names, one row per state (the table in canopen.cpp); the
+// unknown state's row for a value outside the enum.
+using NmtNames = Names<NmtState>;
+const NmtNames& names(NmtState s) noexcept;
+const char* nmt_state_name(NmtState s) noexcept;  // names(s).full
 CanFrame make_nmt(NmtCommand c, std::uint8_t node) noexcept;   // node 0: all nodes
 CanFrame make_heartbeat(std::uint8_t node, NmtState s) noexcept;
 CanFrame make_sync() noexcept;

@@ -6,6 +6,8 @@
 
 #include <cstdint>
 
+#include "cpm/hal/names.hpp"
+
 namespace cpm::hal::cia402 {
 
 // Object indices of the profile used here.
@@ -25,11 +27,23 @@ inline constexpr std::uint16_t kTorqueActual = 0x6077;       // i16, per mille o
 inline constexpr std::uint16_t kInterpolationPeriod = 0x60C2;  // rec: sub1 u8 value, sub2 i8 exponent (s)
 inline constexpr std::int8_t kModeCyclicSyncTorque = 10;     // CST
 inline constexpr std::int8_t kModeHoming = 6;
+// Modes of operation (0x6060, shown in 0x6061), one row per mode of the
+// standard (the table in cia402.cpp).
+struct OperationMode {
+  std::int8_t code;
+  const char* brief;  // "CST"
+  const char* full;   // "cyclic synchronous torque"
+};
+// nullptr for a code the standard does not name (0: no mode yet; below 0:
+// the manufacturer's).
+const OperationMode* operation_mode(std::int8_t code) noexcept;
 // Homing mode objects.
 inline constexpr std::uint16_t kHomeOffset = 0x607C;         // i32, position units
 inline constexpr std::uint16_t kHomingMethod = 0x6098;       // i8
 inline constexpr std::uint16_t kHomingSpeeds = 0x6099;       // rec: sub1 search for switch, sub2 search for zero (u32, velocity units)
 inline constexpr std::uint16_t kHomingAcceleration = 0x609A; // u32, acceleration units (velocity units per s)
+// Controlword bit 7: fault reset, acted on at its rising edge.
+inline constexpr std::uint16_t kCwFaultReset = 1u << 7;
 // Controlword bit 4 in homing mode: homing operation start (rising edge starts, 0 interrupts).
 inline constexpr std::uint16_t kCwHomingStart = 1u << 4;
 // Statusword bits 12, 13 in homing mode (bit 10: target reached).
@@ -60,7 +74,11 @@ enum class State : std::uint8_t {
   fault,
   unknown,  // a statusword that matches no row of the table
 };
-const char* state_name(State s) noexcept;
+// A state's names, one row per state (the table in cia402.cpp; `full` as
+// the standard says it); the unknown state's row for a value outside the enum.
+using StateNames = Names<State>;
+const StateNames& names(State s) noexcept;
+const char* state_name(State s) noexcept;  // names(s).full
 
 // The state a statusword reports (CiA 402 statusword table: bits 0-3, 5, 6).
 State decode_statusword(std::uint16_t sw) noexcept;
