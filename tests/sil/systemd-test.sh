@@ -25,6 +25,6 @@ mkdir -p "$T/lib"
 ldd "$vd" | awk '/libgomp/ { print $3 }' | xargs -r cp -t "$T/lib"
 CONF=$SIL_DIR/../../config
 rc=0
-bash "$SIL_DIR/systemd-vm.sh" --timeout "${CPM_SIL_TIMEOUT:-900}" --deb "$deb" --file "$vd" --file "$T/lib" \
+bash "$SIL_DIR/systemd-vm.sh" --timeout "${CPM_SIL_TIMEOUT:-1100}" --deb "$deb" --file "$vd" --file "$T/lib" \
   --file "$CONF/sil.yaml" --file "$CONF/machine-sil.yaml" -- "$SIL_DIR/systemd-checks.sh" "$@" || rc=$?
 exit $rc

@@ -71,9 +71,13 @@ customize_rootfs() {  # mmdebstrap customize hook; $1 is the root
            systemd-timesyncd.service systemd-networkd-wait-online.service e2scrub_reap.service \
            e2scrub_all.timer fstrim.timer dpkg-db-backup.timer apt-daily.timer apt-daily-upgrade.timer \
            man-db.timer systemd-tmpfiles-clean.timer systemd-update-utmp.service \
-           systemd-update-utmp-runlevel.service; do
+           systemd-update-utmp-runlevel.service getty-static.service dev-hugepages.mount \
+           modprobe@configfs.service modprobe@dm_mod.service modprobe@drm.service modprobe@efi_pstore.service \
+           modprobe@fuse.service modprobe@loop.service systemd-pstore.service; do
     ln -sf /dev/null "$r/etc/systemd/system/$u"
   done
+  # LCM asks for a 4 MB receive buffer (lcm-proj.github.io/multicast_setup.html).
+  echo 'net.core.rmem_max = 4194304' > "$r/etc/sysctl.d/60-cpm-lcm.conf"
   cat > "$r/usr/local/sbin/cpm-sil-check" <<'EOF'
 #!/bin/sh
 # Mount the run folder, run its check script, leave the exit code in /sil/rc
