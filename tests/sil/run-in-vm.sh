@@ -332,7 +332,10 @@ prepare_vm() {
 # export_parts DIR: the parts of the image, for a guest with its own root
 # (tests/sil/systemd-vm.sh): vmlinux, busybox, the modules with their order.
 export_parts() {
-  local dir=$1 x ko base
+  local dir=$1 x ko base stamp
+  # Done already for this kernel, these modules and this gpio-sim build?
+  stamp="$KREL $KVER ${GUEST_MODULES[*]} $(stat -c %Y "$KDIR/vmlinux" "$KDIR/gpio-sim.ko" | tr '\n' ' ')"
+  [ "$(cat "$dir/.stamp" 2>/dev/null)" != "$stamp" ] || return 0
   x=$(mktemp -d "$CACHE_ROOT/.x.XXXXXX")
   dpkg -x "$KDIR"/debs/linux-image-"$KREL"_*.deb "$x"
   MOD_PATH=(); MOD_DONE=(); MOD_ORDER=()
@@ -347,6 +350,7 @@ export_parts() {
   cp "$KDIR/gpio-sim.ko" "$dir/modules/"; echo gpio-sim.ko >> "$dir/modules/order"
   cp "$KDIR/vmlinux" "$dir/vmlinux"
   cp "$(busybox_bin)" "$dir/busybox"
+  echo "$stamp" > "$dir/.stamp"
   rm -rf "$x"
 }
 

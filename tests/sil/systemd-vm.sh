@@ -141,9 +141,6 @@ prepare() {
   done
   mkdir -p "$CACHE_ROOT"
   local parts=$CACHE_ROOT/systemd-parts
-  # The kernel's parts: the SIL runner's image, plus what mounts an ext4 root.
-  bash "$SIL_DIR/run-in-vm.sh" --export "$parts.tmp" crc32c_generic virtio_blk ext4 >&2 \
-    || die "the SIL runner could not prepare the kernel and modules"
   local pkgs; pkgs=$(printf '%s\n' "${BASE_PACKAGES[@]}" $(deb_depends) | sort -u | tr '\n' ' ')
   local versions
   versions=$(apt-cache policy $pkgs 2>/dev/null | awk '/^[^ ]/ { p = $1 } /Candidate:/ { print p, $2 }')
@@ -154,7 +151,10 @@ prepare() {
   IMG_DIR=$CACHE_ROOT/systemd-$key
   exec 8>"$CACHE_ROOT/.systemd-lock"
   flock 8
-  rm -rf "$parts"; mv "$parts.tmp" "$parts"
+  # The kernel's parts: the SIL runner's image, plus what mounts an ext4 root
+  # (copied once; again only when the kernel or gpio-sim change).
+  bash "$SIL_DIR/run-in-vm.sh" --export "$parts" crc32c_generic virtio_blk ext4 >&2 \
+    || die "the SIL runner could not prepare the kernel and modules"
   if [ ! -f "$IMG_DIR/rootfs.img" ]; then
     local t0=$SECONDS x
     x=$(mktemp -d "$CACHE_ROOT/.sd.XXXXXX")
