@@ -40,8 +40,10 @@ set(CPACK_DEBIAN_CPMD_PACKAGE_NAME cpmd)
 set(CPACK_DEBIAN_CPMD_PACKAGE_SECTION misc)
 # The libraries cpmd and cpm link, with the versions they need: dpkg-shlibdeps.
 set(CPACK_DEBIAN_CPMD_PACKAGE_SHLIBDEPS ON)
-# postinst makes the user with systemd-sysusers, else adduser.
-set(CPACK_DEBIAN_CPMD_PACKAGE_DEPENDS "systemd | adduser")
+# postinst makes the user with systemd-sysusers, else adduser. procps: the
+# unit's ExecReload is /bin/kill, which a minimal Debian lacks (a reload under
+# systemd failed there with "Command /bin/kill is not executable").
+set(CPACK_DEBIAN_CPMD_PACKAGE_DEPENDS "systemd | adduser, procps")
 set(CPACK_DEBIAN_CPMD_PACKAGE_SUGGESTS "can-utils, gpiod")
 set(CPACK_COMPONENT_CPMD_DESCRIPTION
     "motion controller for the 3-PRRR Cartesian parallel manipulator

@@ -23,6 +23,7 @@ packages=(
   libgpiod-dev             # GPIO (v1 API, libgpiod 1.6)
   clang libclang-rt-14-dev # fuzz/: libFuzzer with ASan/UBSan (clang 14 of bookworm)
   qemu-system-x86 xz-utils # SIL tests: boots Debian's kernel (vcan, gpio-sim) when the host has none
+  mmdebstrap e2fsprogs     # SIL test sil.systemd: a bookworm root file system for cpmd under systemd as PID 1
   rt-tests                 # bench/run.sh: cyclictest, the kernel's own wake-up latency beside cpmd's
   python3-scipy            # bench/run.sh: SciPy's least_squares on Kim's ball-bar problem beside cpmd's solver
   linuxcnc-uspace          # bench/run.sh: LinuxCNC's servo thread and motion controller (lineardeltakins) beside cpmd's loop

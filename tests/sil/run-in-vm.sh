@@ -16,6 +16,11 @@ usage() {
   cat <<'EOF'
 usage: run-in-vm.sh [options] [--] COMMAND [ARG...]
        run-in-vm.sh --prepare          download and build the VM image only
+       run-in-vm.sh --export DIR [MODULE...]
+                                       prepare, then copy into DIR the kernel (vmlinux),
+                                       busybox, and modules/ (the guest's modules, MODULE...
+                                       and their dependencies, gpio-sim.ko; load order in
+                                       modules/order): another image's parts (systemd-vm.sh)
 
 options:
   --auto            run on the host if it has what --needs asks, else in the VM (default)
@@ -67,6 +72,7 @@ KEEP=${CPM_SIL_KEEP:-0}
 NEEDS=can,gpio
 RW_DIRS=()
 PREPARE_ONLY=0
+EXPORT_DIR=""
 
 # Kernel modules the guest needs; their dependencies are resolved from the
 # modules' own .modinfo, so the load order follows the pinned kernel.
@@ -83,6 +89,7 @@ while [ $# -gt 0 ]; do
     --rw) RW_DIRS+=("$(cd "${2:?--rw DIR}" && pwd)") || die "--rw: no folder $2"; shift 2 ;;
     --keep) KEEP=1; shift ;;
     --prepare) PREPARE_ONLY=1; shift ;;
+    --export) PREPARE_ONLY=1; MODE=vm; EXPORT_DIR=${2:?--export DIR}; shift 2; break ;;
     -h|--help) usage; exit 0 ;;
     --) shift; break ;;
     -*) die "unknown option $1 (see --help)" ;;
@@ -97,6 +104,7 @@ for n in "${_needs[@]}"; do
   case $n in can) need_can=1 ;; gpio) need_gpio=1 ;; "") ;; *) die "--needs: unknown '$n' (can, gpio)" ;; esac
 done
 if [ $PREPARE_ONLY = 0 ] && [ $# -eq 0 ]; then usage >&2; exit 125; fi
+if [ -n "$EXPORT_DIR" ]; then GUEST_MODULES+=("$@"); set --; fi
 
 # --- host path ---------------------------------------------------------------
 host_can_ok() {
@@ -321,6 +329,31 @@ prepare_vm() {
   flock -u 9
 }
 
+# export_parts DIR: the parts of the image, for a guest with its own root
+# (tests/sil/systemd-vm.sh): vmlinux, busybox, the modules with their order.
+export_parts() {
+  local dir=$1 x ko base stamp
+  # Done already for this kernel, these modules and this gpio-sim build?
+  stamp="$KREL $KVER ${GUEST_MODULES[*]} $(stat -c %Y "$KDIR/vmlinux" "$KDIR/gpio-sim.ko" | tr '\n' ' ')"
+  [ "$(cat "$dir/.stamp" 2>/dev/null)" != "$stamp" ] || return 0
+  x=$(mktemp -d "$CACHE_ROOT/.x.XXXXXX")
+  dpkg -x "$KDIR"/debs/linux-image-"$KREL"_*.deb "$x"
+  MOD_PATH=(); MOD_DONE=(); MOD_ORDER=()
+  while IFS= read -r ko; do
+    base=$(basename "$ko" .ko); MOD_PATH[${base//-/_}]=$ko
+  done < <(find "$x/lib/modules/$KREL" -name '*.ko')
+  for m in "${GUEST_MODULES[@]}"; do mod_resolve "$m"; done
+  rm -rf "$dir"; mkdir -p "$dir/modules"
+  for ko in "${MOD_ORDER[@]}"; do
+    cp "$ko" "$dir/modules/"; basename "$ko" >> "$dir/modules/order"
+  done
+  cp "$KDIR/gpio-sim.ko" "$dir/modules/"; echo gpio-sim.ko >> "$dir/modules/order"
+  cp "$KDIR/vmlinux" "$dir/vmlinux"
+  cp "$(busybox_bin)" "$dir/busybox"
+  echo "$stamp" > "$dir/.stamp"
+  rm -rf "$x"
+}
+
 # --- VM path -----------------------------------------------------------------
 quote_cmd() { local a s=""; for a in "$@"; do s+=" $(printf '%q' "$a")"; done; echo "${s# }"; }
 
@@ -403,7 +436,9 @@ run_in_vm() {
 # --- main --------------------------------------------------------------------
 if [ $PREPARE_ONLY = 1 ]; then
   if [ "$MODE" = auto ] && host_ok; then note "the host provides --needs $NEEDS; no VM image needed"; exit 0; fi
-  t0=$SECONDS; prepare_vm; note "VM image ready in $KDIR ($((SECONDS - t0)) s)"; exit 0
+  t0=$SECONDS; prepare_vm; note "VM image ready in $KDIR ($((SECONDS - t0)) s)"
+  [ -z "$EXPORT_DIR" ] || export_parts "$EXPORT_DIR"
+  exit 0
 fi
 case $MODE in
   host) host_ok || die "--host: this host cannot provide --needs $NEEDS (no vcan module, or no gpio-sim / not root)"
