@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Calibration solve times: Kim's 32-point ball-bar problem (LM + the
 // identifiability analysis), and a 25-pose full-position problem.
 #include <benchmark/benchmark.h>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Benchmarks of the real-time core: one control step and one plant step.
 // Speed is shown here, never asserted by a timed test.
 #include <benchmark/benchmark.h>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // One control cycle of cpmd (read sim backend, estimate, trajectory, IK,
 // computed torque, safety, write, publish) while playing Elkady's circle.
 // The wall-clock figures of a 60 s run at 1 kHz come from daemon/latency-run.sh.

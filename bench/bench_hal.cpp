@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // One master cycle (read + write for three drives in operation enabled) on
 // the fake bus. The virtual drives answer between cycles, outside the timing.
 #include <benchmark/benchmark.h>

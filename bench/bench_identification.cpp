@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Speed of the diagnosis: a motion log at 1 kHz (60 s: the issue's case;
 // 5 s: bench/run.sh --quick), the whole dynamic library (every effect on
 // every axis, the cogging wavelength and Stribeck speed searched). Issue 4

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Speed of the measurement-file reader and writer: a 60 s, 1 kHz motion log
 // (60 000 rows, 13 columns of full-precision numbers) must read well under 1 s.
 #include <benchmark/benchmark.h>

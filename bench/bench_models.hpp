@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The machine model the benchmarks time the control cycle on: what a model
 // carries after the README's workflow (calibrate, diagnose, fit), so that a
 // cycle pays for every branch a calibrated machine takes, not the nominal

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Speed of the path planner (issue 18): a 10 000-segment program must plan
 // in well under 1 s; and of one real-time sample of the prepared plan,
 // which must not depend on the program's length (that is tested by

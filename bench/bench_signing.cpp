@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Signed state (docs/security.md, "Signed state"): what cpmd's publishing
 // thread pays per message it seals, and what a client pays to check one.
 // Beside the cycle's cost (bench_daemon.cpp): sealing is not in the cycle.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // cpm_perf: the figures Google Benchmark's per-iteration means cannot give.
 //
 //   cpm_perf --source DIR [--cycles N] [--repeat R] [--kim-problem FILE] [--json FILE]  (--help: each option)

@@ -1,4 +1,5 @@
 #!/usr/bin/python3
+# SPDX-License-Identifier: Apache-2.0
 """The table and JSON of bench/run.sh, from the raw outputs of one run.
 
     report.py --dir RAW --json OUT --quick 0|1 --seconds S --segments K --priority P --interval-us I

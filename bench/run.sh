@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: Apache-2.0
 # The performance figures of docs/performance.md, measured side by side with
 # their references in one run, printed as a table and written as JSON.
 #

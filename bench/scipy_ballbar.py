@@ -1,4 +1,5 @@
 #!/usr/bin/python3
+# SPDX-License-Identifier: Apache-2.0
 """Kim's 32-point ball-bar calibration solved by SciPy, the reference for cpmd's own solver.
 
 Reads the problem cpm_perf exported (actuator readings, bar lengths, nominal

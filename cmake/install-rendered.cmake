@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 # Runs at install time (install(CODE) in cmake/install.cmake), with
 # CMAKE_INSTALL_PREFIX as installed into: places the files whose text names
 # installed paths. /etc follows GNUInstallDirs' rules: prefix /usr -> /etc,

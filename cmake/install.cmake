@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 # What `cmake --install` and the packages put where (docs/install.md).
 #
 # Files whose text names installed paths (the unit's ExecStart, the

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 # The Debian packages, built by CPack from the install rules (docs/install.md):
 #   cd build && cpack -G DEB       -> cpmd_VERSION-1_ARCH.deb, cpmd-dev_VERSION-1_ARCH.deb
 # cpmd: the programs, the unit, /etc/cpmd (conffiles), the .lcm definitions,

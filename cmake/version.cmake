@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 # The build's version, for --version, the package and the CMake package.
 # CPM_VERSION: `git describe --tags --dirty` when the source is a git clone
 # with git on the path (tag v0.2.0, 14 commits on: 0.2.0-14-g1b1cebc; no

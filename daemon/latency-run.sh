@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: Apache-2.0
 # The loop's timing over a 60 s run at 1 kHz (issue 5): cpmd on the simulator
 # backend, the machine enabled and running circles the whole time, then the
 # wake-up latency and per-phase times as `cpm stats` prints them.

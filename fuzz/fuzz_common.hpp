@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Shared by the fuzz targets: what counts as a finding besides a sanitizer
 // report. A parser or validator may refuse its input only with the project's
 // error types (cpm::Error, or hal::Error in the hardware layer), whose

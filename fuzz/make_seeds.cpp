@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Writes the binary seed inputs of the fuzz targets whose inputs are not
 // text (LCM messages, frame scripts) into fuzz/corpus/<target>/seed-*:
 //   build/fuzz/fuzz_make_seeds fuzz/corpus

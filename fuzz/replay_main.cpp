@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // A driver for the fuzz targets without libFuzzer (the g++ build): runs
 // LLVMFuzzerTestOneInput once on every file named, or in every folder named.
 // CTest uses it to replay the committed corpora as regression tests.

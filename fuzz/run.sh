@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: Apache-2.0
 # Build and run the libFuzzer targets of fuzz/targets (docs/fuzzing.md).
 #   fuzz/run.sh build                     configure and build every fuzzer with clang
 #   fuzz/run.sh run TARGET [SECONDS]      fuzz TARGET for SECONDS (default 20) from its corpus

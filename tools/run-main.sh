@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: Apache-2.0
 # The main job: set up, build, start cpmd on its simulator backend, run the
 # paper's circle through `cpm`, print the tracking error, stop.
 set -euo pipefail

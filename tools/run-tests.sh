@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: Apache-2.0
 # Set up, build and run every test.
 set -euo pipefail
 cd "$(dirname "$0")/.."

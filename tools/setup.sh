@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: Apache-2.0
 # Install what cpmd needs to build and test, from Debian bookworm's packages.
 # Idempotent and quiet when everything is already there.
 set -euo pipefail

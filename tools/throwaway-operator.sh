@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 # Sourced by the demo scripts (tools/run-main-daemon.sh, daemon/latency-run.sh):
 # a throw-away operator for one run against the simulator (docs/security.md).
 # Makes a fresh key under a private temporary directory, known to cpmd through

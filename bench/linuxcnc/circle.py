@@ -1,4 +1,5 @@
 #!/usr/bin/python3
+# SPDX-License-Identifier: Apache-2.0
 # The "display" of cpm-ldelta.ini (bench/run.sh): no GUI; it does what an
 # operator would (e-stop reset, machine on, home, MDI circles) and what the
 # comparison needs:

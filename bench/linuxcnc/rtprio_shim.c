@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 /* LD_PRELOADed into LinuxCNC's rtapi_app by run-linuxcnc.sh. rtapi_app
  * raises RLIMIT_RTPRIO to unlimited before it takes its POSIX real-time
  * path, and falls back to SCHED_OTHER when that fails. In a container

@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: Apache-2.0
 # LinuxCNC's motion controller with lineardeltakins on a 1 kHz servo thread
 # (cpm-ldelta.ini), real-time, circling for SECONDS, its servo thread at
 # PRIORITY on CPU, every period's timedelta and function times in OUT.

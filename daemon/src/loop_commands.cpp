@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The loop's commands (as LinuxCNC keeps command.c apart from control.c):
 // each one's legality in the current mode and its transition, answered
 // with an Ack. Called from apply_commands() in the cycle: real-time, no

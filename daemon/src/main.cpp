@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // cpmd: the motion controller daemon. See docs/daemon.md and docs/security.md.
 //   cpmd --config FILE [--check] [--duration S] [--stats-json FILE] [--loop-cpu N] [--operators DIR] [--version]
 #include <fcntl.h>

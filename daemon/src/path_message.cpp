@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Programs as path_command_t chunks and back (path_message.hpp).
 #include "cpm/daemon/path_message.hpp"
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The server's path-queue hooks (server.hpp): a program's chunks are
 // authenticated and sessioned as trajectory commands are, assembled and
 // planned by the PathService, and the planned program goes to the loop as

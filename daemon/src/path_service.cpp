@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The path queue's server side (path_service.hpp).
 #include "path_service.hpp"
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The path queue's server side (docs/path.md): programs assembled from
 // path_command_t chunks, each planned whole in a worker thread (not the LCM
 // thread, which must keep the state flowing and hear a stop; not the

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // An example client of cpmd: reads one state message from a running cpmd and
 // prints the platform's position, the mode, the faults and the tracking error
 // of the last finished segment, and whether it was verified as cpmd's.

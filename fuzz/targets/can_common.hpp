@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Frame scripts for the CAN targets: each record is
 //   op (u8), node (u8), len (u8), len % 9 data bytes
 // op bits 0-2 pick the COB-ID family (kIds below, + node % 5, so node 4 is a

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The virtual CiA 402 drive's handlers (NMT, SDO server with expedited and
 // segmented transfers, RPDOs with the mapping the SDOs set, SYNC, master
 // heartbeat) on the fake bus, fed by a hostile master port. Oracle: nothing

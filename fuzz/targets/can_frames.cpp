@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The pure decoders of hal on one arbitrary frame: error frames, EMCY and
 // its text, TPDO unpacking, statusword/controlword decoding, SDO abort text.
 // Oracle: the texts are NUL-terminated within their buffers and never

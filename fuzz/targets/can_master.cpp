@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The master's frame handlers (TPDO, EMCY, heartbeat, SDO answers, NMT and
 // SYNC from a stranger, error frames) against a started master with three
 // virtual drives on the fake bus (tests/hal/rig.hpp), while it runs its

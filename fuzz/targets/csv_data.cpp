@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // io::parse_data on arbitrary text: the three measurement-file kinds of
 // docs/data-formats.md (the `# kind = ...` line picks the kind, so the corpus
 // holds all three). Oracle: refused only with cpm::Error; what is accepted

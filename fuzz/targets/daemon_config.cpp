@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // cpmd's YAML configuration (daemon::parse_config) on arbitrary text.
 // Oracle: refused only with cpm::Error or hal::Error (the CANopen section is
 // checked by hal::validate); an accepted configuration has the ranges the

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // What cpmd reads from its operators directory (docs/security.md): a key
 // file's bytes (daemon::parse_key) and roles.yaml (daemon::parse_roles). The
 // first input byte picks which. Oracle: only cpm::Error escapes; a key

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The bytes of an ack_t as a client receives them on CPMD_ACK, where anyone
 // on the bus may publish (docs/security.md): daemon::decode_ack, which the
 // client uses instead of lcm-gen's typed decoding. Oracle: it never throws;

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // A whole command session against a running loop: the bytes are a script of
 // LCM messages (control and trajectory, raw bytes as a commander would send
 // them) interleaved with control cycles of the loop on the simulator

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The bytes of a trajectory_command_t as they arrive on CPMD_TRAJ, decoded as
 // the daemon's LCM thread decodes them, then daemon::validate_segment (the
 // check every segment passes before the loop sees it). Oracle:

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // io::parse_model_file on arbitrary YAML. Oracle: refused only with
 // cpm::Error (never a yaml-cpp exception); an accepted model prepares a
 // ctl::Machine or is refused by it with cpm::Error, and renders to text that

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The SDO client (the master's side of every configuration transfer) against
 // a hostile server: the first bytes pick a transfer (upload or download,
 // expedited or segmented, a size), then records of can_common.hpp are the

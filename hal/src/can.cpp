@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #include <linux/can.h>
 #include <linux/can/error.h>
 

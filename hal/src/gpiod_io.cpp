@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #include "cpm/hal/gpiod_io.hpp"
 
 #include <gpiod.h>

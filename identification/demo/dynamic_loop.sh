@@ -1,4 +1,5 @@
 #!/bin/bash
+# SPDX-License-Identifier: Apache-2.0
 # The identification loop in one command: a true machine with planted dynamic
 # effects; the nominal controller tracks a circle; the motion log goes
 # through `cpm loop` (diagnose, add what is missing, refit, diagnose again

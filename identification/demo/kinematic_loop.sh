@@ -1,4 +1,5 @@
 #!/bin/bash
+# SPDX-License-Identifier: Apache-2.0
 # Issue 4, point 6(b), in one command: ball-bar data from a true machine that
 # carries Kim's plane errors (and his pivot error) plus a planted kinematic
 # effect; calibrate; diagnose; fit the effect named; the circular test's G

@@ -1,4 +1,5 @@
 #!/bin/bash
+# SPDX-License-Identifier: Apache-2.0
 # The loop in the open world, on ball-bar data: Kim's plane errors, backlash
 # of 4 µm on axis 2 (a library effect) and a lead-screw pitch error on axis 1
 # growing along its stroke to 8 µm (no library effect describes it). Ball-bar

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The cogging fitter (candidates.hpp): a force periodic in the axis position.
 // Its wavelength is searched by a periodogram of the base refit's residual
 // against the position, its strongest peaks refined by golden section; the

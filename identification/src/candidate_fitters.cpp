@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The fitters of the candidate table (candidates.hpp) but cogging's
 // (candidate_cogging.cpp): linear one-column effects with their physical
 // bounds, the spring with its rest position, Stribeck friction with its speed

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Stage "columns": the fitter table and the one entry point every stage uses
 // to evaluate a candidate (evaluate_dynamic_candidate), and what the fitters
 // share: recording a fit, its confounding with the base, the excitation.

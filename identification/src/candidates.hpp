@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Stage "columns" of the motion diagnosis (not a public header): every
 // dynamic effect of the library fitted as a candidate on the residual of the
 // base model. The library (ctl::info, control/src/effects.cpp) says what an

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Shared middle of a diagnosis (internal.hpp, rank_and_confound): look-elsewhere
 // correction and the score of each candidate alone against the model as given,
 // the ranking by it, the confounding between candidates (the verdict is the

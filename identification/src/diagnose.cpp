@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The motion diagnosis as its straight list of stages (diagnose.hpp): read,
 // align, columns (candidates.cpp), ranking (decide.cpp), selection
 // (select.cpp), outside the library (outside.cpp), the one-way ambiguity, the

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Pieces of a candidate effect's evaluation that do not depend on the kind of
 // data (not a public header): the searches of a nonlinear parameter (a
 // wavelength, a time constant, a speed) and the base parameters a candidate's

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Pieces the motion and the kinematic diagnosis share (not a public header).
 #pragma once
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The kinematic problem (stage 1, read; stage 3's linear problem): the data,
 // the residual of the model as given, the base calibrated at the model's own
 // effects, the residual's sensitivity to each axis' effective displacement.

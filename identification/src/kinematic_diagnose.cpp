@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The kinematic diagnosis (kinematic.hpp): stage 4 (every effect of the table
 // on every axis, scored alone), stage 5 (verdict: noise floor, ranking and
 // confounding shared with the motion side, the forward selection of

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Stage 2, columns per effect: the kinematic effect table. Each kinematic
 // effect of docs/effects.md has one entry: how its columns are built, how its
 // nonlinear parameter is searched, how its values are read from a joint fit,

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // cpm fit on kinematic data (kinematic.hpp): the requested effects fitted
 // jointly with the base, each read through its entry of the effect table;
 // the new model, and its figures on the data, held-out data or a 2-fold

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Pieces the files of the kinematic side share (not a public header):
 // kinematic.cpp (the problem: read, calibrate, residual), kinematic_effects.cpp
 // (the effect table and a candidate's evaluation), kinematic_scales.cpp

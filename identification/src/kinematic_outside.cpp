@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Kinematic data in the open world (kinematic_stages.hpp): the noise floor
 // from the data's own repeatability, a smooth non-periodic error of an axis'
 // reading (a lead screw's pitch error growing along the stroke), the

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // actuator_scale at the model as given (part of stage 5, the selection:
 // kinematic_select.cpp).
 //

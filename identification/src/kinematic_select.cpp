@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Stage 5 of the kinematic diagnosis, selection and verdict
 // (kinematic_internal.hpp, select_kinematic_effects).
 //

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The stages of prepare_motion (motion_stages.hpp).
 #include "motion_stages.hpp"
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The stages of prepare_motion (motion.hpp), in the order it runs them:
 //   1. sampling: input checks, sample period, segments (read_sampling);
 //   2. acceleration source: noise of the logged positions and velocities,

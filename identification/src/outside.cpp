@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Stage "outside the library" of the motion diagnosis (internal.hpp).
 //
 // The structure scan (structure.hpp) looks at what the chosen effects leave.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The JSON that programs read (cpm compare / diagnose --json; docs/identification.md
 // documents the diagnosis' fields). Built with nlohmann::ordered_json, so keys
 // keep the order written here; numbers are written shortest-exact, and a number

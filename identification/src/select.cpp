@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Stage "selection" of a diagnosis (selection.hpp; motion logs:
 // internal.hpp, select_motion_effects; kinematic data: kinematic_select.cpp).
 //

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Stage "selection" of a diagnosis, in its units (select.cpp; not a public
 // header): the terms the forward selection may choose, where it starts for
 // each kind of data, the model it has reached, and what it produces. Motion

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Stage "verdict" of the motion diagnosis (internal.hpp): the sentence that
 // names every effect the selection chose, with its parameters, what the data
 // cannot tell it apart from, and values no healthy machine has.

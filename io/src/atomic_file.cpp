@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Atomic writes, file hashes and timestamps for the io module.
 #include <fcntl.h>
 #include <sys/stat.h>

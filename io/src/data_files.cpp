@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The measurement files of docs/data-formats.md: CSV with `#`
 // comments, `# key = value` metadata and a header of column names.
 //

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The YAML model file (docs/model-file.md): rendering by hand, so that the
 // file carries a unit comment on every number and doubles in their shortest
 // exact form; loading through yaml-cpp with a strict walker that refuses

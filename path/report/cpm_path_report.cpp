@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // cpm-path-report: a G-code contour (by default the square-diamond-circle
 // test contour) planned with the actuator-aware planner and with Cartesian
 // limits only, each run through the in-process closed loop (the plant and

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Plots for the path report: the path coloured by contour error, and line
 // charts, as inline SVG (one self-contained HTML page, no scripts).
 #pragma once

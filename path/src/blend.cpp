@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Corner blending within the path tolerance (geometry.hpp says what and why).
 #include <algorithm>
 #include <cmath>

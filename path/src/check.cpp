@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The plan as the cycle will sample it, checked at every knot against the
 // limits with the machine's own inverse kinematics and inverse dynamics.
 #include <algorithm>

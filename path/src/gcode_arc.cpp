@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Arc centres from I J K or R, with LinuxCNC's tolerances (gcode_internal.hpp).
 #include <cmath>
 #include <numbers>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // A program against the machine's workspace, and into the planner's queue (gcode.hpp).
 #include <cmath>
 #include <cstdio>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The G-code reader's pieces: lexing a line into words, and the arc centres.
 #pragma once
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Lexing a G-code line: words, numbers, comments (gcode.hpp).
 #include <cctype>
 #include <cmath>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Reading a program: modal state, the order of execution within a block,
 // and the canonical moves (gcode.hpp).
 #include <array>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Evaluating pieces: lines, arcs (with the spiral and helix terms) and the
 // quintic Bezier blends; their lengths; the nearest point on a piece.
 #include "cpm/path/geometry.hpp"

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The planner's grid: each limit at each point as a bound on u given x.
 #include "grid.hpp"
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The planner's grid: points along the path where every limit is a bound
 // on u = s_dd given x = s_dot^2 (planner.hpp, step 2), and the passes over it.
 #pragma once

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // What the path module's sources share and nobody else needs.
 #pragma once
 

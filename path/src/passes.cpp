@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Reachability over the grid (planner.hpp, steps 3 and 4).
 #include <algorithm>
 #include <cmath>

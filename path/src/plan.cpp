@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Sampling a prepared plan in the real-time cycle (plan.hpp).
 #include "cpm/path/plan.hpp"
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The planner's steps in order (planner.hpp), the repairs, and what the plan reports.
 #include "cpm/path/planner.hpp"
 

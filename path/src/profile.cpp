@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // From the grid's profile to time, and the jerk filter (planner.hpp, step 4).
 #include <algorithm>
 #include <cmath>

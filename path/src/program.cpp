@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // From text to a checked plan (program.hpp).
 #include "cpm/path/program.hpp"
 

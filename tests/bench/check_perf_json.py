@@ -1,4 +1,5 @@
 #!/usr/bin/python3
+# SPDX-License-Identifier: Apache-2.0
 """Check that a JSON of bench/run.sh has every field docs/performance.md
 reports, each a finite number (or the stated type). Shape only: no timing."""
 import json

@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: Apache-2.0
 # Smoke test of the benchmark command: bench/run.sh --quick runs every step
 # (in seconds) and writes a JSON with every figure of docs/performance.md.
 # It checks the JSON's shape and that each figure is a number, never how

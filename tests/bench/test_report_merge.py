@@ -1,4 +1,5 @@
 #!/usr/bin/python3
+# SPDX-License-Identifier: Apache-2.0
 """bench/report.py merges the latency turns of each program into one run:
 checked against runs built by hand whose merged percentiles are known."""
 import os

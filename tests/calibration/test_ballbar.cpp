@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Ball-bar calibration (Kim 4.2): the frame conversions, exact recovery
 // without noise, statistically honest recovery with noise over random
 // machines and seeds, the unidentifiable bar offset with one bar length,

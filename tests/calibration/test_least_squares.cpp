@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The solver and the statistics under the calibration: LM against problems
 // with known minima, the Student t quantile against tabulated values, the
 // identifiability analysis against a problem whose covariance is known in

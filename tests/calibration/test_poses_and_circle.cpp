@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Pose planning and the circular test: Kim's layout, the D-optimal set, the
 // CSV, and the ISO 230-4 figures against closed forms.
 #include <gtest/gtest.h>

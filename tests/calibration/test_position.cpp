@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Full-position calibration (Kim 4.1): exact recovery from the minimum of
 // four poses, statistically honest recovery with noise, refusal of pose
 // sets that cannot determine the planes, and the analytic Jacobian.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Calibration from files (what `cpm calibrate` runs): the model file round
 // trip through the writer, and bad input refused with a clear message and
 // no file written.

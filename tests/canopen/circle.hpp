@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The paper's circle (or any circle) through cpmd's loop: on the simulator
 // backend, and through the canopen backend and the virtual drives (Rig), with
 // the daemon's own tracking figures.

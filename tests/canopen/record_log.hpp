@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // A motion log recorded through cpmd's CANopen path, for the diagnosis: the
 // daemon's loop, the canopen backend and the hal master on the fake bus,
 // three virtual drives with real (synchronous) timing around the true plant

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // cpmd's control loop on the canopen backend, against the virtual machine
 // (three virtual CiA 402 drives coupled by the true plant) on the fake bus
 // with a fake clock and fake GPIO: the daemon's whole hardware path in one

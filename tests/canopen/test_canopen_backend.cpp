@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The canopen backend inside cpmd's loop, against three virtual drives that
 // share one plant, on the fake bus: bring-up, enable, motion through the
 // plant against the in-process simulator, every fault and its safe state.

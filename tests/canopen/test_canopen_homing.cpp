@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Homing with the drives' own homing mode through cpmd's canopen backend,
 // hal::Master and the virtual machine (three virtual drives, one plant of
 // the true machine, incremental encoders, home and limit switches wired to

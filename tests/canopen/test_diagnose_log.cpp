@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The diagnosis on a log it did not make: recorded through cpmd's CANopen
 // path (record_log.hpp), where the synchronous drives apply each torque from
 // the SYNC after the one it was computed from. The log carries a dead time of

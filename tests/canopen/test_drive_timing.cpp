@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Real drive timing on the bus: a CiA 402 drive in cyclic synchronous torque
 // applies the torque of an RPDO from the SYNC after the one whose positions
 // the master computed it from. The virtual drives do that by default; the

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The motion log recorded through the CANopen path (record_log.hpp): what it
 // holds, and that it survives the CSV layout of docs/data-formats.md.
 #include <algorithm>

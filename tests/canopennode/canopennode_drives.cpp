@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // canopennode-drives: three CiA 402 drive nodes built on CANopenNode and its
 // Linux driver (CANopenLinux), an implementation of CiA 301 this project did
 // not write, around the same plant as build/bin/virtual-drives

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // A small CiA 402 drive state machine (IEC 61800-7-201, the device control
 // state table), written for the CANopenNode drive nodes from the profile's
 // tables and deliberately not shared with hal/cia402: a misreading there

@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: Apache-2.0
 # Our virtual drives commissioned by CANopenNode: canopend (CANopenNode's
 # CANopen device with SDO client, NMT master and the CiA 309-3 ASCII gateway)
 # driven by cocomm, on vcan0, does to build/bin/virtual-drives what a

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The object dictionary of one CiA 402 drive node built on CANopenNode: the
 // CiA 301 communication objects CANopenNode needs and the CiA 402 objects
 // cpmd's master uses (docs/canopen-backend.md), each with the data type,

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The four control laws, the force limit, and the real-time contract of a
 // control step (no heap allocation, no exception, a status on bad input).
 #include <gtest/gtest.h>

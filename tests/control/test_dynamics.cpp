@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Elkady's dynamics checked against itself and the effects against docs/effects.md.
 #include <gtest/gtest.h>
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The gain check: which laws and gains hold the machine at the loop's rate.
 // Its figures are checked against the closed form of a sampled double
 // integrator under PD, against a direct simulation of the sampled loop (and

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The controller's prediction across the actuation delay: with a model that
 // has actuation_delay tau, it applies its law at the state the platform will
 // have at t + tau, when its command starts to act.

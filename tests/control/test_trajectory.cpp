@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Trajectories: geometry, derivatives, limits, and refusal of bad ones.
 #include <gtest/gtest.h>
 

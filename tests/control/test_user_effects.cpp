@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // User effects (table, expression; docs/effects.md "Effects you add") in the
 // prepared Machine: the plant's forward dynamics, the controller's computed
 // torque and the holding command, against the library effects they equal.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The shipped configuration files' text, for the configuration and parameter tests.
 #pragma once
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // End to end: cpmd on its simulator backend in its own process, this test as
 // the client over LCM. The client enables, sends the paper's circle and a
 // point-to-point move, records the state, and checks that the machine went

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // A control loop on the simulator backend, driven cycle by cycle without
 // threads: deterministic, for the state-machine and allocation tests.
 #pragma once

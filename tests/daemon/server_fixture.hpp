@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The server on memq:// (in-process LCM) with the loop on the simulator
 // backend, cycle by cycle: commands signed by a test operator go in as bytes
 // on the bus, acks come back; the session clock is a variable the test moves.

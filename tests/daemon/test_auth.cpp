@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Keys, key files, the MAC and the operators directory (docs/security.md):
 // what cpmd and cpm accept, and what they refuse with a sentence saying why.
 #include <gtest/gtest.h>

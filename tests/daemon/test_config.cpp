@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The daemon's configuration is strict: what is unknown, missing, mistyped or
 // out of range is refused with the file, line:column and the key's path.
 #include <gtest/gtest.h>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // cpmd's loop with a model that has an actuation delay, on a simulator whose
 // plant has it too: the controller predicts across it with the reference
 // sampled ahead (the queue while moving, the stop profile while stopping),

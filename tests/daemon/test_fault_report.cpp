@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Fault reports people read (issue 17, part 4): every fault kind gives its
 // name, the axis as 1-3 or none, its figures in human units and a sentence of
 // what happened and what to do.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // One actuator's homing sequence (homing.hpp) against a simulated actuator
 // that follows its ramped reference, with a home switch and index marks
 // planted at known places: the zero it finds must put the actuator at

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Homing through the loop, cycle by cycle, on the simulator with
 // incremental encoders and home switches (config/sim-homing.yaml): from a
 // cold start whose actuator zeros are unknown, motion is refused, homing

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Hostile input to a running daemon, through its public seams: the server's
 // LCM handle (memq://, in-process: bytes published on it reach the same
 // subscriptions as on the network) and the control loop on the simulator

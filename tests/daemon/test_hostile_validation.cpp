@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Hostile trajectory commands against the validator the LCM thread runs on
 // every segment (validate_segment): every non-finite value in every field,
 // huge, zero and negative durations, out-of-order setpoint streams, bad

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // cpmd's messages: the journal's priority prefix when stderr is the journal
 // ($JOURNAL_STREAM names its device and inode), "cpmd: warning: ..." otherwise;
 // and the --stats-json document.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The loop's owners (loop_state.hpp) on their own: each transition against
 // a closed form or a planted value, without a loop around it.
 #include <gtest/gtest.h>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The control cycle allocates nothing: global operator new is replaced in
 // this test binary by one that counts, and the cycles of every mode
 // (disabled, enabling, holding, moving through a circle and a move, stopping,

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Operating the machine (issue 17), cycle by cycle on the simulator backend:
 // jogging with its deadman and the workspace's edge, trajectories that must
 // start with the motion the queue ends with, and a controller switched while

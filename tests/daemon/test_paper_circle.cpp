@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The paper's circle through the loop, cycle by cycle (no threads, no LCM):
 // the tracking error the loop reports is the in-process closed loop's, and
 // the exact figure is printed so that a change to the cycle that should not

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The parameters `cpm get` / `cpm set` use: each name reaches its field, a
 // refused change leaves the configuration as it was, and the YAML loader and
 // the table refuse the same values.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // cpm run against cpmd, each in its own process (the harness of every
 // process-level test, support/daemon_process.hpp, in a private network
 // namespace when it may): a G-code program is checked and planned by cpm,

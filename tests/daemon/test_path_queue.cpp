@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The path queue (docs/path.md): programs as path_command_t chunks and back,
 // a plan played by the loop without allocating, retired to the server's
 // store and freed there; and the whole way in-process (the server on

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The velocity ramp behind jogs, homing moves and the actuator space:
 // checked against the closed forms of constant-acceleration motion.
 #include <gtest/gtest.h>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Who may command the machine: the session cpmd grants to one commander at
 // a time and the sequence numbers its commands carry (docs/daemon.md). The
 // server runs on memq:// (in-process LCM) with the loop on the simulator

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The simulator backend's homing inputs, stepped by hand: incremental
 // encoders read d - encoder_zero, the home switch and the index marks are
 // seen where they are in the true d, within one period's travel; and the

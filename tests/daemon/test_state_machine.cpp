@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Every state x every command of the state machine (docs/daemon.md), legal
 // and illegal, and the transitions the loop makes by itself (drives enabled,
 // queue empty, at rest, faults), all on the simulator backend cycle by cycle.

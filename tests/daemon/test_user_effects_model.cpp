@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // A model file with user effects (docs/effects.md, "Effects you add") loaded
 // the way cpmd loads its model, and the loop compensating them on the
 // simulator: the paper's circle with the effect in the truth, the loop's

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Trajectory commands are validated before the loop sees them: finite,
 // inside the workspace and the soft limits, within the speed and acceleration
 // limits, continuous with the queue. And the setpoint-stream interpolation.

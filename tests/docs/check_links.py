@@ -1,4 +1,5 @@
 #!/usr/bin/env python3
+# SPDX-License-Identifier: Apache-2.0
 """Check that every reference a reader of the docs follows resolves inside the project.
 
 Users have a clone of this repository and nothing beside it, so in README.md,

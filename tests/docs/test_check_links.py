@@ -1,4 +1,5 @@
 #!/usr/bin/env python3
+# SPDX-License-Identifier: Apache-2.0
 """The link checker on a small fixture: it passes the fixture as committed and
 fails, naming the file, the line and the reference, on each kind of dangling
 reference planted into a copy of it. A checker that cannot fail would pass the

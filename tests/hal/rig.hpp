@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // A master and three virtual drives on the fake bus, with a fake clock: the
 // whole CANopen stack runs deterministically in one thread.
 #pragma once

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The per-cycle path allocates nothing: read() and write() of the master
 // (and the fake bus under them) with every global allocation counted, in
 // cyclic synchronous torque and through a homing cycle.

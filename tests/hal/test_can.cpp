@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The CAN layer: the fake bus and its fault injection, error-frame decoding,
 // and SocketCAN's report when the kernel has no CAN.
 #include <gtest/gtest.h>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The CiA 402 state machine against the standard's own tables (statusword
 // table, controlword command table, state transition table).
 #include <gtest/gtest.h>

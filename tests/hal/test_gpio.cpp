@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Digital I/O: configuration checks, the fake, and libgpiod's report on a
 // machine without GPIO chips (the real lines are tested in the SIL VM).
 #include <gtest/gtest.h>

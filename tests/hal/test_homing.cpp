@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // CiA 402 homing through the master, the virtual drive and a mass on each
 // axis (tests/hal/rig.hpp): every method the virtual drive has ends where
 // the standard puts the home, with the counts redefined to the home offset;

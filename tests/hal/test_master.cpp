@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The master with three virtual drives on the fake bus: start-up, the CiA 402
 // path to operation enabled and back, scaling end to end, and the faults it
 // must detect (heartbeat, EMCY, PDO loss and length, bus-off, error passive,

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The one table of names per enum (hal/src/cia402.cpp, canopen.cpp): every
 // value has its row, keys are distinct, a code off the bus that is no value
 // gets the unknown row.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // PDO packing and scaling at the limits, and the bus-load figures.
 #include <gtest/gtest.h>
 

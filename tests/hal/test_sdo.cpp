@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // SDO client against the virtual drive's SDO server on the fake bus:
 // expedited and segmented transfers both ways, aborts, timeouts.
 #include <gtest/gtest.h>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The kinematic cells of the robustness matrix: every pair of kinematic
 // effects planted at once, on axes the seed picks, in each data condition:
 // ball-bar lengths with one bar radius (150 mm) and with two (100 and 150

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Ball-bar and position data for the kinematic identification tests: a true
 // machine with Kim's fitted plane errors (and the pivot error of his
 // experiment) plus planted kinematic effects, commanded through the nominal

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Motion logs from the simulator for the identification tests: a true
 // machine (Kim-sized plane errors, planted effects) driven by the nominal
 // computed-torque controller along a 3-D Lissajous path that moves every

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Stage "columns" of the motion diagnosis (identification/src/candidates.hpp):
 // the fitter table covers the effect library, and each fitter recovers a
 // value planted in the residual of a simulated log within its standard error,

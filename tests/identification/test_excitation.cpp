@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // cpm excite's design (excitation.hpp): within the limits, periodic, and,
 // on the simulated machine, better than a plain multi-sine of the same
 // duration: the standard errors of the fitted effects smaller (1.35x in the

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // cpm fit for user effects (identification/fit_user.hpp) on logs of the
 // independent generator (tests/identification/independent), which plants
 // the user effects in its own plant.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Identification on simulated motion logs: the filter and statistics against
 // closed forms, planted effects recovered (ranked first, parameters within
 // 3 sigma, residual at the noise floor), no false alarms on clean data,

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The kinematic side of diagnose / fit on simulated ball-bar and position
 // data (a true machine with Kim's errors, the nominal model as given).
 #include <gtest/gtest.h>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The kinematic cells of the robustness matrix (kin_cells.hpp): two kinematic
 // effects at once, one and two bar radii, one and both directions, ball-bar
 // and position data, null sets in every condition; each cell (a pair in a

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Kinematic data in the open world (issue 26): a lead screw whose pitch error
 // grows smoothly along one axis' stroke, which no library effect describes.
 //

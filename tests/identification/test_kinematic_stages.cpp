@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The stages of the kinematic diagnosis as units (kinematic_stages.hpp): the
 // effect table covers every kinematic effect, an effect's columns against
 // their closed form, the nonlinear searches recover planted values on

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Three kinematic effects planted at once (the issue's "two and three
 // effects at once", kinematic side; pairs are the kinematic cells): every
 // triple of the pool but actuator_scale (which only a nominal-only machine

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The user's loop as one command (loop.hpp): several effects planted at once,
 // the loop names every one, and the waterfall ends within 20 % of the noise
 // floor, on a motion log and on ball-bar data.

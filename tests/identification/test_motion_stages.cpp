@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The stages of prepare_motion (identification/src/motion_stages.hpp) on
 // synthetic logs whose answer is known in closed form: sampling and segments,
 // the acceleration source, the kept rows (state, acceleration, the force at

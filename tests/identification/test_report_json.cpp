@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The JSON the identification writes (cpm diagnose / loop / compare --json):
 // numbers read back exactly, strings escaped, fields in the documented order.
 #include <gtest/gtest.h>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // What the diagnosis' reports show a person (identification/src/report.cpp,
 // loop.cpp's waterfall, verdict.cpp's sentence): plot ticks that tell their
 // values apart, the waterfall's axis, labels and legend, a noise floor above

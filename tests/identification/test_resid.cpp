@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // cpm compare as MATLAB's compare and resid know it (report.hpp): on two
 // simulated logs of the nominal machine, one with nothing missing from the
 // model and one with dry friction on axis 2 the model lacks, the fit per

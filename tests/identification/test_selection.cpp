@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The stages "selection", "verdict" and "structure" of the motion diagnosis,
 // and cpm fit, as units: forward selection on small synthetic LinearProblems
 // whose answer is known (planted columns, pure noise), the look-elsewhere

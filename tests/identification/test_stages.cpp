@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The stages of the motion diagnosis that hold it on data it did not make:
 // the alignment (when the logged force acts), the force-gain instrument (noise
 // in the logged force), the forward selection (several effects at once) and

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 # Sourced by staged.sh and package.sh: `cpm compare`, `diagnose`, `fit` and
 # `calibrate` without --model, in the current folder (outside the tree), must
 # use the installed default model MODEL; each names the model it read (its

@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: Apache-2.0
 # The Debian package end to end (docs/install.md), on this system: build the
 # packages from the build (cpack -G DEB), install them with dpkg, check dpkg -L
 # and the conffiles, run `cpmd --version`, verify the installed unit; start

@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: Apache-2.0
 # The install as installed (docs/install.md), without root:
 #  1. `cmake --install --prefix /usr` into a staging root (DESTDIR): every file
 #     where the package puts it, no @VARIABLE@ and no path of the source or

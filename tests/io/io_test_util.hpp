@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Shared helpers of the io tests: a scratch directory per test, file
 // helpers, and bit-exact comparison of doubles.
 #pragma once

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The measurement files of docs/data-formats.md: round trips of the
 // three layouts, every error rule with the line/column its message names,
 // real-world formatting (CRLF, BOM, spaces, quotes), and atomic writes.

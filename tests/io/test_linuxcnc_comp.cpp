@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // LinuxCNC's screw-compensation file (io/linuxcnc_comp.hpp), checked line by
 // line against its documented format and against what its loader and motion
 // module do with it (usrmotLoadComp: fgets + sscanf("%lf %lf %lf") until the

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The YAML model file: bit-exact round trips with every effect kind, the
 // default config equal to the nominal machine, refusal of bad files with
 // FILE:LINE:COLUMN and the key path, and safe saving.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // User effects in the model file (docs/model-file.md, `user_effects`): table,
 // expression and pitch_table round-trip bit for bit, and a bad one is
 // refused naming the file, line, effect index and key.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The limb solver checked against itself (finite differences), against the
 // paper's own Gamma and against docs/model.md's reference angles.
 #include <gtest/gtest.h>

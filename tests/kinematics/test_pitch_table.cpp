@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The pitch table of a limb (d~ = d + e(d), docs/effects.md "Effects you add"):
 // forward and inverse kinematics and the Jacobian carry it.
 #include <gtest/gtest.h>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Calibrated plane kinematics (Kim eqs. 1-7) with the effects of docs/effects.md.
 #include <gtest/gtest.h>
 

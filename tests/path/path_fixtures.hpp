@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // What the path tests share: the machine, a few paths, and an independent
 // check of a plan's actuator forces through the model's inverse dynamics.
 #pragma once

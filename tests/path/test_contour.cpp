@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The test contour in simulation (issue 18): the square-diamond-circle at a
 // feed the machine holds on straight lines, planned with the actuator
 // limits and run through the in-process closed loop (the plant and the

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The G-code reader: what it accepts, and every fault refused with its line
 // and column before anything moves.
 #include <gtest/gtest.h>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The path's pieces and corner blends: lengths, continuity, tolerance.
 #include <gtest/gtest.h>
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The planner: closed forms on lines and arcs, the limits it is given held
 // at every sample (checked here with the model's inverse dynamics), and
 // look-ahead that slows before a corner rather than breaking a limit.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // A program from text to a checked plan in one call (path/program.hpp): the
 // same plan as reading, checking and planning step by step, the daemon's
 // limits mapped onto the planner's options, every fault of a bad program

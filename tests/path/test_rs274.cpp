@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Our canonical moves against those of Debian's rs274 (LinuxCNC's
 // RS274NGC interpreter, package linuxcnc-uspace) on the programs in
 // tests/path/programs: arcs in the three planes, incremental moves and

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The real-time side of a plan: sampling allocates nothing, throws nothing,
 // and costs the same on a program of 10 segments as on one of 10 000 (its
 // work is counted, not timed: speed is for the benchmarks).

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // A point past cpmd's soft limits is refused with its figures: the point and
 // the limit in the program's coordinates (z up from program zero) and the
 // machine's, as a stroke refusal gives its figures; cpmd, which has no

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // A daemon's command side in-process for the red team: the server on memq://
 // (bytes published on its LCM handle reach the same subscriptions as on the
 // network) and the loop on the simulator backend, cycle by cycle. The

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The red-team suite's common parts (docs/security.md, "Attacks and outcomes").
 //
 // Echo: no answer to a refused input may carry more than kMaxEcho bytes of

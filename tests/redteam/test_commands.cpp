@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The red team against the daemon's command side, in-process (cell.hpp):
 // commands without a key, with a wrong key, from an unknown operator, with
 // a stolen session, replayed, with a stale seq; roles; a stranger's stop;

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The red team against CMD_LOAD_MODEL, in-process (cell.hpp): paths outside
 // the model directory, .. and symlinks out of it, /proc, devices, FIFOs,
 // directories, huge files, files that are no model. Each is refused with a

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The red team against cpmd itself, over real UDP, each test in its own
 // network namespace (support/daemon_process.hpp): a stranger on the bus, a
 // bounded flood of 20 000 messages, two daemons, bad files at start, key

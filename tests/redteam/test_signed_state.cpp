@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Signed state (docs/security.md, "Signed state"): what an attacker on the
 // bus can do to a client's view of the machine with no key, and what the
 // client's check (cpm::daemon::Verifier, used by Client) makes of it. cpmd

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Harnesses for the fault matrix (docs/fault-matrix.md): the control loop on
 // the simulator backend behind a fault-injecting decorator, stepped cycle by
 // cycle with every published state kept, and the checks every row shares:

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Nothing lost: the model file writer (io::save_model_file renders, then
 // io::write_file_atomically: temporary file beside the target, fsync,
 // rename) killed with SIGKILL while it writes leaves the target whole —

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The fault matrix (docs/fault-matrix.md), rows the canopen backend detects:
 // cpmd's loop, the backend, the hal master and three virtual CiA 402 drives
 // on the fake bus (fake clock, fake GPIO). Each test asserts the detection

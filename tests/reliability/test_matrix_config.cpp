@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Fault matrix rows outside the cycle: an invalid configuration or model
 // file is refused before anything is powered, naming file:line:column and
 // the key; and the systemd unit restarts cpmd after a crash into a state

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The fault matrix (docs/fault-matrix.md), rows the loop detects itself, on
 // the simulator backend: one test per row, each asserting the detection
 // latency in cycles, the reaction (zero force, drives off, brakes holding),

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Restart safety at the process level: cpmd (simulator backend) is brought
 // to each state — disabled, enabling, holding, moving, stopping, fault — and
 // killed with SIGKILL (no handler runs). A new cpmd, started as systemd's

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Nothing lost: the daemon's state stream recorded at the full loop rate,
 // every message counted against the loop's own cycle counter (state_t.cycles
 // counts the cycles run; state_t.cycle is the schedule's slot index, which

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 # cpm_add_sil_test(NAME <name> [NEEDS can|gpio|can,gpio] [TIMEOUT <s>] COMMAND <cmd> [args...])
 #
 # Registers a CTest test that runs <cmd> through tests/sil/run-in-vm.sh:

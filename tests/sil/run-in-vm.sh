@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: Apache-2.0
 # SIL runner: run COMMAND where a real kernel CAN stack (vcan0) and a
 # simulated GPIO chip (gpio-sim) exist, and return COMMAND's exit status.
 #

@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 # Shared set-up of the SIL environment: loopback and multicast route, vcan0,
 # and a gpio-sim chip with the machine's named lines. POSIX sh: it is sourced
 # by busybox ash inside the VM and by bash on a host that has vcan/gpio-sim,

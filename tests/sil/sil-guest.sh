@@ -1,3 +1,4 @@
+# SPDX-License-Identifier: Apache-2.0
 # Stage 2 of the SIL VM's /init, run by busybox ash with the run folder
 # (virtio-9p tag "silrun") mounted at /sil. The initramfs has already
 # mounted proc, sys, devtmpfs and loaded the modules. This script brings up

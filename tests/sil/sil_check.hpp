@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Minimal checks for the SIL smoke programs: they run inside the VM, where a
 // small self-contained binary is easiest to read in a serial log. Each
 // failed check prints what and where, and the program exits non-zero.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // SIL smoke test of the kernel CAN stack the runner provides: CAN_RAW on
 // $CPM_SIL_CAN (vcan0), non-blocking sockets, error frames enabled, a frame
 // from one socket to another with a kernel receive timestamp, acceptance

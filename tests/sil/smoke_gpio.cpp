@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // SIL smoke test of the simulated GPIO chip the runner provides, through
 // libgpiod v1 (Debian's 1.6): lines found by name at their documented
 // offsets, an input driven from the simulator's side (sysfs pull) and read,

@@ -1,4 +1,5 @@
 #!/bin/bash
+# SPDX-License-Identifier: Apache-2.0
 # The checks of cpmd.service under a real systemd (issue 31, docs/sil.md
 # "cpmd under systemd"). Runs as root inside the guest of
 # tests/sil/systemd-vm.sh, from the run folder /sil that holds the cpmd .deb

@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: Apache-2.0
 # sil.systemd (docs/sil.md, "cpmd under systemd"): make the cpmd .deb of this
 # build with cpack, then boot the systemd guest (tests/sil/systemd-vm.sh) and
 # run tests/sil/systemd-checks.sh there. With --prepare: the image only.

@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: Apache-2.0
 # Boot Debian bookworm with systemd as PID 1 under QEMU (TCG) and run a check
 # script there as root, with the cpmd packages of this build in the run
 # folder, to be installed with dpkg inside the guest (docs/sil.md, "cpmd

@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: Apache-2.0
 # The SIL runner's contract, checked through the VM path: the command's exit
 # code comes back; arguments, environment and working folder arrive intact;
 # the working folder is writable and the rest of the host is not; a VM that

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // SIL: cpmd with the canopen backend, build/bin/virtual-drives and this
 // program as the client, on a real kernel's vcan0 and gpio-sim chip (run by
 // tests/sil/run-in-vm.sh: on the host when it has them, else in a VM).

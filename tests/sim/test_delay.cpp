@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The plant's actuation delay (docs/effects.md, actuation_delay): the command
 // given at t_k acts over [t_k + tau, t_k+1 + tau).
 #include <gtest/gtest.h>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The plant: its dynamics against the model's inverse dynamics, energy
 // conservation, the closed-form error of computed torque, Table 3.
 #include <gtest/gtest.h>

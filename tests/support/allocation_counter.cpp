@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Replaces the global allocation functions of this test binary to count
 // allocations per thread (see support/allocation_counter.hpp).
 #include "support/allocation_counter.hpp"

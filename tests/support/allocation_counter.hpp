@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Counts heap allocations made by this thread while a guard is alive. The
 // global operator new is replaced in allocation_counter.cpp of the test
 // binary that includes this (link it into that suite only).

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The one harness of the process-level tests (tests/daemon e2e,
 // tests/reliability, tests/redteam, tests/sil_daemon): cpmd and other
 // programs as child processes with their stderr in a log, a private network

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // main() of the process-level tests (support/daemon_process.hpp): the test
 // and the daemons it starts talk LCM in a private network namespace when the
 // test may make one (root, as on CI), otherwise on the host's loopback with

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Random but plausible machines for property tests: calibrated planes of
 // Kim's size (tenths of a degree, a few tenths of a mm), optionally with
 // kinematic effects. Deterministic for a given seed.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Operators for in-process tests of the server (docs/security.md): a table
 // as cpmd would load it from operators.d, with fixed keys, and helpers that
 // sign commands as a given operator.

@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: Apache-2.0
 # The command lines as a user meets them (docs/cli.md):
 #   cli_test.sh VERSION MAN_DIR CPM CPMD VIRTUAL_DRIVES NAME=PROGRAM...
 # - every program prints "NAME VERSION" for --version, VERSION being the build's;

@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: Apache-2.0
 # The bash completion of cpm (tools/completion/cpm), run as bash runs it:
 # COMP_WORDS/COMP_CWORD set, _cpm called, COMPREPLY read. Once with the
 # script alone, once with bash-completion loaded (what a Debian user has).

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Running the built `cpm` (CPM_EXE) from a test: its exit status and what it
 // printed, through files in a temporary folder of the test's own.
 #pragma once

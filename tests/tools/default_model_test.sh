@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: Apache-2.0
 # compare, diagnose, fit and calibrate (and plan-poses, simulate-measurement)
 # without --model, from a folder outside the source tree: each takes the
 # default model, here the build tree's config/machine.yaml (build/bin/cpm ->

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // `cpm identify` on cpmd's simulator, as a user runs it (the built programs,
 // each in its own process): a true machine with Coulomb friction on axis 1,
 // viscous friction on axis 3 and a 0.4 kg payload, none of them in the

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // `cpm stream` on cpmd's simulator, as a user runs it (the built programs,
 // each in its own process; a private network namespace when the test may
 // make one, support/daemon_process.hpp): a good file is approached from

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // `cpm watch` as an operator sees it: cpmd on its simulator (a private
 // network namespace when the test may make one, support/daemon_process.hpp),
 // `cpm watch` in an 80 x 24 tmux pane, the pane captured with `tmux

@@ -1,4 +1,5 @@
 #!/bin/bash
+# SPDX-License-Identifier: Apache-2.0
 # cpm fit --add pitch_table:AXIS on kinematic data, end to end through the
 # command line: Kim's true machine with a lead-screw pitch error planted by
 # `cpm simulate-measurement --truth-effect pitch_table:...` (a curve growing

@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: Apache-2.0
 # A compensation file written by `cpm export-comp` read by LinuxCNC itself:
 # its loader (usrmotLoadComp) and motion module (the screw compensation of
 # joint 0) in the bench's linear-delta config, not real-time

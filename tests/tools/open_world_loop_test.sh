@@ -1,4 +1,5 @@
 #!/bin/bash
+# SPDX-License-Identifier: Apache-2.0
 # cpm loop in the open world, end to end through the command line
 # (identification/demo/open_world_loop.sh: ball-bar data with backlash on axis 2
 # and a pitch error on axis 1 planted in truth.yaml's user_effects):

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Stream files for the cpm stream tests, from closed forms (a multi-sine and
 // its derivatives), written apart from the checker in cpm.
 #pragma once

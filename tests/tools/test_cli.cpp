@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The frame of the cpm command line (tools/cpm/cli.hpp): where the default
 // model is looked for, in order, in a temporary folder layout; the JSON text
 // (shortest round-trip numbers, null for non-finite ones, escaping); the

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The operator's console without a terminal (tools/cpm/console.hpp): the
 // watch screen at 80 x 24 and 120 x 40 in every mode, with a drive in fault
 // and a long fault sentence (every field's label there, no line wider than

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // cpm compare and diagnose with --validate as a user runs them (the built
 // cpm, logs made by cpm sim): a log with nothing missing and one with 2 N of
 // Coulomb friction on axis 2 the model lacks. compare: the fit per axis and

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // cpm excite as a user meets it (the built program): it writes a stream file
 // that cpm stream accepts whole, at rest at both ends; a design that cannot
 // fit the limits is refused naming them.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // cpm run as a user meets it (the built program, in its own process):
 // --dry-run's figures are the planner's own (path::prepare_program on the
 // same text, model and options), and a bad program is refused with its

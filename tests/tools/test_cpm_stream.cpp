@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // cpm stream as a user meets it (the built program, in its own process):
 // the whole file is checked against cpmd's limits before anything is sent.
 // The files are generated here from closed forms (a multi-sine and its

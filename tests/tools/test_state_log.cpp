@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // cpmd's state stream as a motion log: lcm-logger files written here event by
 // event (states with the drives on and off, a foreign channel, a damaged
 // event, a non-finite value), read back strictly and leniently; and a

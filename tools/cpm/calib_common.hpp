@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Helpers shared by the calibration subcommands (calibrate, circular-test,
 // plan-poses, simulate-measurement, kim-experiment).
 #pragma once

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The `cpm` command line: one tool, one file per subcommand, parsed by CLI11.
 //
 // A subcommand registers itself with a static `Command` object whose setup

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // cpm calibrate: kinematic calibration (Kim 2005) from a ball-bar or
 // full-position measurement file; writes a new model file.
 #include <cstdio>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // cpm circular-test: ISO 230-4 circular test of a simulated true machine
 // driven by a controller that believes another model.
 #include <cstdio>

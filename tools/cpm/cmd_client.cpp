@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Client subcommands for the state machine: status, enable, disable, stop,
 // reset, controller, load-model, stats. They talk to a running cpmd over LCM.
 #include <cmath>

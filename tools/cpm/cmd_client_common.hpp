@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Shared by the client subcommands (cmd_client*.cpp): how to reach the
 // daemon, and small helpers. Not a subcommand itself.
 #pragma once

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Client subcommands that record the state stream: record (state -> motion
 // CSV of docs/data-formats.md), lcm-log-to-csv (the same from an lcm-logger
 // file). The live view, cpm watch, is the console's (cmd_console.cpp).

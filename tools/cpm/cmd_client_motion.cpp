@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Client subcommands that send trajectories to a running cpmd: move, circle, stream.
 #include <cmath>
 #include <fstream>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // cpm export-comp / import-comp: a pitch_table (docs/effects.md, "Effects
 // you add") as LinuxCNC's screw-compensation file and back
 // (io/linuxcnc_comp.hpp has the format and the conversion).

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // cpm compare: the residual of a model on a data file, broken down by axis,
 // direction, position and time, with an HTML report (identification/).
 // Motion logs: the force residual (N). Ball-bar and position data: the

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The operator's console, looking: `cpm watch` (the full-screen view of a
 // running cpmd: the loop, the platform, the drives and the bus) and `cpm
 // drives` (the drive table once, or its JSON). What they show is

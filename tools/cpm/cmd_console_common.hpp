@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Shared by the console's subcommands (cmd_console*.cpp). Not a subcommand.
 #pragma once
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The operator's console, moving: `cpm home` (CMD_HOME, then the phases
 // until every actuator asked is homed) and `cpm jog` (CMD_JOG from the
 // keyboard, or for a script a velocity for a time).

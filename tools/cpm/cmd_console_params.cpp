@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The operator's console, tuning: `cpm get` (cpmd's parameters: limits,
 // gains, jog and homing settings, from params_t) and `cpm set` (one of them,
 // CMD_SET_PARAM; cpmd checks the range and the mode and says why it refuses).

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // cpm diagnose: which effect of the library is missing from a model, judged
 // on measurements (motion logs: the force residual; identification/).
 #include <cstdio>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // cpm excite: design an identification experiment for this machine and
 // model (identification/excitation.hpp) and write it as the stream file
 // `cpm stream` plays, checked first with cpmd's own segment checks

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // cpm fit: add effects to a model, refit, write the new model file (never
 // the input), and show the error before and after (identification/).
 #include <cstdio>

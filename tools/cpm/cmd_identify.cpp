@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // cpm identify: from an experiment to a better model on a running cpmd.
 // The experiment file (cpm excite's, or any stream file) is checked whole
 // against the limits cpmd publishes before anything moves, approached and

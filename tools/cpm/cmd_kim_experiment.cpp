@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // cpm kim-experiment: Kim's ball-bar calibration experiment reproduced in
 // simulation, with the circular test before and after beside Kim's figures.
 #include <cstdio>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // cpm loop: the identification loop as one command (identification/loop.hpp):
 // diagnose, add the effect found, refit, diagnose again, until nothing is
 // missing; prints the waterfall, writes the new model file (never the input)

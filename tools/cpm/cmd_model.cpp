@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // cpm model check|show|init: validate a model file, print it for a person
 // (mm, µm, degrees, labelled), or write the nominal machine as a new file.
 #include <algorithm>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // cpm plan-poses: measurement poses for a calibration, checked against the
 // workspace, as a CSV of commanded positions.
 #include <cstdio>

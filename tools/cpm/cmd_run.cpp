@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // cpm run FILE.ngc: a G-code program on the machine (docs/path.md). The
 // whole program is read, checked against the workspace and the limits and
 // planned here first (path::prepare_program), so that a bad program is

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // cpm sim: run a trajectory with a chosen controller on a chosen true machine.
 #include <cstdio>
 #include <memory>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // cpm simulate-measurement: what a ball-bar or a laser tracker would read on
 // a true machine commanded through a controller's model, as a measurement
 // file of docs/data-formats.md (for trying the calibration and for tests).

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // cpm table3: Elkady's Table 3 under the reference conditions of docs/model.md.
 #include <cstdio>
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The screens of the operator's console (console.hpp): cpm watch, the drive
 // table, the bus and inputs, and cpm jog's screen.
 #include "console.hpp"

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The operator's console: what `cpm watch`, `drives`, `get`, `set`, `home`
 // and `jog` show and how they read their input, as pure functions of the
 // messages (state_t, loop_stats_t, drives_t, params_t), so that tests check

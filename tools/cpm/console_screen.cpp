@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 #include "console_screen.hpp"
 
 #include <curses.h>

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The terminal of cpm watch and cpm jog, through ncurses (docs/cli.md says
 // why): the alternate screen, keys one at a time without echo, the arrows
 // and page keys decoded from whatever the terminal sends (terminfo), the

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // What the console reads and writes besides its screens (console.hpp): the
 // parameter table of cpm get, cpm set's VALUE with its unit, cpm home's
 // actuators, and drives_t as JSON.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Options shared by the identification subcommands (compare, diagnose, fit,
 // loop): the measurements, the model judged, the motion logs' filter, and
 // the new model file fit and loop write. Not a subcommand itself.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // cpm: the command-line tool of cpmd. Subcommands live in cmd_*.cpp; CLI11
 // parses every command line (cli.hpp).
 #include <cstdio>

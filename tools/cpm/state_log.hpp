@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // cpmd's state stream as a motion log (docs/data-formats.md, kind =
 // motion): what `cpm record` and `cpm lcm-log-to-csv` write, and what
 // `cpm compare`, `diagnose` and `fit` read directly from an lcm-logger file.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // cpm stream's setpoint file and the checks it passes before anything is
 // sent (cmd_client_motion.cpp); cpm excite checks its design with the same.
 #pragma once

@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: Apache-2.0
 # The man pages, at build time: help2man on the built cpm (cpm.1 and one
 # cpm-COMMAND.1 per subcommand, as git has) and cpmd (cpmd.8), so that each
 # page is the program's own --help; md2man.py on docs/daemon.md's

@@ -1,4 +1,5 @@
 #!/usr/bin/env python3
+# SPDX-License-Identifier: Apache-2.0
 """A man page (roff, man macros) from the project's own Markdown docs.
 
 The file-format pages (cpmd.yaml(5), cpm-model(5)) are generated at build

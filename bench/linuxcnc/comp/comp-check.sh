@@ -1,4 +1,5 @@
 #!/usr/bin/env bash
+# SPDX-License-Identifier: Apache-2.0
 # LinuxCNC's own loader and motion module on a compensation file written by
 # `cpm export-comp`: LinuxCNC (linuxcnc-uspace, not real-time) with the
 # linear-delta config of bench/linuxcnc, COMP_FILE on joint 0, moved to a

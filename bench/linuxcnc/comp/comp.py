@@ -1,4 +1,5 @@
 #!/usr/bin/python3
+# SPDX-License-Identifier: Apache-2.0
 # The "display" of comp-check.sh: machine on, home, then MDI moves; at each
 # rest it prints joint 0's commanded position and the compensation LinuxCNC
 # adds to it (joint.0.backlash-corr: the trim of its COMP_FILE, interpolated

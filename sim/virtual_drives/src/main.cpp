@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // virtual-drives: three CiA 402 drives on a SocketCAN interface, stepping
 // the true machine's plant by one control period per SYNC. See
 // docs/canopen-backend.md.

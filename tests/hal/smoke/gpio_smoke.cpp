@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // GPIO through libgpiod on a real kernel (gpio-sim in the SIL VM).
 //   hal_gpio_smoke [--chip gpiochip0] [--in OFFSET] [--out OFFSET] [--expect-in 0|1] [--active-low]
 // Requests OFFSET --in as the e-stop input and --out as the drive-enable

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // SocketCAN on a real kernel: two sockets on one interface (vcan0 by default)
 // exchange a data frame through a filter and an injected error frame.
 // Run by the SIL VM runner; exits 77 (skipped) where the kernel has no CAN

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // An independent motion-log generator: the yardstick against which
 // `cpm diagnose` is judged on logs it did not make itself.
 //

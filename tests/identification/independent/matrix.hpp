@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The robustness matrix of the motion diagnosis: logs from the independent
 // generator (generator.hpp) in every cell of
 //   {sampled, zoh, delay1, delay1_5} x {plant, command} x {250, 1000, 4000 Hz},

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The open-world matrix of the motion diagnosis: logs from the independent
 // generator with a force no library effect describes (generator.hpp,
 // OutsideForce: a cable carrier following another axis' velocity, a local

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // cpm_robustness: the robustness matrix of `cpm diagnose` on motion logs from
 // the independent generator. Prints a markdown table (one row per cell) and,
 // with --json FILE, every log's result.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The independent generator checked with its own arithmetic (nothing from
 // identification/): on noise-free logs the velocity change over one sample
 // period is what the true machine's dynamics give for the force that the

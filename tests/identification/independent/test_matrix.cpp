@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The combinations the robustness matrix plants at once: distinct effects,
 // none of the pairs that motion data cannot separate (kInseparable in
 // matrix.cpp), and every size asked for has some.

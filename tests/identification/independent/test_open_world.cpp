@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The open world on logs of the independent generator: the honest noise floor
 // against the residual of the true model, a force outside the library found on
 // its axis and variable, the two defects of issue 26 (an effect fitted to 0

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // What every program of the project does with its command line beside its
 // own options (CLI11): --version prints "NAME VERSION" with the build's
 // version (cmake/version.cmake), --help prints the options and exits 0, and

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Ball-bar calibration (Kim 2005, section 4.2). A ball-bar measures the
 // distance between a ball on the platform (at P) and a fixed ball (the pivot)
 // at actuator readings d_j. Distances do not see the frame: its origin and

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The circular test of ISO 230-4 with a simulated ball-bar: the controller
 // (believing `controller`) drives the true machine (`truth`) round a circle,
 // counter-clockwise then clockwise, and a ball-bar between the platform and

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // How well do the data determine each parameter? From the Jacobian J of the
 // residuals at the solution and the residuals r:
 //  * singular values of J with its columns scaled to unit length (so that the

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Kim's ball-bar experiment (Kim 2005, section 5), reproduced in simulation:
 // a true machine carrying Kim's fitted errors (docs/calibration.md, "Kim's
 // experiment in simulation"), the QC10's +-0.5 µm on every length, Kim's 32 poses

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Levenberg-Marquardt for the calibration problems: small dense problems
 // (up to a few dozen parameters, thousands of residuals) with an analytic
 // Jacobian. Not for the control cycle: it allocates and may throw.

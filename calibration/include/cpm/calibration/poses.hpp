@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Measurement poses: where to put the platform for a calibration. Every pose
 // is a commanded platform point (machine frame, m) checked against the
 // workspace of the model that will command it (kin::check_pose: strokes,

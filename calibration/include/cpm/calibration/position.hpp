@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Full-position calibration (Kim 2005, section 4.1): a 3-D instrument (laser
 // tracker, CMM) measures the platform point p_j in the machine frame at
 // actuator readings d_j. All 12 plane parameters are identifiable:

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Simulated measurements: what an instrument would read on a true machine
 // commanded through a controller's model (docs/model.md, issue 3):
 //   d = IK_controller(p_commanded)      the encoder readings the drives settle at

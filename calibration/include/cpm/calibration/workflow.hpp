@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Calibration from files, as `cpm calibrate` runs it: read the model file and
 // a measurement file (docs/data-formats.md: kind = ballbar or position), check
 // every row, fit, and produce the new model file (nominal values, fitted

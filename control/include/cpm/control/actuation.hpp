@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Dead time between a force command and the force it makes (the
 // actuation_delay effect of docs/effects.md): the command given at t_k acts over
 // [t_k + tau, t_k+1 + tau) instead of [t_k, t_k+1).

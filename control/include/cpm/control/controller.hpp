@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The four control laws of Elkady section 4, with the actuator force limit.
 //
 // Errors and gains:

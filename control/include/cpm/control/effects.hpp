@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The dynamic effects of docs/effects.md: forces the actuators must
 // supply beyond Elkady's rigid-body model.
 //

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Whether a control law with given gains can hold the machine at the loop's
 // rate: the check the daemon makes before it takes a law or gains (issue 17),
 // on its command thread, never in the control cycle. Pure; it allocates.

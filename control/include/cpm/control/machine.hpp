@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The machine model: one constant description used by the controller (the
 // model it believes), the simulator (the true machine) and identification
 // (the numbers it fits). As in Pinocchio, the model is constant data and

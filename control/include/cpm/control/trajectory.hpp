@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Reference trajectories of the platform centre in the machine frame
 // (m, m/s, m/s^2). A trajectory is prepared (and validated) before the loop;
 // sampling it is noexcept and allocation-free.

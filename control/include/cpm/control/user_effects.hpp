@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Effects a user adds in the model file without writing C++ (docs/effects.md,
 // "Effects you add"; the file's spelling is docs/model-file.md):
 //   - table:      a force (N) on one axis, linearly interpolated against one

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Who may command cpmd (docs/security.md): operators, their keys and roles,
 // and the MAC every command but a stop carries.
 //

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The seam between the control loop and the machine's I/O.
 //
 // The loop sees two calls per cycle, read() at its start and write() before

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The CANopen backend: the daemon's Backend over hal/ — three CiA 402 drives
 // in cyclic synchronous torque through hal::Master on a CAN bus, and the
 // machine's GPIO through hal::DigitalIo. docs/canopen-backend.md.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // A client of a running cpmd over LCM: used by the `cpm` client subcommands
 // and by the end-to-end tests. Not real-time.
 #pragma once

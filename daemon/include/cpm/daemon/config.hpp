@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // cpmd's configuration: one YAML file (see config/sim.yaml, docs/daemon.md).
 //
 // Loading is strict: an unknown key, a missing key, a value of the wrong type

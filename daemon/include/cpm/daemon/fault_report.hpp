@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The first fault of a state message in words an operator reads: the one
 // place that writes them, for `cpm status` (text and --json "fault_report"),
 // the journal (cpmd logs it when a fault latches) and any other client.

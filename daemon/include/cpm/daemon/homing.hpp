@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Homing one actuator: a small state machine stepped once per control cycle,
 // with the phases of LinuxCNC's homing (src/emc/motion/homing.c) for a home
 // switch and an index, and a hand-over to a drive that homes itself (CiA 402

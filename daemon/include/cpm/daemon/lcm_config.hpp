@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Where cpmd and its clients meet on LCM: the URL and the channels (the
 // `lcm:` section of cpmd's configuration, docs/daemon.md). On its own so that
 // a client (cpm_client, find_package(cpmd)) needs none of the daemon's types.

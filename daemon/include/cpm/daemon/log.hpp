@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // cpmd's messages, with a severity the journal understands.
 //
 // Under systemd, stderr is a stream to journald: each line is sent with the

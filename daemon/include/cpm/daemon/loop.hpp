@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The control loop of cpmd: the state machine and one control cycle.
 //
 // cycle() is the real-time part, shaped like LinuxCNC's emcmotController

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The control loop's state in small owners, each with its own transitions
 // (as LinuxCNC keeps homing.c and command.c apart from control.c): the fault
 // latch, the stop profile, the segment queue and its tracking, the homing

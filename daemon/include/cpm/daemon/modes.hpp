@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The loop's modes and fault bits (= state_t.MODE_* and state_t.FAULT_*) and
 // their names: shared by the loop and its clients (cpm_client).
 #pragma once

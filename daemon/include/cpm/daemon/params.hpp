@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The parameters an engineer may read and change while cpmd runs (`cpm get`,
 // `cpm set`, control_command_t.CMD_SET_PARAM, params_t): the limits, the jog
 // and the controller's gains, each with its unit, its range, whether it may

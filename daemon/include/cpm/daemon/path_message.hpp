@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // A program's segments as path_command_t chunks and back (docs/path.md):
 // what `cpm run` sends and what cpmd assembles, in one place so that both
 // ends agree on the layout. Not real-time.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // What cpmd checks at start, beyond each file's own rules (config.cpp,
 // the model file): that the configuration, the model and the backend fit
 // together, so that a machine that cannot be run safely is refused before

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // A velocity-ramped reference: the generator behind jogging, the daemon's
 // homing moves and the reference while the actuators are held one by one
 // (before homing). Each period the velocity moves toward a target velocity

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The real-time thread: runs ControlLoop::cycle on an absolute schedule.
 //
 // The thread sleeps with clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME) until

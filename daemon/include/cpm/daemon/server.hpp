@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The command/state side of cpmd (not real-time): one thread with the LCM
 // handle. It decodes commands, authenticates them (docs/security.md: the
 // operator's MAC, role and session, before anything costly is done for

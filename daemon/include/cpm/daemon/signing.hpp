@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Signed state (docs/security.md, "Signed state"): cpmd seals what it
 // publishes (state, acks, drives, statistics, parameters, security counts)
 // with its Ed25519 key, so that any observer can check it with the public

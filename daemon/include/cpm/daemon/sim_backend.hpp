@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The embedded simulator backend: the plant of sim/ (the true machine, with
 // its own parameters and effects) stepped in-process by the loop.
 //

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Single-producer single-consumer ring of fixed capacity, lock-free and
 // allocation-free after construction. The real-time loop and the other threads
 // meet only through these (and the atomics they expose): one thread pushes,

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // cpmd --stats-json: the loop statistics at exit as JSON (bench/report.py
 // and docs/performance.md read it).
 #pragma once

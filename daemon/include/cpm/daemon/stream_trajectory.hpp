@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // A trajectory through timed setpoints (a chunk of a setpoint stream),
 // interpolated by cubic Hermite splines on the given positions and
 // velocities. Fixed capacity, so it can be copied into the real-time queue

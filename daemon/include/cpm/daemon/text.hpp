@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // printf into a std::string, for the sentences cpmd and its clients show
 // (fault reports, the console). Not for the real-time path (it allocates).
 #pragma once

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Bus load of a cyclic CANopen configuration: frames and worst-case stuffed
 // bits per cycle against the bitrate.
 #pragma once

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The CAN bus seam: classic CAN 2.0 frames, non-blocking send and receive,
 // acceptance filters, receive timestamps and error frames.
 //

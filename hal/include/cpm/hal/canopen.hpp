@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // CANopen (CiA 301) basics shared by the master and the virtual drive:
 // COB-IDs of the predefined connection set, NMT, heartbeat, EMCY, SDO
 // command specifiers and abort codes. Pure functions, no allocation.

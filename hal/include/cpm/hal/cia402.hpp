@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // CiA 402 (IEC 61800-7-201) drive state machine: statusword decoding,
 // controlword commands and the state table, shared by the master (which
 // plans a path of commands toward a target) and the virtual drive (which

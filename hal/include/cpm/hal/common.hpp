@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Basic types of the hardware layer: errors, per-cycle status, clocks.
 //
 // hal/ knows nothing of the machine's kinematics or control: it moves frames,

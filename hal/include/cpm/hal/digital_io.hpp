@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Digital I/O of the machine: named lines, read and written as a whole once
 // per cycle. Values are logical (true = asserted), whatever the wiring: the
 // active level of each line comes from the configuration.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // An in-process CAN bus with several ports and fault injection, for fast,
 // deterministic tests. Time is the network's Clock: a frame sent at t is
 // receivable at t + latency (+ injected delay). Queues are preallocated, so

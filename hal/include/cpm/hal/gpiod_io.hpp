@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // DigitalIo through libgpiod 1.6 (Debian bookworm's libgpiod-dev, v1 API).
 #pragma once
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // A CiA 301/402 master for a few servo drives in cyclic synchronous torque
 // mode (the machine has three: one per linear actuator).
 //

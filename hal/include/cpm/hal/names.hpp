@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // One table of names per enum (CiA 402 states, NMT states): a row per value,
 // the last row the unknown value's, found by value.
 #pragma once

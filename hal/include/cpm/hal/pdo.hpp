@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The fixed PDO mappings of this master and their packing and scaling.
 //
 //   RPDO1 (0x200 + node, synchronous): controlword 0x6040 (u16), target torque 0x6071 (i16)  4 bytes

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // SDO client (CiA 301 §7.2.4): expedited and segmented upload and download,
 // aborts in both directions, a timeout per expected answer. Non-blocking:
 // start a transfer, feed it the server's frames and call poll() for time;

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // CAN over Linux SocketCAN (CAN_RAW), non-blocking, with error frames.
 #pragma once
 

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // A virtual CiA 402 servo drive: the slave side of the protocol, with no
 // plant. NMT, an SDO server over an object dictionary, PDOs mapped from that
 // dictionary (so the master's mapping is really applied), the CiA 402 state

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Stage "align" of the motion diagnosis: when does the logged force act?
 //
 // A motion log's force column is the force commanded at t_k (docs/data-formats.md),

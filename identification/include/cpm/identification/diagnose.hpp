@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Diagnosis: which effects of docs/effects.md are missing from a
 // model, judged on measurements. For a motion log, a straight list of stages
 // (docs/identification.md):

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The regression machinery every data kind shares: a residual y (one row per
 // measured scalar), the columns of the base model's own parameters B, row
 // weights, and candidate effects given as more columns. Fitting a candidate

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // cpm excite: an identification experiment for this machine and model.
 //
 // Each axis follows a periodic multi-sine about the workspace centre

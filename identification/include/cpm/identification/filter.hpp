@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Zero-phase Savitzky-Golay kernels: a polynomial of degree `order` fitted by
 // least squares to the 2m+1 samples around sample k, evaluated (or
 // differentiated) at k + offset. Offset 0.5 evaluates half a sample later,

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // cpm fit: add effects to a model, refit, and measure the error before and
 // after on the fitted data and on data it was not fitted to.
 #pragma once

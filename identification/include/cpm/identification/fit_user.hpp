@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // cpm fit for user effects (docs/effects.md, "Effects you add"): a table's
 // values or an expression's parameters fitted on a motion log, beside the
 // nuisance the model as given is fitted with (motion.hpp, plane tilts).

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The kinematic side of compare / diagnose / fit: ball-bar lengths and full
 // positions (kind = ballbar, position), residual in m.
 //

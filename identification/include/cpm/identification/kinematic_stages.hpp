@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The stages of the kinematic diagnosis (kinematic.hpp) as units:
 //  1. read: the data and the model's residual (read_kinematic), the base
 //     calibrated at the model's own effects (prepare_kinematic);

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The user's loop, as one command (cpm loop): diagnose, add the effect found
 // first, refit every effect added so far together, diagnose again, until
 // nothing is missing, something outside the library is, or the steps run out.

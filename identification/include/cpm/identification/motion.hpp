@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The force residual of a model on a motion log (kind = motion):
 //     r = g . F_commanded - ( J^T (M p_dd + G p_dot + K) + model effects )
 // per actuator (N), g the model's drive gain (force_gain effect).

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // What people and programs read: the comparison summary (cpm compare), the
 // diagnosis as text, JSON (the contract of issue 4) and one self-contained
 // HTML file with inline SVG plots.

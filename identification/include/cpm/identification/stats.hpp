@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The few statistics the diagnosis needs: F and chi-square tail
 // probabilities, an effective sample size for correlated residuals, robust
 // noise estimates.

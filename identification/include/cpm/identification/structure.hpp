@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // What remains: structure in a residual that the fitted effects do not
 // explain, said with where it is. Checks, per axis: a difference between the
 // two directions of motion; a periodic pattern against each axis' position

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Readers and writers for the measurement files of docs/data-formats.md
 // (a published interface: read exactly as written there).
 //

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // LinuxCNC's screw-compensation file (the [JOINT_n] COMP_FILE of its INI,
 // read by usrmotLoadComp in its src/emc/motion/usrmotintf.cc) for a
 // pitch_table (docs/effects.md, "Effects you add"):

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The YAML model file (docs/model-file.md): the machine's nominal
 // parameters and every calibrated or identified addition, in one
 // human-readable file. The default machine model is config/machine.yaml.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // cpm::Error, on its own: the client library's public headers need it
 // without the rest of types.hpp (Eigen).
 #pragma once

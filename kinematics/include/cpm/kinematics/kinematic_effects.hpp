@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The kinematic effects of docs/effects.md by name: their parameters,
 // units, bounds and a one-line cause and signature, and access to their
 // values in a LimbKinematicEffects. The equations are in plane_model.cpp.

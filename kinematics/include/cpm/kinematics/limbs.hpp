@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The three PRRR limbs: where their links are for a given platform point.
 //
 // Geometry of docs/model.md (read from Elkady's matrix Gamma):

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // A per-axis pitch table: the error e(d) of the effective displacement
 // against the axis position, the form every CNC controller uses for lead
 // screw compensation (docs/effects.md, "Effects you add"):

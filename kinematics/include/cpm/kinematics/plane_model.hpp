@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Kinematics of the machine: the calibrated plane model of Kim 2005 plus the
 // kinematic effects of docs/effects.md.
 //

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Basic types shared by every module.
 //
 // Units are SI everywhere inside the project: metres, seconds, newtons,

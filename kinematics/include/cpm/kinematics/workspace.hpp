@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Workspace check: does a platform point lie where the machine can go?
 //
 // Three kinds of limit, reported with the limb or actuator that breaks it:

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Contouring figures of a run along a plan (simulated or measured): how far
 // the platform strayed from the programmed path, and how fast it went
 // against the programmed feed.

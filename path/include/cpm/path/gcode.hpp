@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // A G-code reader: the RS274NGC subset a machinist needs for contours on
 // this machine, producing the canonical moves LinuxCNC's interpreter
 // (rs274) would, and the path queue the planner takes.

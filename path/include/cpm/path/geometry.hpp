@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The path as the planner and the real-time sampler see it: a flat array of
 // pieces (lines, arcs and the corner blends between them) laid end to end
 // on one path parameter s (m), with the points where the platform must stop.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // What the path planner must respect: the platform's motion along the path
 // (machine frame) and, in the actuator-aware mode, what each of the three
 // actuators can do (velocity, acceleration, force), reached through the

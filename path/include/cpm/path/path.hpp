@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // A programmed path: lines, circular arcs in any plane and dwells, one after
 // the other from a start point, with the path tolerance within which the
 // planner may round the corners between them.

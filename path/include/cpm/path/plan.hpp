@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // A prepared plan: the speed chosen along the path, as knots of the path
 // parameter s(t) every knot_period, built before motion (planner.hpp). The
 // real-time cycle samples it by time: the knot's index is t / knot_period,

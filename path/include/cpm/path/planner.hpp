@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The path planner: the speed along a blended path, with look-ahead over
 // the whole queue, within the machine's limits. Runs outside the real-time
 // cycle (it allocates and may throw); its result, a Plan, is what the cycle

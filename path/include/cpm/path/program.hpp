@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // A G-code program from text to a checked plan in one call: read (every
 // fault with line and column), checked against the workspace and the soft
 // limits, turned into the planner's queue, planned with the limits the

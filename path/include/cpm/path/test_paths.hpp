@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Standard paths for tests, benchmarks and reports.
 //
 // Units: G-code text in mm and mm/min (what a machinist would write);

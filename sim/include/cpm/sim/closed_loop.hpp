@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // A controller closing the loop on the plant at a fixed control rate, the
 // way the daemon does it on its embedded simulator backend: each period the
 // encoders are read, the controller computes forces from the reference at

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The plant: the true machine, which may differ from the controller's model
 // in its kinematic parameters, masses and effects.
 //

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // Elkady's Table 3 under the reference conditions of docs/model.md: the paper's
 // circle from rest at P1, each of the four laws with its Table 3 gains,
 // control at 1 kHz with zero-order hold, the plant integrated by RK4 in 10

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The drives' fault-injection channel: text lines from a UNIX stream socket
 // (each answered with one line) or from stdin, handed to a command handler.
 // Shared by virtual-drives and the CANopenNode drive nodes of the tests, so

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The command-line options that virtual-drives and canopennode-drives share
 // (CLI11): where the drives are, the true machine, the rate, node ids and
 // scaling. Header-only: the programs link cpm_program_cli for CLI11.

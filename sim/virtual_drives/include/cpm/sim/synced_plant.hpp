@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The true machine as drives on a synchronous CAN bus move it: one
 // sim::Plant stepped by exactly one control period per SYNC frame, with the
 // brake rule and the two timings of the header of virtual_machine.hpp.

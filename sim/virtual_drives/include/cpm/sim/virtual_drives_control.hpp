@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The virtual drives' fault-injection protocol: one command per text line,
 // the same from the command line (--fault), stdin and the UNIX control
 // socket (docs/canopen-backend.md). AXIS is 1, 2, 3 or x, y, z.

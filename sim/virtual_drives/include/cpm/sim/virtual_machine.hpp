@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The machine as three CiA 402 drives see it: three hal::VirtualDrive on one
 // CAN bus, coupled by one sim::Plant (the true machine, a rigid platform on
 // three actuators).
