@@ -115,9 +115,11 @@ void verdict_text_motion(Diagnosis& D);
 // Why a fitted value is physically implausible for this machine, or empty (verdict.cpp).
 std::string implausible(const CandidateResult& c);
 // Motion logs, outside the library (outside.cpp): the strong findings of the
-// structure scan in what the chosen effects leave; the problem with their
-// columns as nuisance (to select again beside them); the verdict text led by them.
-std::vector<StructureFinding> strong_structure(const Diagnosis& D, const MotionProblem& P, const DiagnoseOptions& opt);
+// structure scan in what the chosen effects leave (bump_beside_step as for
+// find_motion_structure); the problem with their columns as nuisance (to
+// select again beside them); the verdict text led by them.
+std::vector<StructureFinding> strong_structure(const Diagnosis& D, const MotionProblem& P, const DiagnoseOptions& opt,
+                                               bool bump_beside_step = false);
 LinearProblem with_structure(const LinearProblem& L, const std::vector<StructureFinding>& S, const MotionProblem& P);
 void lead_with_outside_library(Diagnosis& D);
 // Structure in what the model as given leaves (a bump, a step, a smooth force:

@@ -302,8 +302,17 @@ SuggestedUserEffect suggest_user_effect(const StructureFinding& f) {
     s.kind = "table";
     s.input = f.coordinate;
     if (f.kind == "bump") {
-      s.nodes = {f.lo - w, f.lo, f.hi, f.hi + w};
-      s.values = {0.0, f.size, f.size, 0.0};
+      // Its shape, not only its stretch: nodes a quarter of the scan's bin
+      // apart over four bins around it (the fit sets their values). Four
+      // nodes (a trapezoid over the bin) left a Gaussian tight spot at 10x the
+      // floor 1.23x the floor, and the loop then named a drive gain and a
+      // rotor inertia for what the trapezoid left.
+      constexpr int kNodes = 17;
+      for (int k = 0; k < kNodes; ++k) {
+        const double x = f.lo - 1.5 * w + 4.0 * w * k / (kNodes - 1);
+        s.nodes.push_back(x);
+        s.values.push_back(x >= f.lo && x <= f.hi ? f.size : 0.0);
+      }
     } else {
       s.nodes = {f.location - 1e-3, f.location + 1e-3};
       s.values = {0.0, f.size};

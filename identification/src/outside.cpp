@@ -78,10 +78,11 @@ Eigen::MatrixXd structure_columns(const StructureFinding& f, const MotionProblem
 
 }  // namespace
 
-std::vector<StructureFinding> strong_structure(const Diagnosis& D, const MotionProblem& P, const DiagnoseOptions& opt) {
+std::vector<StructureFinding> strong_structure(const Diagnosis& D, const MotionProblem& P, const DiagnoseOptions& opt,
+                                               bool bump_beside_step) {
   std::vector<StructureFinding> out;
   if (!opt.structure_search) return out;
-  for (const auto& f : find_motion_structure(P, D.residual_final, D.axis_noise))
+  for (const auto& f : find_motion_structure(P, D.residual_final, D.axis_noise, bump_beside_step))
     if (std::fabs(f.z) >= kStrongZ && f.axis >= 0 && std::fabs(f.size) >= 0.5 * D.axis_noise[f.axis])
       out.push_back(f);
   return out;
@@ -143,7 +144,10 @@ std::vector<StructureFinding> confirmed_outside_library(const Diagnosis& D, cons
     Diagnosis probe;
     probe.axis_noise = D.axis_noise;
     probe.residual_final = residual_of_chosen(D, Engine(with_structure(E.problem(), others, D.motion)));
-    const std::vector<StructureFinding> again = strong_structure(probe, D.motion, opt);
+    // Looked for as itself: a bump is not hidden behind a step the scan also
+    // sees there (the bump's flank on one side is a step too: a 3x bump found
+    // beside a step was otherwise dropped with it, and cogging took the axis).
+    const std::vector<StructureFinding> again = strong_structure(probe, D.motion, opt, true);
     if (std::any_of(again.begin(), again.end(), [&](const StructureFinding& f) { return same_finding(f, all[k]); }))
       kept.push_back(all[k]);
   }
