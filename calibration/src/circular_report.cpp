@@ -223,7 +223,10 @@ std::string ballbar_report_html(const BallbarReport& b, const std::string& title
   for (const auto& e : b.errors) {
     const auto [unit, scale] = display_unit(e.unit);
     o << "<tr><td>" << html_escape(e.name) << "</td><td>"
-      << (e.key == "not_explained" ? std::string() : fmt("%+.2f ", e.value * scale) + unit) << "</td><td>"
+      // A value that rounds to zero is shown as 0.00, not -0.00.
+      << (e.key == "not_explained" ? std::string()
+                                   : fmt("%+.2f ", std::abs(e.value * scale) < 0.005 ? 0.0 : e.value * scale) + unit)
+      << "</td><td>"
       << fmt("%.2f", e.contribution * 1e6) << "</td><td>" << fmt("%.0f %%", e.share)
       << "</td><td style=\"width:30mm;text-align:left\"><span class=\"bar\" style=\"width:" << fmt("%.1f", 0.3 * e.share)
       << "mm\"></span></td></tr>\n";
