@@ -18,6 +18,7 @@ packages=(
   bash-completion          # completion for cpm (pkg-config gives its install folder)
   libncurses-dev           # cpm watch and cpm jog: the full-screen terminal
   tmux                     # tests/tools: cpm watch in an 80 x 24 pane, captured
+  chromium                 # tests/calibration: prints the ball-bar report to PDF, checks one A4 page
   libsodium-dev            # Ed25519: cpmd signs its state and acks (docs/security.md)
   libssl-dev               # SHA-256 of data files (libcrypto), model file provenance
   liblcm-dev liblcm-bin    # LCM transport and lcm-gen

@@ -238,7 +238,7 @@ void evaluate_circular_traces(CircularTestResult& r) {
   r.G_bidirectional = hi - lo;
 }
 
-std::string circular_test_svg(const CircularTestResult& r, const std::string& title) {
+std::string circular_test_svg(const CircularTestResult& r, const std::string& title, double um_per_division) {
   // Plot on the left (rings up to R0 + 4 pitches, axes a little beyond), the
   // legend in its own column on the right, the title above everything.
   const double R0 = 180, cx = 330, cy = 370, W = 900, Hh = 710;
@@ -255,6 +255,7 @@ std::string circular_test_svg(const CircularTestResult& r, const std::string& ti
       div = n;
       break;
     }
+  if (um_per_division > 0.0) div = um_per_division;
   const double pitch = 30.0;
   const double px_per_um = pitch / div;
   std::ostringstream o;

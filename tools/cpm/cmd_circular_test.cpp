@@ -5,6 +5,7 @@
 #include <sstream>
 
 #include "calib_common.hpp"
+#include "cpm/calibration/circular_report.hpp"
 #include "cpm/calibration/circular_test.hpp"
 #include "cpm/calibration/workflow.hpp"
 #include "cpm/io/model_file.hpp"
@@ -23,7 +24,8 @@ std::string trace_csv(const cal::CircularTestResult& r) {
 }
 
 struct Options {
-  std::optional<std::string> truth, model, centre, pivot, svg, json, trace;
+  std::optional<std::string> truth, model, centre, pivot, svg, json, trace, report, report_json, tolerances;
+  double um_per_division = 0.0;
   cal::CircularTestSpec spec;
   std::string plane = "xy", controller = "computed_torque";
   bool kinematic = false;
@@ -57,13 +59,30 @@ int run(const Options& o) {
   std::printf("  radial deviation F:    max %+.2f µm, min %+.2f µm (centre as set); max |error| %.2f µm\n",
               r.F_max * 1e6, r.F_min * 1e6, r.max_abs_error * 1e6);
   if (s.closed_loop) std::printf("  servo error (reference - estimate), RMS %.3f µm\n", r.servo_rms * 1e6);
+  const std::string title = "Circular test: " + truth_path + " driven by " + model_path;
   if (svg) {
-    io::write_file_atomically(*svg, cal::circular_test_svg(r, "Circular test: " + truth_path + " driven by " + model_path));
+    io::write_file_atomically(*svg, cal::circular_test_svg(r, title, o.um_per_division));
     std::printf("polar plot: %s\n", svg->c_str());
   }
   if (trace) {
     io::write_file_atomically(*trace, trace_csv(r));
     std::printf("traces: %s\n", trace->c_str());
+  }
+  if (o.report || o.report_json) {
+    const cal::BallbarTolerances tol = o.tolerances ? cal::load_ballbar_tolerances(*o.tolerances) : cal::BallbarTolerances{};
+    const cal::BallbarReport b = cal::make_ballbar_report(r, tol, o.um_per_division);
+    std::printf("  error sources (contribution peak-to-valley, share of their sum):\n");
+    for (const auto& e : b.errors)
+      std::printf("    %-40s %8.2f µm  %3.0f %%\n", e.name.c_str(), e.contribution * 1e6, e.share);
+    if (!b.checks.empty()) std::printf("  against the tolerances of %s: %s\n", o.tolerances->c_str(), b.pass ? "PASS" : "FAIL");
+    if (o.report) {
+      io::write_file_atomically(*o.report, cal::ballbar_report_html(b, title));
+      std::printf("report: %s\n", o.report->c_str());
+    }
+    if (o.report_json) {
+      io::write_file_atomically(*o.report_json, cal::ballbar_report_json(b));
+      std::printf("report data: %s\n", o.report_json->c_str());
+    }
   }
   if (json)
     write_json(*json, Json{{"G", r.G_bidirectional},
@@ -100,6 +119,16 @@ Run setup(CLI::App& app) {
       ->default_str("the commanded centre");
   app.add_option("--svg", o->svg, "write the polar plot to FILE.svg")->type_name("FILE.svg");
   app.add_option("--trace", o->trace, "write the traces (angle in rad, deviation in m) to FILE.csv")->type_name("FILE.csv");
+  app.add_option("--report", o->report, "write the one-page ball-bar report (prints on one A4 sheet) to FILE.html")
+      ->type_name("FILE.html");
+  app.add_option("--report-json", o->report_json, "write the report's data (error sources, checks) as JSON to FILE")
+      ->type_name("FILE");
+  app.add_option("--tolerances", o->tolerances, "judge the report against the tolerances in FILE.yaml (docs/calibration.md)")
+      ->type_name("FILE.yaml")
+      ->check(CLI::ExistingFile);
+  add_number(app, "--magnification", o->um_per_division, "UM",
+             "plot scale in µm per ring (division); 0 picks one from the largest deviation")
+      ->check(CLI::NonNegativeNumber);
   app.add_option("--json", o->json, "write G, H, F (m) as JSON to FILE")->type_name("FILE");
   return [o] { return run(*o); };
 }

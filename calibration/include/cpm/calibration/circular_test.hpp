@@ -86,8 +86,11 @@ void evaluate_circular_traces(CircularTestResult& r);
 
 // A self-contained SVG polar plot as a ball-bar user knows it: the nominal
 // circle, the two runs' radial deviations magnified (scale rings in µm),
-// and the figures.
-std::string circular_test_svg(const CircularTestResult& r, const std::string& title);
+// and the figures. um_per_division > 0 sets the scale (µm between rings, the
+// test's magnification); 0 picks one so the largest deviation spans about
+// three rings.
+std::string circular_test_svg(const CircularTestResult& r, const std::string& title,
+                              double um_per_division = 0.0);
 
 // Plane axes of a CirclePlane: (first, second) machine axis indices.
 std::pair<int, int> plane_axes(ctl::CirclePlane p);
