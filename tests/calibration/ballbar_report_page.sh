@@ -1,4 +1,5 @@
 #!/bin/bash
+# SPDX-License-Identifier: Apache-2.0
 # The ball-bar report of a simulated circle with a planted backlash (20 µm on
 # x) and squareness (100 µrad) printed by headless Chromium: the PDF must be
 # exactly one page, and the page must hold every section. Exit 77 (skipped)

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The one-page ball-bar report: the error sources of a simulated circular
 // test with planted backlash and squareness, read back from the report's
 // JSON, and the tolerance file.

@@ -1,3 +1,4 @@
+// SPDX-License-Identifier: Apache-2.0
 // The one-page ball-bar report of a circular test (cpm circular-test
 // --report): the error sources a ball-bar user reads off the two runs, each
 // with its contribution in µm and its share, and pass/fail against the
