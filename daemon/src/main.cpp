@@ -259,6 +259,12 @@ int main(int argc, char** argv) {
   // glibc would otherwise raise this threshold after the first one and keep
   // every later one resident (docs/security.md). The loop allocates nothing.
   mallopt(M_MMAP_THRESHOLD, 256 * 1024);
+  // One malloc arena for every thread: glibc reserves 64 MiB of address
+  // space for each thread's own arena, and with mlockall(MCL_FUTURE) all of
+  // it counts as locked (VmLck rose 72 MiB at the first model load, its
+  // loader's arena and stack). The loop allocates nothing, so the one
+  // arena's lock is never taken by it.
+  mallopt(M_ARENA_MAX, 1);
   try {
     return run(argc, argv);
   } catch (const std::exception& e) {

@@ -2,6 +2,7 @@
 #include "cpm/daemon/server.hpp"
 
 #include <malloc.h>
+#include <pthread.h>
 #include <sys/socket.h>
 #include <sys/un.h>
 #include <unistd.h>
@@ -20,6 +21,7 @@
 #include <lcm/lcm-cpp.hpp>
 #include <random>
 #include <sstream>
+#include <stdexcept>
 
 #include "cpm/daemon/fault_report.hpp"
 #include "cpm/daemon/log.hpp"
@@ -122,7 +124,7 @@ class ModelLoader {
       quit_ = true;
     }
     cv_.notify_all();
-    if (thread_.joinable()) thread_.join();
+    if (started_) pthread_join(thread_, nullptr);
   }
   // Whether a load is in progress or its result not yet taken.
   [[nodiscard]] bool busy() const {
@@ -142,7 +144,7 @@ class ModelLoader {
     }
     // Started by the first load, from the LCM thread: it inherits that
     // thread's CPUs (never loop.cpu, main.cpp).
-    if (!thread_.joinable()) thread_ = std::thread([this] { run(); });
+    if (!started_) started_ = spawn();
     cv_.notify_all();
   }
   // The finished load, if any (never waits for one).
@@ -155,6 +157,25 @@ class ModelLoader {
   }
 
  private:
+  // The loader's stack is mapped locked (mlockall MCL_FUTURE) for cpmd's
+  // life: 1 MiB, not glibc's 8 MiB. The parse never recurses deeper than
+  // kMaxModelDepth; a load of the largest files touches well under this.
+  static constexpr std::size_t kStackBytes = 1024 * 1024;
+  bool spawn() {
+    pthread_attr_t attr;
+    if (pthread_attr_init(&attr) != 0) throw std::runtime_error("model loader: pthread_attr_init failed");
+    pthread_attr_setstacksize(&attr, kStackBytes);
+    const int rc = pthread_create(
+        &thread_, &attr,
+        [](void* self) -> void* {
+          static_cast<ModelLoader*>(self)->run();
+          return nullptr;
+        },
+        this);
+    pthread_attr_destroy(&attr);
+    if (rc != 0) throw std::runtime_error(std::string("model loader: cannot start its thread: ") + std::strerror(rc));
+    return true;
+  }
   void run() {
     std::unique_lock<std::mutex> lock(mu_);
     for (;;) {
@@ -188,7 +209,8 @@ class ModelLoader {
   }
   mutable std::mutex mu_;
   std::condition_variable cv_;
-  std::thread thread_;
+  pthread_t thread_{};
+  bool started_ = false;  // touched only by start() and the destructor (the LCM thread's side)
   bool quit_ = false, pending_ = false;
   std::int64_t id_ = 0;
   std::string path_, model_dir_, operator_name_;
