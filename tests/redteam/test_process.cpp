@@ -81,6 +81,22 @@ struct Rig {
     config = cpm::test::sim_config(dir.path(), "sim.yaml", ops.path(), all, dir / "models");
     cfg = daemon::load_config(config);
   }
+  // cpmd's public key in a file, as an operator's client is given it.
+  std::string public_key_file() {
+    const std::string pub = dir / "cpmd.pub";
+    daemon::write_public_key_file(pub, daemon::public_key_of(signing_seed));
+    return pub;
+  }
+  // A client of `who` that verifies cpmd's seals, the machine enabled and
+  // holding; `st` is the verified holding state.
+  std::unique_ptr<Client> enabled_verifying(const Credentials& who, std::optional<state_t>& st) {
+    auto c = std::make_unique<Client>(cfg.lcm, who);
+    c->verify_with(daemon::public_key_of(signing_seed));
+    EXPECT_TRUE(c->control(cpm_msgs::control_command_t::CMD_ENABLE).accepted);
+    for (int i = 0; i < 50 && !(st && st->mode == state_t::MODE_HOLDING); ++i) st = c->state(0.2);
+    EXPECT_TRUE(st && st->mode == state_t::MODE_HOLDING) << "cpmd did not reach holding";
+    return c;
+  }
   // Starts cpmd (with `extra` arguments) and waits for its first state.
   void start(const std::vector<std::string>& extra = {}) {
     cpmd = cpm::test::start_cpmd(config, dir / "cpmd.log", extra);
@@ -234,19 +250,13 @@ TEST(Stranger, CanStopTheMachine) {
 // every 5 ms for 1.5 s of a 4 s move. The waiting `cpm move` must not end
 // early, `cpm status` must show the machine moving.
 TEST(ForgedState, DoesNotEndAWaitingMoveNorShowInStatus) {
-  cpm::test::TempDir kd("redteam-forged-key");
-  const std::string key = kd / "cpmd.key", pub = kd / "cpmd.pub";
-  const daemon::Key seed = daemon::generate_key();
-  daemon::write_key_file(key, seed);
-  daemon::write_public_key_file(pub, daemon::public_key_of(seed));
-  Rig r("forged", {{"refusal_acks_per_second: 20", "refusal_acks_per_second: 20\n  signing_key: " + key}});
+  Rig r("forged");
+  const std::string pub = r.public_key_file();
   r.start();
-  Client alice(r.cfg.lcm, r.alice);
-  alice.verify_with(daemon::public_key_of(seed));
-  ASSERT_TRUE(alice.control(C::CMD_ENABLE).accepted);
   std::optional<state_t> st;
-  for (int i = 0; i < 50 && !(st && st->mode == state_t::MODE_HOLDING); ++i) st = alice.state(0.2);
-  ASSERT_EQ(st->mode, state_t::MODE_HOLDING);
+  auto alice_client = r.enabled_verifying(r.alice, st);
+  ASSERT_FALSE(::testing::Test::HasFailure());
+  Client& alice = *alice_client;
   alice.release();
   const auto t0 = Clock::now();
   std::vector<std::string> argv{"/usr/bin/env", "-i", "HOME=" + (r.dir / "nohome"), CPM_EXE, "move", "0.40,0.425,0.300",
@@ -298,19 +308,12 @@ TEST(ForgedState, DoesNotEndAWaitingMoveNorShowInStatus) {
 // client, given cpmd's public key, show only what cpmd sealed and say that
 // they refused the rest.
 TEST(ForgedState, WatchAndTheExampleClientShowOnlyVerifiedMessages) {
-  cpm::test::TempDir kd("redteam-forged-view-key");
-  const std::string key = kd / "cpmd.key", pub = kd / "cpmd.pub";
-  const daemon::Key seed = daemon::generate_key();
-  daemon::write_key_file(key, seed);
-  daemon::write_public_key_file(pub, daemon::public_key_of(seed));
-  Rig r("forged-view", {{"refusal_acks_per_second: 20", "refusal_acks_per_second: 20\n  signing_key: " + key}});
+  Rig r("forged-view");
+  const std::string pub = r.public_key_file();
   r.start();
-  Client alice(r.cfg.lcm, r.alice);
-  alice.verify_with(daemon::public_key_of(seed));
-  ASSERT_TRUE(alice.control(C::CMD_ENABLE).accepted);
   std::optional<state_t> st;
-  for (int i = 0; i < 50 && !(st && st->mode == state_t::MODE_HOLDING); ++i) st = alice.state(0.2);
-  ASSERT_EQ(st->mode, state_t::MODE_HOLDING);
+  const auto alice = r.enabled_verifying(r.alice, st);  // her session holds the machine enabled
+  ASSERT_FALSE(::testing::Test::HasFailure());
   std::atomic<bool> forging{true};
   std::atomic<int> forged{0};
   std::thread forger([&] {

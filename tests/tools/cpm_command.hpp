@@ -37,6 +37,16 @@ struct TempFolder {
   ~TempFolder() { std::filesystem::remove_all(dir); }
 };
 
+// Any shell command, its standard output and error together in `log`.
+struct CommandResult {
+  int status = -1;
+  std::string out;
+};
+inline CommandResult run_command(const std::string& cmd, const std::filesystem::path& log) {
+  const int rc = std::system((cmd + " >" + log.string() + " 2>&1").c_str());
+  return {WIFEXITED(rc) ? WEXITSTATUS(rc) : -1, slurp(log)};
+}
+
 // `cpm ARGS`, its output kept in t.dir/out and t.dir/err.
 inline CpmResult run_cpm(const std::string& args, const TempFolder& t) {
   const std::string cmd = std::string(CPM_EXE) + " " + args + " >" + (t.dir / "out").string() + " 2>" +

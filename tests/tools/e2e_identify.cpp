@@ -15,25 +15,13 @@
 #include "cpm/daemon/client.hpp"
 #include "cpm/io/model_file.hpp"
 #include "support/daemon_process.hpp"
+#include "tools/cpm_command.hpp"
 
 namespace cpm {
 namespace {
 
 using cpm_msgs::control_command_t;
 using cpm_msgs::state_t;
-
-struct Result {
-  int status = -1;
-  std::string out;
-};
-
-Result run(const std::string& cmd, const std::string& log) {
-  const int rc = std::system((cmd + " >" + log + " 2>&1").c_str());
-  std::ifstream f(log);
-  std::stringstream ss;
-  ss << f.rdbuf();
-  return {WIFEXITED(rc) ? WEXITSTATUS(rc) : -1, ss.str()};
-}
 
 TEST(IdentifyOnCpmd, TheExperimentRecordedAndTheLoopNameEveryPlantedEffect) {
   const test::TempDir dir("identify");
@@ -64,12 +52,12 @@ TEST(IdentifyOnCpmd, TheExperimentRecordedAndTheLoopNameEveryPlantedEffect) {
 
   const std::string model = std::string(CPM_SOURCE_DIR) + "/config/machine.yaml";
   const std::string exc = dir / "exc.csv";
-  const Result e = run(std::string(CPM_EXE) + " excite --config " + cfg_path + " --out " + exc +
+  const auto e = test::run_command(std::string(CPM_EXE) + " excite --config " + cfg_path + " --out " + exc +
                            " --period 4 --periods 2 --harmonics 4 --iterations 40",
                        dir / "excite.out");
   ASSERT_EQ(e.status, 0) << e.out;
   const std::string better = dir / "better.yaml";
-  const Result r = run(std::string(CPM_EXE) + " identify " + exc + " --model " + model + " --out " + better +
+  const auto r = test::run_command(std::string(CPM_EXE) + " identify " + exc + " --model " + model + " --out " + better +
                            " --log " + (dir / "log.csv") + " --url '" + cfg.lcm.url + "' --key " + ops.key_path("eng") +
                            " --operator eng --apply",
                        dir / "identify.out");
@@ -117,7 +105,7 @@ TEST(IdentifyOnCpmd, TheExperimentRecordedAndTheLoopNameEveryPlantedEffect) {
   ASSERT_TRUE(c.control(control_command_t::CMD_ENABLE).accepted);
   for (int i = 0; i < 100 && s->mode != state_t::MODE_HOLDING; ++i) s = c.state(0.2);
   ASSERT_TRUE(c.release());
-  const Result t = run(std::string(CPM_EXE) + " circle --paper --url '" + cfg.lcm.url + "' --key " + ops.key_path("eng") +
+  const auto t = test::run_command(std::string(CPM_EXE) + " circle --paper --url '" + cfg.lcm.url + "' --key " + ops.key_path("eng") +
                            " --operator eng",
                        dir / "truth.out");
   double true_rms = 0;

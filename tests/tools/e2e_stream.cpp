@@ -16,6 +16,7 @@
 
 #include "cpm/daemon/client.hpp"
 #include "support/daemon_process.hpp"
+#include "tools/cpm_command.hpp"
 #include "tools/stream_files.hpp"
 
 namespace cpm {
@@ -23,19 +24,6 @@ namespace {
 
 using cpm_msgs::control_command_t;
 using cpm_msgs::state_t;
-
-struct Result {
-  int status = -1;
-  std::string out;
-};
-
-Result run(const std::string& cmd, const std::string& log) {
-  const int rc = std::system((cmd + " >" + log + " 2>&1").c_str());
-  std::ifstream f(log);
-  std::stringstream ss;
-  ss << f.rdbuf();
-  return {WIFEXITED(rc) ? WEXITSTATUS(rc) : -1, ss.str()};
-}
 
 Vec3 v3(const double* p) { return Vec3(p[0], p[1], p[2]); }
 
@@ -63,7 +51,7 @@ TEST(StreamOnCpmd, AGoodFileIsApproachedAndPlayedAFastOneRefusedWithNothingMoved
   const test::MultiSine fast = test::over_at(9802, cfg.limits.velocity);
   ASSERT_GT(fast.k, 0);
   fast.write(dir / "fast.csv", 30001);
-  const Result bad = run(cpm + (dir / "fast.csv"), dir / "fast.out");
+  const auto bad = test::run_command(cpm + (dir / "fast.csv"), dir / "fast.out");
   EXPECT_EQ(bad.status, 1) << bad.out;
   EXPECT_NE(bad.out.find("row 9802 (line 9803)"), std::string::npos) << bad.out;
   EXPECT_NE(bad.out.find("nothing sent"), std::string::npos) << bad.out;
@@ -79,7 +67,7 @@ TEST(StreamOnCpmd, AGoodFileIsApproachedAndPlayedAFastOneRefusedWithNothingMoved
   good.write(dir / "good.csv", 4001);
   double p_end[3], v_end[3], a_end[3];
   good.at(4.0, p_end, v_end, a_end);
-  const Result ok = run(cpm + (dir / "good.csv"), dir / "good.out");
+  const auto ok = test::run_command(cpm + (dir / "good.csv"), dir / "good.out");
   EXPECT_EQ(ok.status, 0) << ok.out << d->log();
   EXPECT_NE(ok.out.find("approach: moving to the file's first point"), std::string::npos) << ok.out;
   EXPECT_NE(ok.out.find("a stop of"), std::string::npos) << ok.out;
