@@ -25,6 +25,7 @@
 #include "cpm/daemon/server.hpp"
 #include "cpm/daemon/sim_backend.hpp"
 #include "cpm/daemon/stats_json.hpp"
+#include "cpm/daemon/text.hpp"
 #include "cpm/program_cli.hpp"
 
 namespace {
@@ -246,8 +247,8 @@ int run(int argc, char** argv) {
   backend->stop();
   const cpm_msgs::loop_stats_t& st = loop->current_stats();
   if (!stats_path.empty()) write_atomically(stats_path, stats_json(st, loop->fine_latency_histogram()));
-  log::info("stopped after %lld cycles, %lld overruns, worst wake-up latency %.1f us", static_cast<long long>(st.cycles),
-            static_cast<long long>(st.overruns), st.max_ns[kSeriesLatency] * 1e-3);
+  log::info("stopped after %lld cycles, %lld overruns, worst wake-up latency %s", static_cast<long long>(st.cycles),
+            static_cast<long long>(st.overruns), cpm::daemon::worst_us_text(st.max_ns[kSeriesLatency], st.cycles > 0).c_str());
   return 0;
 }
 

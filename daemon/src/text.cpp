@@ -2,6 +2,7 @@
 #include "cpm/daemon/text.hpp"
 
 #include <cstdarg>
+#include <cstdint>
 #include <cstdio>
 
 namespace cpm::daemon {
@@ -17,6 +18,12 @@ std::string printf_text(const char* format, ...) {
   if (n > 0) std::vsnprintf(s.data(), s.size() + 1, format, again);
   va_end(again);
   return s;
+}
+
+std::string worst_us_text(std::int32_t ns, bool any) {
+  if (!any) return "none yet";
+  if (ns >= INT32_MAX) return printf_text("> %d us (beyond what the statistics hold: a stall of 2.1 s or more)", INT32_MAX / 1000);
+  return printf_text("%.1f us", ns * 1e-3);
 }
 
 }  // namespace cpm::daemon

@@ -537,12 +537,6 @@ Lines render(const std::optional<state_t>& s, const std::optional<loop_stats_t>&
 
 // ---- cpm status, stats
 
-std::string worst_us_text(std::int32_t ns, bool any) {
-  if (!any) return "none yet";
-  if (ns >= INT32_MAX) return daemon::printf_text("> %d us (beyond what the statistics hold: a stall of 2.1 s or more)", INT32_MAX / 1000);
-  return daemon::printf_text("%.1f us", ns * 1e-3);
-}
-
 std::string not_homed_mark(const state_t& s) {
   std::string which;
   for (int i = 0; i < 3; ++i)

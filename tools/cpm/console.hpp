@@ -22,6 +22,8 @@
 #include <cpm_msgs/params_t.hpp>
 #include <cpm_msgs/state_t.hpp>
 
+#include "cpm/daemon/text.hpp"
+
 #include "cli.hpp"
 
 namespace cpm::cli::console {
@@ -73,11 +75,8 @@ const char* homing_phase_name(std::int8_t phase) noexcept;  // "idle", "search",
 
 // ---- cpm status, stats
 
-// A worst-case time from cpmd's statistics (int32 ns) in us, as the screens
-// show it: "none yet" before the first sample (`any` false), "> 2147483 us"
-// where the figure stopped at the message's 32-bit maximum (a stall of
-// 2.1 s or more: the true figure is unknown), else "45.6 us".
-std::string worst_us_text(std::int32_t ns, bool any);
+// A worst-case time from cpmd's statistics: daemon/text.hpp.
+using daemon::worst_us_text;
 // The homed mark after a position: "" when every actuator is homed, else
 // "NOT HOMED (actuators 1 3): the position is not referenced".
 std::string not_homed_mark(const cpm_msgs::state_t& s);
