@@ -14,6 +14,8 @@
 #include <map>
 #include <optional>
 #include <string>
+#include <type_traits>
+#include <utility>
 #include <vector>
 
 #include <cpm/daemon/auth.hpp>
@@ -24,6 +26,14 @@ namespace cpm::daemon {
 using PublicKey = std::array<std::uint8_t, 32>;
 using Digest = std::array<std::uint8_t, 32>;  // BLAKE2b-256
 inline constexpr std::size_t kSignatureBytes = 64;
+
+// Whether message type M carries a sign_counter (state_t, ack_t). Written
+// without C++20's requires-expression: this header is installed with the
+// client library, whose users may build as C++17 (examples/client).
+template <class M, class = void>
+struct HasSignCounter : std::false_type {};
+template <class M>
+struct HasSignCounter<M, std::void_t<decltype(std::declval<M&>().sign_counter)>> : std::true_type {};
 
 // The public half of a daemon key (its 32-byte seed, a key file as `cpm keygen` writes).
 PublicKey public_key_of(const Key& seed);
@@ -55,7 +65,7 @@ class Signer {
   // the publisher's monotonic clock (s); `ack`: a command waits for it.
   template <class M>
   const std::vector<std::uint8_t>& add(M& m, double now, bool ack = false) {
-    if constexpr (requires { m.sign_counter; }) m.sign_counter = counter_ + 1;
+    if constexpr (HasSignCounter<M>::value) m.sign_counter = counter_ + 1;
     buf_.resize(static_cast<std::size_t>(m.getEncodedSize()));
     m.encode(buf_.data(), 0, static_cast<int>(buf_.size()));
     list(now, ack);
