@@ -16,6 +16,7 @@
 #include "cpm/io/model_file.hpp"
 #include "support/daemon_process.hpp"
 #include "tools/cpm_command.hpp"
+#include "tools/cpmd_holding.hpp"
 
 namespace cpm {
 namespace {
@@ -42,12 +43,8 @@ TEST(IdentifyOnCpmd, TheExperimentRecordedAndTheLoopNameEveryPlantedEffect) {
   const auto cfg = daemon::load_config(cfg_path);
   auto d = test::start_cpmd(cfg_path, dir / "cpmd.log");
   daemon::Client c(cfg.lcm, eng);
-  std::optional<state_t> s;
-  for (int i = 0; i < 50 && !s; ++i) s = c.state(0.2);
-  ASSERT_TRUE(s) << "cpmd published no state:\n" << d->log();
-  ASSERT_TRUE(c.control(control_command_t::CMD_ENABLE).accepted);
-  for (int i = 0; i < 100 && s->mode != state_t::MODE_HOLDING; ++i) s = c.state(0.2);
-  ASSERT_EQ(s->mode, state_t::MODE_HOLDING);
+  std::optional<state_t> s = test::enable_and_hold(c, *d);
+  ASSERT_TRUE(s);
   ASSERT_TRUE(c.release());
 
   const std::string model = std::string(CPM_SOURCE_DIR) + "/config/machine.yaml";

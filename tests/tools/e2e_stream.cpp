@@ -17,6 +17,7 @@
 #include "cpm/daemon/client.hpp"
 #include "support/daemon_process.hpp"
 #include "tools/cpm_command.hpp"
+#include "tools/cpmd_holding.hpp"
 #include "tools/stream_files.hpp"
 
 namespace cpm {
@@ -35,12 +36,8 @@ TEST(StreamOnCpmd, AGoodFileIsApproachedAndPlayedAFastOneRefusedWithNothingMoved
   const auto cfg = daemon::load_config(cfg_path);
   auto d = test::start_cpmd(cfg_path, dir / "cpmd.log");
   daemon::Client c(cfg.lcm, eng);
-  std::optional<state_t> s;
-  for (int i = 0; i < 50 && !s; ++i) s = c.state(0.2);
-  ASSERT_TRUE(s) << "cpmd published no state:\n" << d->log();
-  ASSERT_TRUE(c.control(control_command_t::CMD_ENABLE).accepted);
-  for (int i = 0; i < 100 && s->mode != state_t::MODE_HOLDING; ++i) s = c.state(0.2);
-  ASSERT_EQ(s->mode, state_t::MODE_HOLDING);
+  std::optional<state_t> s = test::enable_and_hold(c, *d);
+  ASSERT_TRUE(s);
   const Vec3 at_start = v3(s->position);
   ASSERT_TRUE(c.release());  // cpm commands from here; this client only reads the state
 
