@@ -424,6 +424,43 @@ Eigen::MatrixXd table_column(const KinematicProblem& P, const SuggestedUserEffec
   })});
 }
 
+
+// One form of an axis' smooth error tested against an engine: P2, P3, or the
+// pitch table when its BIC, with its effective parameters, is below theirs.
+struct SmoothForm {
+  ColumnTest t;
+  Eigen::MatrixXd X;   // the columns tested
+  double k = 2.0;      // parameters counted by BIC
+  double size = 0.0;   // m, peak to peak of the curved part
+  bool table = false;
+};
+
+SmoothForm smooth_form(const Engine& E, const Eigen::MatrixXd& X) {
+  SmoothForm f;
+  f.t = test_columns(E, X, kSmoothTrials);
+  f.X = X;
+  if (f.t.fit.beta.size() == 2) f.size = smooth_size(f.t.fit.beta);
+  return f;
+}
+
+// The pitch table of axis i fitted on E's residual replaces the P2, P3 form
+// in f when its BIC is lower and its columns are significant there.
+void table_form(const KinematicProblem& P, const Engine& E, int i, int N, SmoothForm& f) {
+  const TableFit tf = fit_table(P, E, i, 11);
+  const double lnN = std::log(static_cast<double>(N));
+  const double bic_s = f.t.ok ? N * std::log(std::max(f.t.rss, 1e-300) / N) + 2.0 * lnN : 1e300;
+  if (tf.table.values.empty() || !(tf.df > 0.0) || !(tf.rss > 0.0) || !(N * std::log(tf.rss / N) + tf.df * lnN < bic_s))
+    return;
+  const Eigen::MatrixXd Xt = table_column(P, tf.table);
+  ColumnTest t = test_columns(E, Xt, kSmoothTrials);
+  if (!t.ok) return;
+  const int q = std::max(1, static_cast<int>(std::lround(tf.df)));
+  t.p = std::min(1.0, kSmoothTrials * E.nested(E.rss_base(), tf.rss, q, E.base_rank() + q, t.fit.n_eff).p_value);
+  t.rss = tf.rss;
+  const auto [vmin, vmax] = std::minmax_element(tf.table.values.begin(), tf.table.values.end());
+  f = {t, Xt, tf.df, *vmax - *vmin, true};
+}
+
 }  // namespace
 
 void kinematic_outside_library(const KinematicProblem& P, const Engine& E, const DiagnoseOptions& opt, Diagnosis& D) {
@@ -483,38 +520,32 @@ void kinematic_outside_library(const KinematicProblem& P, const Engine& E, const
   ColumnTest alone_best, left_best;
   Eigen::MatrixXd X_best;
   for (int i = 0; i < 3; ++i) {
-    Eigen::MatrixXd X = smooth_displacement_columns(P, i);
+    const Eigen::MatrixXd X = smooth_displacement_columns(P, i);
     if (X.cols() == 0) continue;
-    const ColumnTest left = test_columns(Ef, X, kSmoothTrials);
-    ColumnTest alone = test_columns(E, X, kSmoothTrials);
-    double k_alone = 2.0, size = smooth_size((alone.ok ? alone : left).fit.beta);
-    // The pitch-table form too (the suggestion's nodes and smoothness): a pitch
+    SmoothForm left = smooth_form(Ef, X), alone = smooth_form(E, X);
+    // The pitch-table form too (the suggestion's nodes and smoothness), on
+    // what the library's effects leave and alone on the base refit: a pitch
     // error that stops growing inside the stroke is a kink P2, P3 cannot
     // follow, and a long cyclic error then fits it better than they do (a
-    // 1 mm cyclic error on axis 2 of 120 position poses). Taken when its BIC,
-    // with its effective parameters, is below theirs.
-    if (!found.empty()) {
-      const TableFit tf = fit_table(P, E, i, 11);
-      const double bic_s = alone.ok ? N * std::log(std::max(alone.rss, 1e-300) / N) + 2.0 * lnN : 1e300;
-      if (!tf.table.values.empty() && tf.df > 0.0 && tf.rss > 0.0 &&
-          N * std::log(tf.rss / N) + tf.df * lnN < bic_s) {
-        ColumnTest t = test_columns(E, table_column(P, tf.table), kSmoothTrials);
-        if (t.ok) {
-          const int q = std::max(1, static_cast<int>(std::lround(tf.df)));
-          t.p = std::min(1.0, kSmoothTrials * E.nested(E.rss_base(), tf.rss, q, E.base_rank() + q, t.fit.n_eff).p_value);
-          t.rss = tf.rss;
-          alone = t;
-          X = table_column(P, tf.table);
-          k_alone = tf.df;
-          const auto [vmin, vmax] = std::minmax_element(tf.table.values.begin(), tf.table.values.end());
-          size = *vmax - *vmin;
-        }
-      }
+    // 1 mm cyclic error on axis 2 of 120 position poses), or beside a
+    // library effect the kink's remainder is left as structure.
+    table_form(Pf, Ef, i, N, left);
+    if (!found.empty()) table_form(P, E, i, N, alone);
+    // The finding's columns, beside which each library effect is judged
+    // again: fitted on the base refit, not on what the effects leave (a
+    // table fitted there lacks what a cyclic error took of the kink, and the
+    // cyclic error then stayed named beside it).
+    Eigen::MatrixXd X_form = alone.X;
+    if (left.table && !alone.table) {
+      const SuggestedUserEffect T = fit_table(P, E, i, 11).table;
+      if (!T.values.empty()) X_form = detail::hstack(X, table_column(P, T));
     }
-    const bool left_sig = left.ok && left.p < opt.alpha;
+    const double k_alone = alone.k;
+    const double size = alone.table ? alone.size : left.table ? left.size : alone.t.ok ? alone.size : left.size;
+    const bool left_sig = left.t.ok && left.t.p < opt.alpha;
     bool better = false;
-    if (!found.empty() && alone.ok && alone.p < opt.alpha) {
-      const double bic_s = N * std::log(std::max(alone.rss, 1e-300) / N) + k_alone * lnN;
+    if (!found.empty() && alone.t.ok && alone.t.p < opt.alpha) {
+      const double bic_s = N * std::log(std::max(alone.t.rss, 1e-300) / N) + k_alone * lnN;
       better = bic_s < bic_lib - kClearlyBetter || (!D.noise_floor_upper_bound && !at_floor && bic_s < bic_lib);
       // Within the margin either way: the data fit both alike.
       if (!better && std::fabs(bic_s - bic_lib) <= kClearlyBetter && (tie_axis < 0 || bic_s - bic_lib < tie_delta)) {
@@ -524,13 +555,13 @@ void kinematic_outside_library(const KinematicProblem& P, const Engine& E, const
       }
     }
     if (!(left_sig || better)) continue;
-    const double p = left_sig ? std::min(left.p, alone.p) : alone.p;
+    const double p = left_sig ? std::min(left.t.p, alone.t.p) : alone.t.p;
     if (axis < 0 || p < best_p) {
       axis = i;
       best_p = p;
-      alone_best = alone;
-      left_best = left;
-      X_best = X;
+      alone_best = alone.t;
+      left_best = left.t;
+      X_best = X_form;
       best_size = size;
     }
   }
