@@ -112,8 +112,12 @@ double local_high_band_sigma(const KinematicProblem& P, const Eigen::VectorXd& r
 namespace {
 
 // What the base refit leaves less a smooth error of every axis' reading
-// (Legendre degree 2..4 each): the slow part a machine error lives in.
-Eigen::VectorXd without_smooth_part(const KinematicProblem& P, const Engine& E);
+// (Legendre degree 2..4 each): the slow part a machine error lives in; and
+// less, beside it, up to two candidates of the library that are significant
+// there (a backlash or a guide error beside a pitch error: what neither a
+// smooth function of one reading nor the poses' neighbours take).
+Eigen::VectorXd without_smooth_part(const KinematicProblem& P, const Engine& E,
+                                    const std::vector<CandidateResult>& candidates, double alpha);
 
 }  // namespace
 
@@ -142,7 +146,7 @@ KinematicNoiseFloor kinematic_noise_floor_of(const KinematicProblem& P, const En
       if (s < best) { best = s; best_label = c.label(); }
     }
   if (P.kind == "ballbar") {
-    const double hb = local_high_band_sigma(P, without_smooth_part(P, E), 12, 1);
+    const double hb = local_high_band_sigma(P, without_smooth_part(P, E, candidates, 0.01), 12, 1);
     // Below what any description leaves by more than the scatter of either
     // estimate: the high band holds structure finer than the poses' spacing
     // (a short cyclic error), and the floor is known only as an upper bound.
@@ -196,12 +200,42 @@ Eigen::MatrixXd smooth_displacement_columns(const KinematicProblem& P, int axis,
 
 namespace {
 
-Eigen::VectorXd without_smooth_part(const KinematicProblem& P, const Engine& E) {
+Eigen::VectorXd without_smooth_part(const KinematicProblem& P, const Engine& E,
+                                    const std::vector<CandidateResult>& candidates, double alpha) {
   Eigen::MatrixXd X(P.rows(), 0);
   for (int i = 0; i < 3; ++i) X = detail::hstack(X, smooth_displacement_columns(P, i, 4));
   if (X.cols() == 0 || P.samples() < 3 * X.cols()) return E.base_fit().residual;
-  const JointFit f = E.fit(X);
-  return f.residual.allFinite() ? f.residual : E.base_fit().residual;
+  JointFit f = E.fit(X);
+  if (!f.residual.allFinite()) return E.base_fit().residual;
+  std::vector<char> used(candidates.size(), 0);
+  const double trials = std::max<double>(1.0, static_cast<double>(candidates.size()));
+  for (int round = 0; round < 2; ++round) {
+    int pick = -1;
+    double best_p = alpha;
+    JointFit best;
+    for (std::size_t k = 0; k < candidates.size(); ++k) {
+      const CandidateResult& c = candidates[k];
+      if (used[k] || !c.identifiable || c.effect == "actuator_scale" || c.columns.rows() != P.rows() ||
+          c.columns.cols() == 0 || P.samples() < 3 * (X.cols() + c.columns.cols()))
+        continue;
+      const Eigen::MatrixXd Xc = detail::hstack(X, c.columns);
+      const JointFit g = E.fit(Xc);
+      if (!g.full_rank || !g.residual.allFinite()) continue;
+      const int q = static_cast<int>(c.columns.cols());
+      const NestedTest t = E.nested(f.rss, g.rss, q, E.base_rank() + static_cast<int>(Xc.cols()), g.n_eff);
+      const double pc = std::min(1.0, t.p_value * std::max(1.0, c.trials) * trials);
+      if (t.f_stat > 0.0 && pc < best_p) {
+        best_p = pc;
+        pick = static_cast<int>(k);
+        best = g;
+      }
+    }
+    if (pick < 0) break;
+    used[static_cast<std::size_t>(pick)] = 1;
+    X = detail::hstack(X, candidates[static_cast<std::size_t>(pick)].columns);
+    f = best;
+  }
+  return f.residual;
 }
 
 // A column set tested against an engine's base refit, p corrected for `trials`.

@@ -55,6 +55,7 @@ struct PitchSet {
   std::uint64_t seed = 1;
   bool noise = true;     // false: the exact readings (a test adds its own noise)
   std::vector<PlantedKinematic> library{};  // library effects planted beside it (kin_data.hpp)
+  double bar_half_width = 0.5e-6;           // m, the bar's uniform noise
 };
 
 // Where the kink shape stops growing, as a fraction of the stroke.
@@ -99,11 +100,11 @@ io::DataSet pitch_data(const PitchSet& s) {
     lo = std::min(lo, q.d[s.axis]);
     hi = std::max(hi, q.d[s.axis]);
   }
-  const double sigma = s.position ? kPosSigma : kBarSigma;
+  const double sigma = s.position ? kPosSigma : s.bar_half_width / std::sqrt(3.0);
   const double on = s.noise ? 1.0 : 0.0;
   const double A = s.multiple * sigma / curved_part_ptp(s.shape);
   std::mt19937_64 rng(s.seed * 7919 + 13);
-  std::uniform_real_distribution<double> bar(-kBarHalfWidth, kBarHalfWidth);
+  std::uniform_real_distribution<double> bar(-s.bar_half_width, s.bar_half_width);
   std::normal_distribution<double> gauss(0.0, kPosSigma);
   const Vec3 pivot_true = cal::kim_pivot() + cal::kim_fitted_errors().dq;
   io::BallbarData b;
@@ -687,6 +688,56 @@ TEST(KinematicOutside, ALibraryEffectBesideAKinkIsNamedAndTheTableReachesTheFloo
         EXPECT_LE(T.after, 1.2 * D.noise_floor) << c.name << " " << want << " seed " << seed;
       }
   }
+}
+
+// The ball-bar noise floor over the generator's settings: one and two radii,
+// the bar's noise 0.25, 0.5 and 1 µm half-width, with nothing planted, a
+// smooth or kinked pitch error (10x), a library effect alone at the cells'
+// 10x, and a library effect beside a kink: within 30 % of the planted sigma.
+TEST(KinematicOutside, BallbarNoiseFloorOverTheGeneratorsSettings) {
+  struct Planted {
+    const char* name;
+    int shape;
+    double multiple;
+    std::vector<PlantedKinematic> library;
+  };
+  const std::vector<Planted> planted = {
+      {"nothing", 0, 0.0, {}},
+      {"a smooth pitch error", 1, 10.0, {}},
+      {"a kink", 3, 10.0, {}},
+      {"backlash", 0, 0.0, {{"backlash", 2, {5e-6, 0, 0}}}},
+      {"a guide error", 0, 0.0, {{"guide_angular_error", 0, {4.7e-4, 0, 0}}}},
+      {"a cyclic error", 0, 0.0, {{"cyclic_error", 0, {2.6e-6, 0.016, 0.3}}}},
+      {"backlash + a kink", 3, 10.0, {{"backlash", 2, {5e-6, 0, 0}}}},
+      {"a guide error + a kink", 3, 10.0, {{"guide_angular_error", 0, {4.7e-4, 0, 0}}}},
+  };
+  double worst_all = 0.0;
+  for (const Condition& c : conditions()) {
+    if (c.position) continue;
+    for (const Planted& pl : planted) {
+      std::string line;
+      double worst = 0.0;
+      for (double hw : {0.25e-6, 1.0e-6}) {
+        const double scale = hw / kBarHalfWidth;
+        for (std::uint64_t seed : {51u, 52u}) {
+          PitchSet s{false, c.radii, static_cast<int>(seed % 3), pl.shape, pl.multiple, seed};
+          s.library = pl.library;
+          for (auto& e : s.library) e.params[0] *= scale;  // the same multiple of the noise
+          s.bar_half_width = hw;
+          const ident::Diagnosis D = diagnose(pitch_data(s));
+          const double ratio = D.noise_floor / (hw / std::sqrt(3.0));
+          worst = std::max(worst, std::fabs(ratio - 1.0));
+          line += " " + std::to_string(ratio).substr(0, 5) + (D.noise_floor_upper_bound ? "u" : "");
+          EXPECT_NEAR(ratio, 1.0, 0.3) << c.name << ", " << pl.name << ", bar +-" << hw * 1e6 << " µm, seed " << seed
+                                       << ": " << D.noise_floor_text;
+        }
+      }
+      worst_all = std::max(worst_all, worst);
+      std::printf("%s, %s: floor / planted sigma (bar +-0.25, +-1 µm; u = upper bound)%s; worst |ratio - 1| %.3f\n",
+                  c.name, pl.name, line.c_str(), worst);
+    }
+  }
+  std::printf("ball-bar floor over the generator's settings: worst |ratio - 1| %.3f\n", worst_all);
 }
 
 }  // namespace
