@@ -116,7 +116,7 @@ namespace {
 // less, beside it, up to two candidates of the library that are significant
 // there (a backlash or a guide error beside a pitch error: what neither a
 // smooth function of one reading nor the poses' neighbours take).
-Eigen::VectorXd without_smooth_part(const KinematicProblem& P, const Engine& E,
+Eigen::VectorXd without_smooth_part_and_effects(const KinematicProblem& P, const Engine& E,
                                     const std::vector<CandidateResult>& candidates, double alpha);
 
 }  // namespace
@@ -146,7 +146,8 @@ KinematicNoiseFloor kinematic_noise_floor_of(const KinematicProblem& P, const En
       if (s < best) { best = s; best_label = c.label(); }
     }
   if (P.kind == "ballbar") {
-    const double hb = local_high_band_sigma(P, without_smooth_part(P, E, candidates, 0.01), 12, 1);
+    constexpr double kEffectOut = 0.01;  // a candidate taken out first: p x its trials x candidates below this
+    const double hb = local_high_band_sigma(P, without_smooth_part_and_effects(P, E, candidates, kEffectOut), 12, 1);
     // Below what any description leaves by more than the scatter of either
     // estimate: the high band holds structure finer than the poses' spacing
     // (a short cyclic error), and the floor is known only as an upper bound.
@@ -200,7 +201,7 @@ Eigen::MatrixXd smooth_displacement_columns(const KinematicProblem& P, int axis,
 
 namespace {
 
-Eigen::VectorXd without_smooth_part(const KinematicProblem& P, const Engine& E,
+Eigen::VectorXd without_smooth_part_and_effects(const KinematicProblem& P, const Engine& E,
                                     const std::vector<CandidateResult>& candidates, double alpha) {
   Eigen::MatrixXd X(P.rows(), 0);
   for (int i = 0; i < 3; ++i) X = detail::hstack(X, smooth_displacement_columns(P, i, 4));
