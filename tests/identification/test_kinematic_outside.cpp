@@ -656,8 +656,11 @@ TEST(KinematicOutside, ALibraryEffectBesideAKinkIsNamedAndTheTableReachesTheFloo
   for (const Condition& c : conditions()) {
     if (c.radii.size() < 2) continue;
     const double sigma = c.position ? kPosSigma : kBarSigma;
+    int sets = 0, right = 0, value = 0;
+    std::string misses;
     for (const Beside& b : cases)
-      for (std::uint64_t seed : {31u, 32u}) {
+      for (int k = 0; k < sets_per_axis(2); ++k) {
+        const auto seed = static_cast<std::uint64_t>(31 + k);
         PitchSet s{c.position, c.radii, b.kink_axis, 3, 10.0, seed};
         s.library = {b.effect};
         if (c.position) s.library[0].params[0] *= 3.0;  // 2 µm noise: the cells' 10x on positions
@@ -678,15 +681,20 @@ TEST(KinematicOutside, ALibraryEffectBesideAKinkIsNamedAndTheTableReachesTheFloo
                     c.name, want.c_str(), b.kink_axis + 1, static_cast<int>(seed), named_text(D).c_str(), want.c_str(),
                     named ? (std::to_string(100.0 * off).substr(0, 5) + " % off").c_str() : "not named", planted,
                     T.base_only * 1e6, T.after * 1e6, T.after / sigma, D.noise_floor * 1e6, D.noise_floor_source.c_str());
-        EXPECT_TRUE(outside_on(D, b.kink_axis)) << c.name << " " << want << " seed " << seed << ": " << D.verdict_text;
-        ASSERT_NE(named, nullptr) << c.name << " " << want << " seed " << seed << ": " << D.verdict_text;
-        EXPECT_EQ(D.found().size(), 1u) << c.name << " " << want << " seed " << seed << ": " << named_text(D);
+        ++sets;
+        const bool ok = outside_on(D, b.kink_axis) && named && D.found().size() == 1;
+        right += ok;
         // Within 5 %, or 3 of its standard errors where those are wider (a cyclic error at 10x on positions: 2.5 %).
-        EXPECT_LT(std::fabs(off), std::max(0.05, 3.0 * named->params[0].std_error / planted))
-            << c.name << " " << want << " seed " << seed;
+        value += named && std::fabs(off) < std::max(0.05, 3.0 * named->params[0].std_error / planted);
+        if (!ok) misses += "\n  " + want + " seed " + std::to_string(seed) + ": " + named_text(D);
         EXPECT_LE(T.after, 1.2 * sigma) << c.name << " " << want << " seed " << seed;
         EXPECT_LE(T.after, 1.2 * D.noise_floor) << c.name << " " << want << " seed " << seed;
       }
+    std::printf("%s, a library effect beside a kink: outside on the kinked axis with the effect named and nothing "
+                "else %d/%d, its value within 5 %% (or 3 s.e.) %d/%d%s\n",
+                c.name, right, sets, value, sets, misses.c_str());
+    EXPECT_GE(right, 0.9 * sets) << c.name << misses;
+    EXPECT_GE(value, 0.9 * sets) << c.name;
   }
 }
 
