@@ -21,6 +21,7 @@
 #include <vector>
 
 #include "cmd_client_common.hpp"
+#include "console.hpp"
 #include "cpm/daemon/loop.hpp"
 
 namespace cpm::cli::client {
@@ -69,6 +70,15 @@ Histogram rebin(const Histogram& fine, const Histogram& like) {
     h.count[static_cast<std::size_t>(std::max<std::ptrdiff_t>(0, it - h.lo_us.begin() - 1))] += fine.count[k];
   }
   return h;
+}
+
+// The q-quantile's bin's upper edge (us), as `cpm stats` gives percentiles
+// (console::percentile_us), of a histogram in cpmd's bins.
+double percentile_us(const Histogram& h, double q) {
+  loop_stats_t s{};
+  for (int k = 0; k < daemon::kBins; ++k) s.histogram[kLat][k] = static_cast<std::int32_t>(h.count[k]);
+  s.count[kLat] = h.total();
+  return console::percentile_us(s, kLat, q);
 }
 
 // One second of the run (between two statistics messages).
@@ -344,10 +354,15 @@ int latency(const Options& o) {
   std::printf("cpmd: worst wake-up latency %.3f us%s; in this run %s us (its histogram's bin)\n", max_us,
               max_in_window ? " (reached in this run)" : " (since the loop started, before this run)",
               std::isinf(run_max) ? ">= 2000" : ("< " + std::to_string(static_cast<long>(run_max))).c_str());
-  if (ct.ran)
+  const Histogram cth = ct.ran ? rebin(ct.hist, h) : Histogram{};
+  std::printf("cpmd: percentiles (upper edges of cpmd's bins) p50 %.0f us, p99 %.0f us, p99.9 %.0f us\n",
+              percentile_us(h, 0.5), percentile_us(h, 0.99), percentile_us(h, 0.999));
+  if (ct.ran) {
     std::printf("cyclictest: %lld wake-ups, min %.0f us, avg %.2f us, max %.0f us%s\n", ct.cycles, ct.min_us, ct.avg_us,
                 ct.max_us, ct.overflows ? (" (" + std::to_string(ct.overflows) + " beyond 2 ms)").c_str() : "");
-  else
+    std::printf("cyclictest: percentiles in the same bins p50 %.0f us, p99 %.0f us, p99.9 %.0f us\n",
+                percentile_us(cth, 0.5), percentile_us(cth, 0.99), percentile_us(cth, 0.999));
+  } else
     std::printf("cyclictest: %s\n", ct.why.c_str());
   std::printf("\n%-14s %12s %12s   (log bar: cpmd)\n", "latency (us)", "cpmd", ct.ran ? "cyclictest" : "");
   for (std::size_t r = 0; r + 1 < std::size(kRowEdges); ++r) {
@@ -391,6 +406,9 @@ int latency(const Options& o) {
                  {"histogram_total", h.total()},
                  {"max_ns", last.max_ns[kLat]},
                  {"max_in_run", max_in_window},
+                 {"p50_us", percentile_us(h, 0.5)},
+                 {"p99_us", percentile_us(h, 0.99)},
+                 {"p999_us", percentile_us(h, 0.999)},
                  {"run_max_bin_upper_us", std::isinf(run_max) ? nlohmann::ordered_json(nullptr) : nlohmann::ordered_json(run_max)},
                  {"bins_lower_us", h.lo_us},
                  {"histogram", h.count}};
@@ -399,7 +417,9 @@ int latency(const Options& o) {
     j["max_over_time"] = over;
     if (ct.ran)
       j["cyclictest"] = {{"period_us", period_us}, {"priority", priority}, {"cycles", ct.cycles}, {"histogram_total", ct.hist.total()},
-                         {"min_us", ct.min_us}, {"avg_us", ct.avg_us}, {"max_us", ct.max_us}};
+                         {"min_us", ct.min_us}, {"avg_us", ct.avg_us}, {"max_us", ct.max_us},
+                         {"p50_us", percentile_us(cth, 0.5)}, {"p99_us", percentile_us(cth, 0.99)},
+                         {"p999_us", percentile_us(cth, 0.999)}, {"histogram_1us", ct.hist.count}};
     else
       j["cyclictest"] = {{"not_run", ct.why}};
     std::ofstream(o.json) << j.dump(1) << '\n';
