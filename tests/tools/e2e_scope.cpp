@@ -2,7 +2,8 @@
 // `cpm scope` on cpmd's simulator while the paper's circle runs, as a user
 // meets it: the built programs in their own processes (a private network
 // namespace when the test may make one, support/daemon_process.hpp), the
-// page loaded by headless Chromium. The trigger armed on a segment start
+// page loaded by headless Chromium. Before the circle, the live plots move
+// (the newest sample drawn advances between polls). The trigger armed on a segment start
 // fires on the circle's first cycle (as the test's own subscriber saw it);
 // the captured window exported as CSV holds, sample by sample, the values
 // `cpm record` wrote of the same run; the page shows the capture, and its
@@ -105,6 +106,25 @@ TEST(ScopeOnCpmd, TriggerFiresOnThePaperCirclesStartAndTheCaptureMatchesTheRecor
 
   test::Process record({CPM_EXE, "record", "--url", cfg.lcm.url, "--until-idle", "--out", dir / "record.csv"},
                        dir / "record.log", true);
+  // The page while the machine holds, before the circle: live plots that
+  // move (the newest sample drawn advances from one poll to the next).
+  const std::string url = "http://127.0.0.1:" + std::to_string(port) + "/";
+  const std::string chrome = browser + " --headless --no-sandbox --disable-gpu --hide-scrollbars --window-size=1280,1000 "
+                                       "--virtual-time-budget=5000 ";
+  {
+    const auto live = test::run_command(chrome + "--dump-dom " + url + " 2>/dev/null", dir / "live.html");
+    ASSERT_EQ(live.status, 0) << live.out;
+    EXPECT_NE(live.out.find("data-state=\"armed\""), std::string::npos) << live.out.substr(0, 3000);
+    const auto attr = [&](const std::string& name) -> long long {
+      const auto p = live.out.find(name + "=\"");
+      return p == std::string::npos ? -1 : std::atoll(live.out.c_str() + p + name.size() + 2);
+    };
+    EXPECT_GE(attr("data-draws"), 3) << "the live page drew fewer than 3 times";
+    EXPECT_GT(attr("data-newest"), attr("data-first-newest")) << "the live plots did not move";
+    std::printf("[ figures  ] scope page, live: %lld draws, newest sample from cycle %lld to %lld\n", attr("data-draws"),
+                attr("data-first-newest"), attr("data-newest"));
+  }
+
   // The test's own view of the segments: the circle's first cycle. Handling
   // the state for a second also gives record the time to subscribe (a setup
   // wait, not a measurement).
@@ -174,9 +194,6 @@ TEST(ScopeOnCpmd, TriggerFiresOnThePaperCirclesStartAndTheCaptureMatchesTheRecor
   // The page in headless Chromium: the capture shown, one plot per chosen signal.
   const std::filesystem::path out = std::filesystem::path(CPM_TEST_OUTPUT) / "scope";
   std::filesystem::create_directories(out);
-  const std::string url = "http://127.0.0.1:" + std::to_string(port) + "/";
-  const std::string chrome = browser + " --headless --no-sandbox --disable-gpu --hide-scrollbars --window-size=1280,1000 "
-                                       "--virtual-time-budget=5000 ";
   const auto dom = test::run_command(chrome + "--dump-dom " + url + " 2>/dev/null", dir / "dom.html");
   ASSERT_EQ(dom.status, 0) << dom.out;
   EXPECT_NE(dom.out.find("data-state=\"captured\""), std::string::npos) << dom.out.substr(0, 4000);
@@ -200,7 +217,11 @@ TEST(ScopeOnCpmd, TriggerFiresOnThePaperCirclesStartAndTheCaptureMatchesTheRecor
   EXPECT_EQ((h[20] << 24 | h[21] << 16 | h[22] << 8 | h[23]), 1000);
   EXPECT_GT(std::filesystem::file_size(out / "scope.png"), 30000u);
   std::ofstream(out / "capture.csv") << http.Get("/export.csv")->body;
-  std::ofstream(out / "capture.svg") << http.Get("/export.svg?signals=x_ref,x,err_x,f1")->body;
+  const std::string svg = http.Get("/export.svg?signals=x_ref,x,err_x,f1")->body;
+  std::ofstream(out / "capture.svg") << svg;
+  std::size_t lines = 0;
+  for (std::size_t p = svg.find("<polyline"); p != std::string::npos; p = svg.find("<polyline", p + 1)) ++lines;
+  EXPECT_EQ(lines, 4u) << "one trace per chosen signal in the SVG export";
   std::printf("[ figures  ] scope page: %s, %ju bytes (and capture.csv, capture.svg beside it)\n",
               (out / "scope.png").c_str(), static_cast<std::uintmax_t>(std::filesystem::file_size(out / "scope.png")));
 
