@@ -12,6 +12,7 @@
 #include <algorithm>
 #include <array>
 #include <atomic>
+#include <charconv>
 #include <chrono>
 #include <cmath>
 #include <deque>
@@ -219,16 +220,17 @@ class Scope {
     o += "cycle,t,mode,segment_id";
     for (const Signal& s : kSignals) o += std::string(",") + s.name;
     o += '\n';
+    // Each number as the shortest text that reads back as the same double, as the data files are written.
     char b[40];
+    auto num = [&](double v) {
+      o += ',';
+      o.append(b, std::to_chars(b, b + sizeof b, v).ptr);
+    };
     auto put = [&](const Sample& r) {
       o += std::to_string(r.cycle);
-      std::snprintf(b, sizeof b, ",%.17g", r.t);
-      o += b;
+      num(r.t);
       o += ',' + std::string(daemon::mode_text(static_cast<std::int8_t>(r.mode))) + ',' + std::to_string(r.segment_id);
-      for (double v : r.v) {
-        std::snprintf(b, sizeof b, ",%.17g", v);
-        o += b;
-      }
+      for (double v : r.v) num(v);
       o += '\n';
     };
     if (capture)
@@ -346,6 +348,18 @@ int scope(const Options& o) {
   c.on_state([&](const state_t& s) { sc.add(s); });
 
   httplib::Server http;
+  // A bad query (a parameter that is not a number) is the caller's: 400 with the reason.
+  http.set_exception_handler([](const httplib::Request&, httplib::Response& res, std::exception_ptr ep) {
+    try {
+      std::rethrow_exception(ep);
+    } catch (const UsageError& e) {
+      res.status = 400;
+      res.set_content(std::string(e.what()) + "\n", "text/plain");
+    } catch (const std::exception& e) {
+      res.status = 500;
+      res.set_content(std::string(e.what()) + "\n", "text/plain");
+    }
+  });
   auto json = [](httplib::Response& res, const nlohmann::ordered_json& j) {
     res.set_content(j.dump(), "application/json");
   };
