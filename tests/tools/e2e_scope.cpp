@@ -109,10 +109,11 @@ TEST(ScopeOnCpmd, TriggerFiresOnThePaperCirclesStartAndTheCaptureMatchesTheRecor
   // The page while the machine holds, before the circle: live plots that
   // move (the newest sample drawn advances from one poll to the next).
   const std::string url = "http://127.0.0.1:" + std::to_string(port) + "/";
-  const std::string chrome = browser + " --headless --no-sandbox --disable-gpu --hide-scrollbars --window-size=1280,1000 "
-                                       "--virtual-time-budget=5000 ";
+  // The page's virtual clock: 2 s (ten polls) for the live view; the capture is drawn on the first poll.
+  const std::string chrome = browser + " --headless --no-sandbox --disable-gpu --hide-scrollbars --window-size=1280,1000 ";
+  const std::string live_budget = "--virtual-time-budget=2000 ", capture_budget = "--virtual-time-budget=1000 ";
   {
-    const auto live = test::run_command(chrome + "--dump-dom " + url + " 2>/dev/null", dir / "live.html");
+    const auto live = test::run_command(chrome + live_budget + "--dump-dom " + url + " 2>/dev/null", dir / "live.html");
     ASSERT_EQ(live.status, 0) << live.out;
     EXPECT_NE(live.out.find("data-state=\"armed\""), std::string::npos) << live.out.substr(0, 3000);
     const auto attr = [&](const std::string& name) -> long long {
@@ -194,7 +195,7 @@ TEST(ScopeOnCpmd, TriggerFiresOnThePaperCirclesStartAndTheCaptureMatchesTheRecor
   // The page in headless Chromium: the capture shown, one plot per chosen signal.
   const std::filesystem::path out = std::filesystem::path(CPM_TEST_OUTPUT) / "scope";
   std::filesystem::create_directories(out);
-  const auto dom = test::run_command(chrome + "--dump-dom " + url + " 2>/dev/null", dir / "dom.html");
+  const auto dom = test::run_command(chrome + capture_budget + "--dump-dom " + url + " 2>/dev/null", dir / "dom.html");
   ASSERT_EQ(dom.status, 0) << dom.out;
   EXPECT_NE(dom.out.find("data-state=\"captured\""), std::string::npos) << dom.out.substr(0, 4000);
   EXPECT_NE(dom.out.find("data-cycle=\"" + std::to_string(circle_first) + "\""), std::string::npos);
@@ -205,7 +206,7 @@ TEST(ScopeOnCpmd, TriggerFiresOnThePaperCirclesStartAndTheCaptureMatchesTheRecor
   for (std::size_t p = dom.out.find("<canvas"); p != std::string::npos; p = dom.out.find("<canvas", p + 1)) ++canvases;
   EXPECT_EQ(canvases, 5u) << "one plot per default signal (x_ref, x, err_x, f1, latency_max)";
   std::filesystem::remove(out / "scope.png");
-  const auto shot = test::run_command(chrome + "--screenshot=" + (out / "scope.png").string() + " " + url, dir / "shot.log");
+  const auto shot = test::run_command(chrome + capture_budget + "--screenshot=" + (out / "scope.png").string() + " " + url, dir / "shot.log");
   ASSERT_EQ(shot.status, 0) << shot.out;
   ASSERT_TRUE(std::filesystem::exists(out / "scope.png")) << shot.out;
   // A PNG of the window's size (IHDR: width and height, big-endian), with
