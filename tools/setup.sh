@@ -17,6 +17,7 @@ packages=(
   help2man                 # man pages generated from --help
   bash-completion          # completion for cpm (pkg-config gives its install folder)
   libncurses-dev           # cpm watch and cpm jog: the full-screen terminal
+  libcpp-httplib-dev       # cpm scope: the page's HTTP server
   tmux                     # tests/tools: cpm watch in an 80 x 24 pane, captured
   chromium                 # tests/calibration: prints the ball-bar report to PDF, checks one A4 page
   libsodium-dev            # Ed25519: cpmd signs its state and acks (docs/security.md)
