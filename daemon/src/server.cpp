@@ -531,7 +531,10 @@ void Server::publish_sealed(const std::string& channel, M& m, bool ack) {
     lcm_->publish(channel, &m);
     return;
   }
-  // This thread, never the control cycle: a digest here, one signature per seal.
+  // This thread, never the control cycle: a digest here, one signature per
+  // seal (on the sealing thread under run()). A drain publishing more than a
+  // seal's worth seals first.
+  if (signer_->unsealed() >= kSealEvery) seal();
   const auto& bytes = signer_->add(m, now_(), ack);
   lcm_->publish(channel, bytes.data(), static_cast<unsigned>(bytes.size()));
 }
@@ -1169,12 +1172,19 @@ void Server::start_stop_listener(const std::atomic<bool>& stop) {
 
 void Server::run(const std::atomic<bool>& stop) {
   start_stop_listener(stop);  // from this thread: it inherits its CPUs (never loop.cpu)
+  // Seals are signed on a thread of their own, started here for the same
+  // reason; this thread then pays only for the digests (docs/security.md).
+  if (signer_)
+    signer_->start_thread([this](const std::uint8_t* data, std::size_t size) {
+      lcm_->publish(cfg_.lcm.seal_channel, data, static_cast<unsigned>(size));
+    });
   while (!stop.load(std::memory_order_acquire)) {
     lcm_->handleTimeout(1);
     drain();
   }
   drain();
   seal();  // the last messages' seal goes out before the end
+  if (signer_) signer_->stop_thread();
   listener_quit_ = true;
   if (stop_listener_.joinable()) stop_listener_.join();
 }
