@@ -26,6 +26,7 @@
 #include "cpm/daemon/fault_report.hpp"
 #include "cpm/daemon/log.hpp"
 #include "cpm/daemon/params.hpp"
+#include "cpm/daemon/rt.hpp"
 #include "cpm/daemon/path_message.hpp"
 #include "path_service.hpp"
 
@@ -187,6 +188,10 @@ class ModelLoader {
       const std::string path = path_, dir = model_dir_;
       const double force = force_limit_, rate = rate_hz_;
       lock.unlock();
+      // The parse's heap is not locked while it lives, so that malloc_trim
+      // hands it back (locked pages it cannot); the model built is locked
+      // again at the end (docs/security.md, "Model loads").
+      std::optional<FutureLocksPaused> unlocked(std::in_place);
       try {
         ctl::MachineModel model = load_model_beneath(dir, path);
         model.force_limit = std::min(model.force_limit, force);
@@ -202,6 +207,7 @@ class ModelLoader {
       }
       if (!r.machine) r.journal = "load_model '" + path + "': " + (r.journal.empty() ? r.summary : r.journal);
       malloc_trim(0);
+      unlocked.reset();
       lock.lock();
       pending_ = false;
       result_ = std::move(r);
