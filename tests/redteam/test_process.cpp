@@ -237,7 +237,10 @@ TEST(Stranger, CanStopTheMachine) {
   std::string out;
   EXPECT_EQ(run_cpm(r, {"stop"}, &out), 0) << out;
   st = alice.state(1.0);
-  for (int i = 0; i < 50 && st->mode != state_t::MODE_HOLDING; ++i) st = alice.state(0.2);
+  // Up to 3 s of states (the braking takes a fraction of that): 50 were too
+  // few once the states queued while `cpm stop` started were read first.
+  for (int i = 0; i < 3000 && st && st->mode != state_t::MODE_HOLDING; ++i) st = alice.state(0.2);
+  ASSERT_TRUE(st);
   EXPECT_EQ(st->mode, state_t::MODE_HOLDING);
   EXPECT_GT(st->position[0] - 0.40, 0.01);
 }
