@@ -4,7 +4,8 @@
 // with its Ed25519 key, so that any observer can check it with the public
 // half alone. One signature covers many messages: each message's BLAKE2b
 // digest goes into the next seal_t, which cpmd signs every 32 messages or
-// within 10 ms (1 ms after an ack). A client trusts a message once a seal
+// within 10 ms, on a sealing thread (an ack's at once; 1 ms after an ack
+// where the publishing thread signs). A client trusts a message once a seal
 // that lists it has verified, and refuses what no seal lists, what is not
 // newer than the last of its kind, and what comes from another boot.
 #pragma once
