@@ -1190,7 +1190,10 @@ void Server::run(const std::atomic<bool>& stop) {
   }
   drain();
   seal();  // the last messages' seal goes out before the end
-  if (signer_) signer_->stop_thread();
+  if (signer_) {
+    signer_->stop_thread();
+    seal();  // what the sealing thread was too far behind to be handed
+  }
   listener_quit_ = true;
   if (stop_listener_.joinable()) stop_listener_.join();
 }

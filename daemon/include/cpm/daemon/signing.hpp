@@ -103,7 +103,9 @@ class Signer {
   // scheduling: cpmd starts it from its LCM thread (never loop.cpu, normal
   // scheduling), so it never competes with the loop's SCHED_FIFO thread.
   void start_thread(Publish publish);
-  // Waits until the sealing thread published every seal handed to it, and ends it.
+  // Waits until the sealing thread published every seal handed to it, and
+  // ends it. What is still listed (not handed over: the thread was behind)
+  // goes into the next seal(), signed on the calling thread.
   void stop_thread();
   // Seals handed to the sealing thread and not yet published.
   [[nodiscard]] std::uint64_t seals_waiting() const noexcept {
