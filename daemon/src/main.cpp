@@ -152,6 +152,18 @@ int run(int argc, char** argv) {
     } catch (const Error& e) {
       std::printf("warning: operators: %s: nobody could command this cpmd but stop\n", e.what());
     }
+    if (cfg.security.signing_key.empty()) {
+      std::printf("warning: security.signing_key is not set: clients cannot verify what cpmd publishes\n");
+    } else {
+      try {
+        (void)read_key_file(cfg.security.signing_key);  // a missing or loose key: the file and why
+      } catch (const Error& e) {
+        // cpmd would not start: fail. The owner rule is the reader's, so say whose check this was.
+        throw Error(std::string(e.what()) + " (cpmd would not start; check as the user the unit runs cpmd as: " +
+                    "runuser -u cpmd -- cpmd --config " + config_path + " --check)");
+      }
+      std::printf("%s: cpmd seals what it publishes with this key\n", cfg.security.signing_key.c_str());
+    }
     std::printf("%s: configuration and model files are valid\n", config_path.c_str());
     return 0;
   }

@@ -5,13 +5,29 @@
 #include <sched.h>
 #include <sys/mman.h>
 #include <time.h>
+#include <unistd.h>
 
+#include <atomic>
 #include <cerrno>
+#include <cstdint>
+#include <mutex>
+#include <vector>
 #include <cmath>
 #include <cstring>
 
 namespace cpm::daemon {
 namespace {
+
+// Whether lock_memory locked with MCL_ONFAULT; one FutureLocksPaused at a time.
+std::atomic<bool> locked_on_fault{false};
+std::mutex pause_mu;
+std::uintptr_t heap_mark = 0;  // under pause_mu
+
+std::size_t page_size() { return static_cast<std::size_t>(sysconf(_SC_PAGESIZE)); }
+std::uintptr_t page_up(std::uintptr_t a) {
+  const std::uintptr_t p = page_size();
+  return (a + p - 1) / p * p;
+}
 
 constexpr std::int64_t kNs = 1000000000;
 
@@ -43,6 +59,7 @@ bool lock_memory(std::vector<std::string>& warnings, std::size_t stack_bytes) {
   // thread's reassembly buffer resident and locked at once (docs/security.md);
   // everything the loop uses is built, and so touched, before it runs.
   int rc = mlockall(MCL_CURRENT | MCL_FUTURE | MCL_ONFAULT);
+  if (rc == 0) locked_on_fault.store(true);
   if (rc != 0 && errno == EINVAL) rc = mlockall(MCL_CURRENT | MCL_FUTURE);  // a kernel before 4.4
   if (rc != 0) {
     warnings.push_back(std::string("mlockall failed (") + std::strerror(errno) +
@@ -51,6 +68,55 @@ bool lock_memory(std::vector<std::string>& warnings, std::size_t stack_bytes) {
   }
   prefault_stack(stack_bytes);
   return true;
+}
+
+// The heap (one arena, brk: main.cpp) below the mark, all that was
+// allocated before the first pause, stays locked throughout. Above it, while
+// paused, nothing is locked: malloc_trim then hands back every free page
+// there (it cannot hand back locked ones, and MCL_FUTURE locks the heap as it
+// grows). At the end, what is resident above the mark (the model built, what
+// other threads allocated meanwhile) is locked page by page, so that only
+// what is resident counts as locked; the heap grown later is locked as
+// touched again (MCL_FUTURE).
+FutureLocksPaused::FutureLocksPaused() {
+  if (!locked_on_fault.load()) return;
+  pause_mu.lock();
+  if (heap_mark == 0) heap_mark = page_up(reinterpret_cast<std::uintptr_t>(sbrk(0)));
+  // MCL_CURRENT keeps every mapping locked (as touched); without MCL_FUTURE
+  // what is mapped from now on is not.
+  if (mlockall(MCL_CURRENT | MCL_ONFAULT) != 0) {
+    pause_mu.unlock();
+    return;
+  }
+  const std::uintptr_t top = page_up(reinterpret_cast<std::uintptr_t>(sbrk(0)));
+  if (top > heap_mark) (void)munlock(reinterpret_cast<void*>(heap_mark), top - heap_mark);
+  paused_ = true;
+}
+
+FutureLocksPaused::~FutureLocksPaused() {
+  if (!paused_) return;
+  (void)mlockall(MCL_FUTURE | MCL_ONFAULT);  // the mappings as they are, what comes locked as touched
+  const std::uintptr_t top = page_up(reinterpret_cast<std::uintptr_t>(sbrk(0)));
+  const std::size_t page = page_size();
+  std::vector<unsigned char> resident;
+  if (top > heap_mark) {
+    resident.resize((top - heap_mark) / page);
+    if (mincore(reinterpret_cast<void*>(heap_mark), top - heap_mark, resident.data()) == 0) {
+      for (std::size_t i = 0; i < resident.size();) {
+        if (!(resident[i] & 1)) {
+          ++i;
+          continue;
+        }
+        std::size_t j = i;
+        while (j < resident.size() && (resident[j] & 1)) ++j;
+        (void)mlock(reinterpret_cast<void*>(heap_mark + i * page), (j - i) * page);
+        i = j;
+      }
+    } else {
+      (void)mlock2(reinterpret_cast<void*>(heap_mark), top - heap_mark, MLOCK_ONFAULT);
+    }
+  }
+  pause_mu.unlock();
 }
 
 RtThread::RtThread(ControlLoop& loop, const LoopConfig& cfg) : loop_(loop), cfg_(cfg) {}

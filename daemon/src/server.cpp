@@ -26,6 +26,7 @@
 #include "cpm/daemon/fault_report.hpp"
 #include "cpm/daemon/log.hpp"
 #include "cpm/daemon/params.hpp"
+#include "cpm/daemon/rt.hpp"
 #include "cpm/daemon/path_message.hpp"
 #include "path_service.hpp"
 
@@ -187,6 +188,10 @@ class ModelLoader {
       const std::string path = path_, dir = model_dir_;
       const double force = force_limit_, rate = rate_hz_;
       lock.unlock();
+      // The parse's heap is not locked while it lives, so that malloc_trim
+      // hands it back (locked pages it cannot); the model built is locked
+      // again at the end (docs/security.md, "Model loads").
+      std::optional<FutureLocksPaused> unlocked(std::in_place);
       try {
         ctl::MachineModel model = load_model_beneath(dir, path);
         model.force_limit = std::min(model.force_limit, force);
@@ -202,6 +207,7 @@ class ModelLoader {
       }
       if (!r.machine) r.journal = "load_model '" + path + "': " + (r.journal.empty() ? r.summary : r.journal);
       malloc_trim(0);
+      unlocked.reset();
       lock.lock();
       pending_ = false;
       result_ = std::move(r);
@@ -531,7 +537,10 @@ void Server::publish_sealed(const std::string& channel, M& m, bool ack) {
     lcm_->publish(channel, &m);
     return;
   }
-  // This thread, never the control cycle: a digest here, one signature per seal.
+  // This thread, never the control cycle: a digest here, one signature per
+  // seal (on the sealing thread under run()). A drain publishing more than a
+  // seal's worth seals first.
+  if (signer_->unsealed() >= kSealEvery) seal();
   const auto& bytes = signer_->add(m, now_(), ack);
   lcm_->publish(channel, bytes.data(), static_cast<unsigned>(bytes.size()));
 }
@@ -1169,12 +1178,22 @@ void Server::start_stop_listener(const std::atomic<bool>& stop) {
 
 void Server::run(const std::atomic<bool>& stop) {
   start_stop_listener(stop);  // from this thread: it inherits its CPUs (never loop.cpu)
+  // Seals are signed on a thread of their own, started here for the same
+  // reason; this thread then pays only for the digests (docs/security.md).
+  if (signer_)
+    signer_->start_thread([this](const std::uint8_t* data, std::size_t size) {
+      lcm_->publish(cfg_.lcm.seal_channel, data, static_cast<unsigned>(size));
+    });
   while (!stop.load(std::memory_order_acquire)) {
     lcm_->handleTimeout(1);
     drain();
   }
   drain();
   seal();  // the last messages' seal goes out before the end
+  if (signer_) {
+    signer_->stop_thread();
+    seal();  // what the sealing thread was too far behind to be handed
+  }
   listener_quit_ = true;
   if (stop_listener_.joinable()) stop_listener_.join();
 }

@@ -53,7 +53,10 @@ Digest digest_of(const void* data, std::size_t size) {
   return d;
 }
 
-Signer::~Signer() { sodium_memzero(secret_.data(), secret_.size()); }
+Signer::~Signer() {
+  stop_thread();
+  sodium_memzero(secret_.data(), secret_.size());
+}
 
 Signer::Signer(const Key& seed, std::int64_t boot_id) : boot_(boot_id) {
   init_sodium();
@@ -61,6 +64,7 @@ Signer::Signer(const Key& seed, std::int64_t boot_id) : boot_(boot_id) {
   crypto_sign_seed_keypair(pk.data(), secret_.data(), seed.data());
   buf_.reserve(16384);
   seal_.digests.reserve(kSealEvery * sizeof(Digest));
+  for (auto& s : slots_) s.digests.reserve(kSealEvery * sizeof(Digest));
   sealed_.reserve(kSealEvery * sizeof(Digest) + 256);
 }
 
@@ -78,7 +82,16 @@ void Signer::list(double now, bool ack) {
 
 bool Signer::due(double now) const noexcept {
   if (unsealed_ == 0) return false;
-  return unsealed_ >= kSealEvery || now - oldest_ >= kSealWithin || (oldest_ack_ >= 0.0 && now - oldest_ack_ >= kSealAckWithin);
+  return unsealed_ >= kSealEvery || now - oldest_ >= kSealWithin || (oldest_ack_ >= 0.0 && now - oldest_ack_ >= ack_within_);
+}
+
+void Signer::sign(cpm_msgs::seal_t& s, std::vector<std::uint8_t>& out) const {
+  for (auto& b : s.signature) b = 0;
+  out.resize(static_cast<std::size_t>(s.getEncodedSize()));
+  s.encode(out.data(), 0, static_cast<int>(out.size()));
+  crypto_sign_detached(s.signature, nullptr, out.data(), out.size(), secret_.data());
+  // The signature is the encoding's last 64 bytes.
+  std::copy(std::begin(s.signature), std::end(s.signature), out.end() - kSignatureBytes);
 }
 
 const std::vector<std::uint8_t>& Signer::seal(std::int64_t utime) {
@@ -87,15 +100,69 @@ const std::vector<std::uint8_t>& Signer::seal(std::int64_t utime) {
   seal_.utime = utime;
   seal_.boot_id = boot_;
   seal_.digest_bytes = static_cast<std::int32_t>(seal_.digests.size());
-  for (auto& b : seal_.signature) b = 0;
-  sealed_.resize(static_cast<std::size_t>(seal_.getEncodedSize()));
-  seal_.encode(sealed_.data(), 0, static_cast<int>(sealed_.size()));
-  crypto_sign_detached(seal_.signature, nullptr, sealed_.data(), sealed_.size(), secret_.data());
-  // The signature is the encoding's last 64 bytes.
-  std::copy(std::begin(seal_.signature), std::end(seal_.signature), sealed_.end() - kSignatureBytes);
+  if (thread_.joinable()) {
+    const std::uint64_t n = handed_.load(std::memory_order_relaxed);
+    if (n - signed_.load(std::memory_order_acquire) < kHandoffSlots) {
+      cpm_msgs::seal_t& slot = slots_[n % kHandoffSlots];
+      slot.utime = seal_.utime;
+      slot.boot_id = seal_.boot_id;
+      slot.first = seal_.first;
+      slot.digest_bytes = seal_.digest_bytes;
+      slot.digests.swap(seal_.digests);  // the slot's emptied vector comes back: no allocation
+      handed_.store(n + 1, std::memory_order_release);
+      wake_.fetch_add(1, std::memory_order_release);
+      wake_.notify_one();
+      unsealed_ = 0;
+      oldest_ack_ = -1.0;
+      return sealed_;
+    }
+    // The sealing thread is kHandoffSlots seals behind: keep listing, seal
+    // here only when one more would not fit a seal (a client then refuses
+    // the seals still queued as older than this one: fail closed).
+    if (unsealed_ < kMostDigests) return sealed_;
+    ++sealed_here_;
+  }
+  sign(seal_, sealed_);
   unsealed_ = 0;
   oldest_ack_ = -1.0;
   return sealed_;
+}
+
+void Signer::start_thread(Publish publish) {
+  if (thread_.joinable()) return;
+  publish_ = std::move(publish);
+  quit_.store(false);
+  ack_within_ = 0.0;
+  thread_ = std::thread([this] { run_thread(); });
+}
+
+void Signer::stop_thread() {
+  if (!thread_.joinable()) return;
+  quit_.store(true, std::memory_order_release);
+  wake_.fetch_add(1, std::memory_order_release);
+  wake_.notify_one();
+  thread_.join();
+  ack_within_ = kSealAckWithin;
+}
+
+void Signer::run_thread() {
+  std::vector<std::uint8_t> out;
+  out.reserve(kSealEvery * sizeof(Digest) + 256);
+  for (;;) {
+    const std::uint32_t w = wake_.load(std::memory_order_acquire);
+    // Read before the seals: stop_thread() comes after the last hand-off.
+    const bool quitting = quit_.load(std::memory_order_acquire);
+    std::uint64_t n = signed_.load(std::memory_order_relaxed);
+    while (n != handed_.load(std::memory_order_acquire)) {
+      cpm_msgs::seal_t& slot = slots_[n % kHandoffSlots];
+      sign(slot, out);
+      slot.digests.clear();
+      signed_.store(++n, std::memory_order_release);  // the slot is the publisher's again
+      publish_(out.data(), out.size());
+    }
+    if (quitting) return;
+    wake_.wait(w, std::memory_order_acquire);
+  }
 }
 
 bool signature_valid_bytes(const std::uint8_t* data, std::size_t size, const std::uint8_t (&sig)[kSignatureBytes],

@@ -2,11 +2,12 @@
 # SPDX-License-Identifier: Apache-2.0
 # The Debian package end to end (docs/install.md), on this system: build the
 # packages from the build (cpack -G DEB), install them with dpkg, check dpkg -L
-# and the conffiles, run `cpmd --version`, verify the installed unit; start
-# `cpmd --config /etc/cpmd/sim.yaml` as the cpmd user from the installed unit's
-# own ExecStart (its --config swapped, as a drop-in would; its limits, user,
-# umask and no-new-privileges applied as systemd would: this host has no
-# systemd as PID 1), with a throw-away operator key; send it the paper's circle
+# and the conffiles, check the signing key postinst made (and keeps on a second
+# configure), run `cpmd --version`, verify the installed unit; start cpmd as
+# the cpmd user from the installed unit's own ExecStartPre and ExecStart (its
+# limits, user, umask and no-new-privileges applied as systemd would: this
+# host has no systemd as PID 1), with a throw-away operator key; read its
+# state verified with the installed public key; send it the paper's circle
 # with the installed cpm and read the tracking error; run cpm compare,
 # diagnose, fit and calibrate from a folder outside the tree without --model
 # (the installed default model); stop cpmd; dpkg --purge; nothing of the
@@ -107,6 +108,17 @@ done
 getent passwd cpmd >/dev/null || fail "postinst made no user cpmd"
 [ "$(stat -c '%U %a' /etc/cpmd/operators.d)" = "cpmd 700" ] || fail "/etc/cpmd/operators.d: $(stat -c '%U %a' /etc/cpmd/operators.d)"
 [ "$(stat -c '%U' /var/lib/cpmd/models)" = cpmd ] || fail "/var/lib/cpmd/models is not cpmd's"
+# cpmd's signing key, made by postinst: cpmd's own, 0600; its public half for everyone.
+[ "$(stat -c '%U %a' /etc/cpmd/cpmd.key 2>&1)" = "cpmd 600" ] || fail "/etc/cpmd/cpmd.key: $(stat -c '%U %a' /etc/cpmd/cpmd.key 2>&1)"
+[ "$(stat -c '%U %a' /etc/cpmd/cpmd.pub 2>&1)" = "root 644" ] || fail "/etc/cpmd/cpmd.pub: $(stat -c '%U %a' /etc/cpmd/cpmd.pub 2>&1)"
+grep -q "signing key /etc/cpmd/cpmd.key" "$T/dpkg-i.log" || fail "postinst did not say where the key and its public half are"
+key_sum=$(sha256sum </etc/cpmd/cpmd.key) pub_sum=$(sha256sum </etc/cpmd/cpmd.pub)
+# configure again (an upgrade, dpkg-reconfigure): the key stays as it is.
+/var/lib/dpkg/info/cpmd.postinst configure "$DEBVERSION" >"$T/postinst-again.log" 2>&1 \
+  || { cat "$T/postinst-again.log"; fail "postinst configure, again"; }
+[ "$(sha256sum </etc/cpmd/cpmd.key)" = "$key_sum" ] && [ "$(sha256sum </etc/cpmd/cpmd.pub)" = "$pub_sum" ] \
+  || fail "postinst replaced cpmd's key"
+echo "cpmd.key (cpmd 600) and cpmd.pub (root 644) made at install, kept on configure again"
 
 step "cpmd --version"
 cpmd --version >"$T/version.txt" 2>&1 || fail "cpmd --version: $(cat "$T/version.txt")"
@@ -129,13 +141,13 @@ cpm keygen "$T/operator/e2e.key" >/dev/null
 install -o cpmd -g cpmd -m 0600 "$T/operator/e2e.key" /etc/cpmd/operators.d/e2e.key
 printf '# throw-away operator of tests/install/package.sh\ne2e: engineer\n' >/etc/cpmd/operators.d/roles.yaml
 export CPM_KEY_FILE=$T/operator/e2e.key CPM_OPERATOR=e2e HOME=$T/home
+# The user's copy of cpmd's public half, where cpm looks (docs/security.md).
+install -D -m 0644 /etc/cpmd/cpmd.pub "$HOME/.config/cpm/cpmd.pub"
 
-# The unit's own command lines, the configuration swapped for sim.yaml.
+# The unit's own command lines and configuration (on the simulator; it names the signing key).
 exec_start=$(sed -n 's/^ExecStart=//p' "$UNIT")
 exec_pre=$(sed -n 's/^ExecStartPre=//p' "$UNIT")
 [ "$exec_start" = "/usr/bin/cpmd --config /etc/cpmd/cpmd.yaml" ] || fail "ExecStart=$exec_start"
-exec_start=${exec_start/\/etc\/cpmd\/cpmd.yaml//etc/cpmd/sim.yaml}
-exec_pre=${exec_pre/\/etc\/cpmd\/cpmd.yaml//etc/cpmd/sim.yaml}
 rtprio=$(sed -n 's/^LimitRTPRIO=//p' "$UNIT")
 memlock=$(sed -n 's/^LimitMEMLOCK=//p' "$UNIT")
 [ "$memlock" = infinity ] && memlock=unlimited
@@ -161,6 +173,7 @@ step "ExecStartPre as $user: $exec_pre"
 # shellcheck disable=SC2086  # the unit's command line, split as systemd splits it (no quotes in it)
 (as_unit $exec_pre) | tee "$T/check.txt"
 grep -q '1 operators may command' "$T/check.txt" || fail "the throw-away operator is not loaded"
+grep -q '^/etc/cpmd/cpmd.key: cpmd seals' "$T/check.txt" || fail "the unit's configuration does not read cpmd's key"
 
 step "ExecStart as $user: $exec_start"
 # shellcheck disable=SC2086
@@ -168,7 +181,9 @@ step "ExecStart as $user: $exec_start"
 pid=$!  # the subshell execs down to cpmd: this is cpmd's pid
 cd "$T/work"
 for _ in $(seq 100); do cpm status >/dev/null 2>&1 && break; kill -0 $pid 2>/dev/null || break; sleep 0.1; done
-cpm status || { cat "$T/cpmd.log"; fail "cpmd does not answer"; }
+cpm status >status.txt || { cat status.txt "$T/cpmd.log"; fail "cpmd does not answer"; }
+cat status.txt
+grep -q '^state signed by cpmd and verified' status.txt || fail "cpm did not verify cpmd's state with the installed key"
 grep -o 'sim backend.*' "$T/cpmd.log" || true
 [ "$(ps -o user=,comm= -p $pid | tr -s ' ')" = "$user cpmd" ] || fail "pid $pid is not cpmd run by $user: $(ps -o user=,comm= -p $pid)"
 

@@ -237,7 +237,10 @@ TEST(Stranger, CanStopTheMachine) {
   std::string out;
   EXPECT_EQ(run_cpm(r, {"stop"}, &out), 0) << out;
   st = alice.state(1.0);
-  for (int i = 0; i < 50 && st->mode != state_t::MODE_HOLDING; ++i) st = alice.state(0.2);
+  // Up to 3 s of states (the braking takes a fraction of that): 50 were too
+  // few once the states queued while `cpm stop` started were read first.
+  for (int i = 0; i < 3000 && st && st->mode != state_t::MODE_HOLDING; ++i) st = alice.state(0.2);
+  ASSERT_TRUE(st);
   EXPECT_EQ(st->mode, state_t::MODE_HOLDING);
   EXPECT_GT(st->position[0] - 0.40, 0.01);
 }
@@ -552,10 +555,11 @@ TEST(LargestModel, ParsedOffTheLcmThreadLeavesNothingLockedAndAStopBrakesAtOnce)
     if (name == "largest.yaml") EXPECT_TRUE(a.accepted) << a.message;
     else EXPECT_EQ(a.reason, ack_t::REASON_LOAD_FAILED) << a.message;
     EXPECT_LT(worst, 100.0) << "a stop waited for the parse";
-    // Every page cpmd touches stays locked (MCL_ONFAULT), so resident is
-    // locked: what a parse leaves is bounded by the bounds on the file (the
-    // loader's heap is kept for the next load), and loads again level off.
-    EXPECT_LT(rss - rss0, 16384) << "the parse left memory resident (locked)";
+    // The parse's heap is not locked while it lives (FutureLocksPaused) and
+    // is handed back when it ends: what stays is the model and the loader's
+    // stack, not the 13 MB a 19 000-node parse left resident and locked
+    // before; loads again do not grow it.
+    EXPECT_LT(rss - rss0, 2048) << "the parse left memory resident (locked)";
     if (++round == 5) {
       EXPECT_LT(rss - rss_last, 1024) << "loads again go on growing cpmd";
     }

@@ -8,10 +8,13 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cstdio>
 #include <filesystem>
 #include <map>
+#include <mutex>
 
 #include "cpm/daemon/client.hpp"
+#include <cpm_msgs/ack_t.hpp>
 #include "cpm/daemon/signing.hpp"
 #include "redteam/cell.hpp"
 
@@ -148,6 +151,72 @@ TEST(SignedState, EveryMessageCpmdPublishesIsSealedAndVerifies) {
 
 // Released in the order cpmd published them, however they arrive within a
 // window; a genuine message that arrives after its seal is taken at once.
+// The sealing thread (docs/security.md, "The sealing thread"): seals are
+// signed off the publishing thread and handed over without a lock. 900
+// messages (under a seal's 1 024 digests), every third an ack, each due for
+// its seal at once, published back to back: the sealing thread falls behind,
+// its 8 slots fill, and the publisher lists on without waiting. Every message
+// is listed by exactly one verified seal, the seals follow each other without
+// a gap, a client releases all 900 in the order published, and none was
+// signed on the publishing thread.
+TEST(SignedState, TheSealingThreadSealsEveryMessageInOrderWithoutALock) {
+  const daemon::Key seed = daemon::generate_key();
+  daemon::Signer signer(seed, 0x5EA1ED);
+  std::mutex mu;
+  std::vector<Bytes> seals;
+  signer.start_thread([&](const std::uint8_t* d, std::size_t n) {
+    const std::lock_guard<std::mutex> lock(mu);
+    seals.emplace_back(d, d + n);
+  });
+  std::vector<std::pair<Stream, Bytes>> published;
+  state_t st{};
+  cpm_msgs::ack_t ack{};
+  int acks_due_at_once = 0;
+  for (int i = 0; i < 900; ++i) {
+    const double now = 1e-5 * i;
+    if (i % 3 == 2) {
+      ++ack.id;
+      published.emplace_back(Stream::ack, signer.add(ack, now, /*ack=*/true));
+      acks_due_at_once += signer.due(now) ? 1 : 0;
+    } else {
+      ++st.cycle;
+      published.emplace_back(Stream::state, signer.add(st, now));
+    }
+    if (signer.due(now)) {
+      EXPECT_TRUE(signer.seal(i).empty()) << "signed on the publishing thread";
+    }
+  }
+  const std::uint64_t waiting = signer.seals_waiting();
+  (void)signer.seal(900);
+  const std::size_t listed_after = signer.unsealed();
+  signer.stop_thread();
+  // What the thread was too far behind to be handed: sealed here, published last.
+  if (const Bytes rest = signer.seal(901); !rest.empty()) seals.push_back(rest);
+  EXPECT_EQ(acks_due_at_once, 300);
+  EXPECT_EQ(signer.sealed_here(), 0);
+  EXPECT_EQ(signer.seals_waiting(), 0u);
+  EXPECT_EQ(signer.unsealed(), 0u);
+  Reader r(daemon::public_key_of(seed));
+  std::int64_t next = 1;
+  for (const Bytes& b : seals) {
+    const auto s = daemon::decode_seal(b.data(), b.size());
+    ASSERT_TRUE(s);
+    ASSERT_EQ(s->first, next) << "a gap or an overlap between seals";
+    const auto n = static_cast<std::int64_t>(s->digests.size() / sizeof(daemon::Digest));
+    for (std::int64_t c = s->first; c < s->first + n; ++c)
+      r.message(published[static_cast<std::size_t>(c - 1)].first, published[static_cast<std::size_t>(c - 1)].second);
+    EXPECT_EQ(r.seal(b), Trust::ok);
+    next += n;
+  }
+  EXPECT_EQ(next, 901);
+  ASSERT_EQ(r.released.size(), 900u);
+  for (std::size_t i = 0; i < r.released.size(); ++i) ASSERT_EQ(r.released[i], i + 1) << "released out of order";
+  EXPECT_EQ(r.v.refused_total(), 0);
+  std::printf("sealing thread: 900 messages (300 acks due at once) in %zu seals; at the end %llu seals waiting for "
+              "it, %zu messages listed and not handed over\n",
+              seals.size(), static_cast<unsigned long long>(waiting), listed_after);
+}
+
 TEST(SignedState, AWindowArrivingOutOfOrderIsReleasedInOrder) {
   DaemonKey key;
   SignedCell cell(key.path);

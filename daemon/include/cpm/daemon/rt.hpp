@@ -33,6 +33,24 @@ struct RtSetup {
 // Lock memory (process-wide) and pre-fault `stack_bytes` of the calling thread's stack.
 bool lock_memory(std::vector<std::string>& warnings, std::size_t stack_bytes = 512 * 1024);
 
+// While one lives, the heap above what was allocated before the first one
+// and whatever is mapped meanwhile are not locked, so that a passing burst of
+// allocation off the loop (a model file's parse) can be handed back with
+// malloc_trim: locked pages cannot be. Its end locks what is resident there
+// then (the model built), page by page, and locks what is mapped later as
+// touched again. Only when lock_memory locked with MCL_ONFAULT; otherwise it
+// does nothing. One at a time (a second waits); never on the loop's thread.
+class FutureLocksPaused {
+ public:
+  FutureLocksPaused();
+  ~FutureLocksPaused();
+  FutureLocksPaused(const FutureLocksPaused&) = delete;
+  FutureLocksPaused& operator=(const FutureLocksPaused&) = delete;
+
+ private:
+  bool paused_ = false;
+};
+
 class RtThread {
  public:
   explicit RtThread(ControlLoop& loop, const LoopConfig& cfg);

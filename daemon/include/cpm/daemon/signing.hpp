@@ -4,16 +4,20 @@
 // with its Ed25519 key, so that any observer can check it with the public
 // half alone. One signature covers many messages: each message's BLAKE2b
 // digest goes into the next seal_t, which cpmd signs every 32 messages or
-// within 10 ms (1 ms after an ack). A client trusts a message once a seal
+// within 10 ms, on a sealing thread (an ack's at once; 1 ms after an ack
+// where the publishing thread signs). A client trusts a message once a seal
 // that lists it has verified, and refuses what no seal lists, what is not
 // newer than the last of its kind, and what comes from another boot.
 #pragma once
 
 #include <array>
+#include <atomic>
 #include <cstdint>
+#include <functional>
 #include <map>
 #include <optional>
 #include <string>
+#include <thread>
 #include <type_traits>
 #include <utility>
 #include <vector>
@@ -52,11 +56,20 @@ inline constexpr double kSealAckWithin = 0.001;
 
 // cpmd's side, in the publishing thread (never the control cycle): encodes
 // each message, gives it the next counter (state_t and ack_t carry it),
-// keeps its digest, and signs one seal_t over the digests when due().
+// keeps its digest, and seals the digests when due(). The signature is made
+// on the calling thread, or, once start_thread() ran, on a sealing thread of
+// its own: the publishing thread then pays for the digests only.
 class Signer {
  public:
+  // What a seal lists at most (decode_seal's bound): digests are kept while
+  // the sealing thread is behind, and sealed here beyond this.
+  static constexpr std::size_t kMostDigests = 1024;
+  // Seals handed to the sealing thread and not yet signed, at most.
+  static constexpr std::size_t kHandoffSlots = 8;
+  using Publish = std::function<void(const std::uint8_t* data, std::size_t size)>;
+
   Signer(const Key& seed, std::int64_t boot_id);
-  ~Signer();
+  ~Signer();  // stops the sealing thread after it published what it was handed
   Signer(const Signer&) = delete;
   Signer& operator=(const Signer&) = delete;
   void set_boot_id(std::int64_t boot) noexcept { boot_ = boot; }
@@ -71,23 +84,58 @@ class Signer {
     list(now, ack);
     return buf_;
   }
-  // Whether a seal is due at `now` (kSealEvery, kSealWithin, kSealAckWithin).
+  // Whether a seal is due at `now` (kSealEvery, kSealWithin, kSealAckWithin;
+  // with a sealing thread an ack is due at once: its signature costs this
+  // thread nothing, and the command waiting for it waits less).
   [[nodiscard]] bool due(double now) const noexcept;
   [[nodiscard]] std::size_t unsealed() const noexcept { return unsealed_; }
-  // The seal of every message added since the last one, signed and encoded
-  // (empty when there is none); `utime` its wall clock (us).
+  // The seal of every message added since the last one (`utime`: its wall
+  // clock, us). Without a sealing thread: signed here, encoded, returned
+  // (empty when there is nothing to seal). With one: handed to it without a
+  // lock or a wait, and returned empty; when it is kHandoffSlots seals
+  // behind, the digests wait for the next call (signed here beyond kMostDigests).
   const std::vector<std::uint8_t>& seal(std::int64_t utime);
   [[nodiscard]] std::int64_t counter() const noexcept { return counter_; }
 
+  // Sign on a thread of its own from now on, which gives each seal to
+  // `publish` (which must be safe to call beside the publishing thread, as
+  // lcm::LCM::publish is). The thread inherits the caller's CPUs and
+  // scheduling: cpmd starts it from its LCM thread (never loop.cpu, normal
+  // scheduling), so it never competes with the loop's SCHED_FIFO thread.
+  void start_thread(Publish publish);
+  // Waits until the sealing thread published every seal handed to it, and
+  // ends it. What is still listed (not handed over: the thread was behind)
+  // goes into the next seal(), signed on the calling thread.
+  void stop_thread();
+  // Seals handed to the sealing thread and not yet published.
+  [[nodiscard]] std::uint64_t seals_waiting() const noexcept {
+    return handed_.load(std::memory_order_acquire) - signed_.load(std::memory_order_acquire);
+  }
+  // Seals signed on the publishing thread although a sealing thread runs (it was far behind).
+  [[nodiscard]] std::int64_t sealed_here() const noexcept { return sealed_here_; }
+
  private:
   void list(double now, bool ack);
+  // seal_ (its header filled) signed and encoded into `out`.
+  void sign(cpm_msgs::seal_t& s, std::vector<std::uint8_t>& out) const;
+  void run_thread();
   std::array<std::uint8_t, 64> secret_{};
   std::int64_t boot_ = 0;
   std::int64_t counter_ = 0;
   std::size_t unsealed_ = 0;
   double oldest_ = 0.0, oldest_ack_ = -1.0;  // -1: no ack waits
+  double ack_within_ = kSealAckWithin;
   cpm_msgs::seal_t seal_{};
   std::vector<std::uint8_t> buf_, sealed_;
+  std::int64_t sealed_here_ = 0;
+  // The hand-off to the sealing thread: one producer (seal()), one consumer.
+  // A slot's digests are swapped in, never copied or allocated.
+  std::array<cpm_msgs::seal_t, kHandoffSlots> slots_{};
+  std::atomic<std::uint64_t> handed_{0}, signed_{0};
+  std::atomic<std::uint32_t> wake_{0};
+  std::atomic<bool> quit_{false};
+  Publish publish_;
+  std::thread thread_;
 };
 
 // Whether m's signature verifies with `pk` (m's encoding with its signature zeroed).
