@@ -1,8 +1,10 @@
 // SPDX-License-Identifier: Apache-2.0
 // cpm excite's design (excitation.hpp): within the limits, periodic, and,
 // on the simulated machine, better than a plain multi-sine of the same
-// duration: the standard errors of the fitted effects smaller (1.35x in the
-// median over Coulomb, viscous friction and payload; the 2x is not reached).
+// duration: the standard errors of the design's regressor fitted on each log
+// smaller (1.81x in the median over its 19 effect parameters within the same
+// limits, 1.18x within the plain one's peak displacement; the 2x is
+// not reached).
 #include <gtest/gtest.h>
 
 #include <algorithm>
