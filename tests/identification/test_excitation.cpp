@@ -10,6 +10,7 @@
 #include <algorithm>
 #include <cstdio>
 #include <cstdlib>
+#include <cstdlib>
 
 #include "cpm/identification/excitation.hpp"
 #include "cpm/identification/fit.hpp"
@@ -86,6 +87,9 @@ TEST(Excitation, OptimisedDesignAgainstAPlainMultiSineOfTheSameDuration) {
   o.period = 5.0;
   o.harmonics = 4;
   o.iterations = 150;
+  // The full form, by hand: CPM_EXCITE_ITERATIONS=400 (cpm excite's default), CPM_EXCITE_SEED=2 ...
+  if (const char* c = std::getenv("CPM_EXCITE_ITERATIONS")) o.iterations = std::atoi(c);
+  if (const char* c = std::getenv("CPM_EXCITE_SEED")) o.seed = std::strtoull(c, nullptr, 10);
   const MultiSine plain = schroeder_multisine(model, L, o);
   ExcitationLimits same = L;
   const Vec3 room = plain.peak_displacement() / L.margin;
@@ -136,7 +140,8 @@ TEST(Excitation, OptimisedDesignAgainstAPlainMultiSineOfTheSameDuration) {
   const double m_full = compare("within the same limits", full);
   const double m_boxed = compare("within the plain one's peak displacement", boxed);
   for (int i = 0; i < 3; ++i) EXPECT_LE(boxed.trajectory.peak_displacement()[i], plain.peak_displacement()[i] * (1 + 1e-9));
-  // Measured 1.81x and 1.18x (issue 28 asks 2x: not reached, docs/identification.md);
+  // Measured 1.81x and 1.18x at 150 designs; at 400 (seeds 1, 2, 3) 2.01x, 1.73x, 2.07x
+  // and 1.18x, 1.20x, 1.19x (issue 28 asks 2x: not reliably reached, docs/identification.md);
   // these bars fail if the passes or the optimiser stop paying.
   EXPECT_GE(m_full, 1.6);
   EXPECT_GE(m_boxed, 1.05);

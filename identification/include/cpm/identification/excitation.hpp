@@ -57,7 +57,7 @@ struct ExcitationOptions {
   int periods = 4;             // periods played (>= 2 to estimate noise from their differences)
   int harmonics = 6;           // harmonics per axis
   double ramp = 1.0;           // s, fade in and out
-  int iterations = 120;        // candidate designs tried by the optimiser
+  int iterations = 400;        // candidate designs tried by the optimiser
   std::uint64_t seed = 1;
   bool optimise = true;        // false: the flat spectrum with Schroeder phases
   int speeds = 4;              // pairs of constant-speed passes per axis and period (0: sines only)
