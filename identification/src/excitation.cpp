@@ -7,6 +7,9 @@
 #include <random>
 
 #include "cpm/control/effects.hpp"
+#include "cpm/identification/align.hpp"
+#include "cpm/identification/diagnose.hpp"
+#include "cpm/identification/engine.hpp"
 #include "cpm/identification/fit.hpp"
 #include "cpm/identification/motion.hpp"
 #include "cpm/kinematics/plane_model.hpp"
@@ -31,6 +34,28 @@ void fade(double t, double r, double& s, double& sd, double& sdd) {
   sdd = 60 * u * (1 - u) * (1 - 2 * u) / (r * r);
 }
 
+// One pass of duration h at unit speed (blend ramps at both ends): the
+// distance covered since its start, the speed share and its derivative.
+void pass_profile(double t, double h, double& x, double& w, double& wd) {
+  const double r = Passes::blend * h;
+  auto ramp = [r](double u, double& xu, double& wu, double& wdu) {
+    xu = 0.5 * (u - r / kPi * std::sin(kPi * u / r));
+    wu = 0.5 * (1.0 - std::cos(kPi * u / r));
+    wdu = 0.5 * kPi / r * std::sin(kPi * u / r);
+  };
+  if (t < r) {
+    ramp(t, x, w, wd);
+  } else if (t <= h - r) {
+    x = 0.5 * r + (t - r);
+    w = 1.0;
+    wd = 0.0;
+  } else {
+    ramp(h - t, x, w, wd);
+    x = (h - r) - x;
+    wd = -wd;
+  }
+}
+
 }  // namespace
 
 void ExcitationOptions::validate() const {
@@ -39,12 +64,27 @@ void ExcitationOptions::validate() const {
   if (harmonics < 1 || harmonics > 30) throw Error("excite: --harmonics must be 1..30");
   if (!(ramp >= 0.2 && ramp <= 10.0)) throw Error("excite: --ramp must be within 0.2..10 s");
   if (iterations < 0 || iterations > 100000) throw Error("excite: --iterations must be 0..100000");
+  if (speeds < 0 || speeds > 8) throw Error("excite: --speeds must be 0..8");
 }
 
 MultiSine::MultiSine(Vec3 centre, double period, int periods, double ramp, std::array<std::vector<int>, 3> harmonic,
-                     std::array<std::vector<double>, 3> amplitude, std::array<std::vector<double>, 3> phase)
+                     std::array<std::vector<double>, 3> amplitude, std::array<std::vector<double>, 3> phase,
+                     std::array<Passes, 3> passes)
     : centre_(std::move(centre)), period_(period), ramp_(ramp), periods_(periods), k_(std::move(harmonic)),
-      a_(std::move(amplitude)), phi_(std::move(phase)) {}
+      a_(std::move(amplitude)), phi_(std::move(phase)), passes_(std::move(passes)) {
+  for (Passes& p : passes_) {
+    double sum = 0.0;
+    for (double& x : p.share) sum += (x = std::max(x, 0.02));
+    for (double& x : p.share) x /= sum;
+    p.offset -= std::floor(p.offset);
+    if (p.share.empty()) p.stroke = 0.0;
+  }
+}
+
+double MultiSine::pass_speed(int axis, std::size_t j) const {
+  const Passes& p = passes_[static_cast<std::size_t>(axis)];
+  return p.stroke / ((1.0 - Passes::blend) * 0.5 * p.share[j] * period_);
+}
 
 ctl::TrajectorySample MultiSine::periodic(double t) const noexcept {
   ctl::TrajectorySample out;
@@ -57,6 +97,27 @@ ctl::TrajectorySample MultiSine::periodic(double t) const noexcept {
       x += a_[i][j] * std::sin(ph);
       v += a_[i][j] * w * std::cos(ph);
       a -= a_[i][j] * w * w * std::sin(ph);
+    }
+    const Passes& ps = passes_[static_cast<std::size_t>(i)];
+    if (ps.stroke > 0.0) {
+      double u = t / period_ - ps.offset;
+      u = (u - std::floor(u)) * period_;
+      for (std::size_t j = 0; j < ps.share.size(); ++j) {
+        const double h = 0.5 * ps.share[j] * period_;
+        if (u >= 2.0 * h && j + 1 < ps.share.size()) {
+          u -= 2.0 * h;
+          continue;
+        }
+        const double speed = pass_speed(i, j);
+        const bool back = u >= h;
+        double px, pw, pwd;
+        pass_profile(std::min(back ? u - h : u, h), h, px, pw, pwd);
+        const double sgn = back ? -1.0 : 1.0;
+        x += sgn * (speed * px - 0.5 * ps.stroke);
+        v += sgn * speed * pw;
+        a += sgn * speed * pwd;
+        break;
+      }
     }
     out.p[i] = x;
     out.v[i] = v;
@@ -91,9 +152,12 @@ Vec3 MultiSine::peak_displacement() const {
 
 MultiSine MultiSine::scaled(const Vec3& s) const {
   auto a = a_;
-  for (int i = 0; i < 3; ++i)
+  auto p = passes_;
+  for (int i = 0; i < 3; ++i) {
     for (double& x : a[i]) x *= s[i];
-  return MultiSine(centre_, period_, periods_, ramp_, k_, a, phi_);
+    p[i].stroke *= s[i];
+  }
+  return MultiSine(centre_, period_, periods_, ramp_, k_, a, phi_, p);
 }
 
 namespace {
@@ -204,11 +268,7 @@ std::string axis_label(const char* name, int i) { return std::string(name) + "[a
 // cogging is left out: its pitch is unknown before it is found, and
 // payload_mass and inertia_error are base directions, actuation_delay the
 // force's slope in time).
-Regressor regressor(const MultiSine& m, const ctl::Machine& model) {
-  const io::MotionData log = design_log(m, model);
-  MotionOptions mo;
-  mo.accel = MotionOptions::Accel::automatic;
-  const MotionProblem P = prepare_motion(log, model, mo);
+Regressor regressor_of(const MotionProblem& P) {
   Regressor R;
   std::vector<Eigen::VectorXd> cols;
   for (Eigen::Index j = 0; j < P.base.cols(); ++j) {
@@ -243,6 +303,13 @@ Regressor regressor(const MultiSine& m, const ctl::Machine& model) {
   R.X.resize(cols.front().size(), static_cast<Eigen::Index>(cols.size()));
   for (std::size_t j = 0; j < cols.size(); ++j) R.X.col(static_cast<Eigen::Index>(j)) = cols[j];
   return R;
+}
+
+Regressor regressor(const MultiSine& m, const ctl::Machine& model) {
+  const io::MotionData log = design_log(m, model);
+  MotionOptions mo;
+  mo.accel = MotionOptions::Accel::automatic;
+  return regressor_of(prepare_motion(log, model, mo));
 }
 
 // "coulomb_friction:1" -> "coulomb_friction[axis 1]"; "payload_mass" as it is.
@@ -311,7 +378,12 @@ ExcitationFigures excitation_figures(const MultiSine& m, const ctl::Machine& mod
   F.log_det = ev.array().log().sum() + 2.0 * norms.array().max(1e-300).log().sum();
   const Eigen::MatrixXd Ginv = es.eigenvectors() * ev.cwiseInverse().asDiagonal() * es.eigenvectors().transpose();
   F.std_error = Ginv.diagonal().cwiseSqrt().cwiseQuotient(norms.cwiseMax(1e-300));
-  F.log_std_errors = -F.std_error.array().max(1e-300).log().sum();
+  // The force gains left out: on a noise-free log of the model's own force
+  // their columns lie almost in the base span, and their standard errors
+  // (hundreds of times the others') would steer the whole criterion.
+  F.log_std_errors = 0.0;
+  for (std::size_t j = 0; j < R.names.size(); ++j)
+    if (R.names[j].rfind("force_gain", 0) != 0) F.log_std_errors -= std::log(std::max(F.std_error(static_cast<Eigen::Index>(j)), 1e-300));
   F.columns = R.names;
   return F;
 }
@@ -353,21 +425,76 @@ ExcitationDesign design_excitation(const ctl::Machine& model, const ExcitationLi
   ExcitationDesign D{start, excitation_figures(start, model, o), {}, 1};
   D.start = D.figures;
   if (!o.optimise) return D;
-  // Random local search on log-amplitudes and phases (the criterion is
-  // neither smooth nor convex in them; a few hundred designs of one period
-  // each take seconds). Every candidate is scaled to the limits first, so a
-  // design is better by its shape, not by breaking a limit.
+  auto scaled_design = [&](const std::array<std::vector<double>, 3>& a, const std::array<std::vector<double>, 3>& p,
+                           const std::array<Passes, 3>& ps) {
+    return scale_to_limits(MultiSine(start.centre(), o.period, o.periods, o.ramp, start.harmonic(), a, p, ps), model, L);
+  };
+  auto score_of = [&](const MultiSine& m, ExcitationFigures& F) {
+    F = excitation_figures(m, model, o);
+    ++D.evaluations;
+    return score(F, o);
+  };
+  double best = score(D.figures, o);
+  // Starts with passes: the stroke as large as the sines' peak, the pairs on
+  // shares 1 : 1.6 : 2.2 ... of the period (fast to slow), the axes a third
+  // of a period apart so that they do not reverse together; and the same
+  // with the sines at a quarter, where the passes take most of the box.
+  if (o.speeds > 0) {
+    for (const double sines : {1.0, 0.25}) {
+      std::array<Passes, 3> ps;
+      const Vec3 peak = start.peak_displacement();
+      auto a = start.amplitude();
+      for (int i = 0; i < 3; ++i) {
+        ps[i].stroke = peak[i] / sines;
+        for (int j = 0; j < o.speeds; ++j) ps[i].share.push_back(1.0 + 0.6 * j);
+        ps[i].offset = i / 3.0;
+        for (double& x : a[i]) x *= sines;
+      }
+      try {
+        const MultiSine cand = scaled_design(a, start.phase(), ps);
+        ExcitationFigures F;
+        if (const double s = score_of(cand, F); s > best) {
+          best = s;
+          D.trajectory = cand;
+          D.figures = F;
+        }
+      } catch (const Error&) {
+        // passes the limits leave no room for: the sines alone
+      }
+    }
+  }
+  // Random local search on log-amplitudes and phases, the passes' strokes,
+  // shares and offsets (the criterion is neither smooth nor convex in them;
+  // a few hundred designs of one period each take seconds). Every candidate
+  // is scaled to the limits first, so a design is better by its shape, not
+  // by breaking a limit.
   std::mt19937_64 rng(o.seed);
   std::normal_distribution<double> gauss(0.0, 1.0);
   std::uniform_real_distribution<double> uni(0.0, 1.0);
-  auto amp = start.amplitude();
-  auto phi = start.phase();
-  double best = score(D.figures, o);
+  auto amp = D.trajectory.amplitude();
+  auto phi = D.trajectory.phase();
+  auto pas = D.trajectory.passes();
   double step = 0.5;
   for (int it = 0; it < o.iterations; ++it) {
     auto a2 = amp;
     auto p2 = phi;
-    if (uni(rng) < 0.5) {
+    auto q2 = pas;
+    const double pick = uni(rng);
+    const bool with_passes = o.speeds > 0 && q2[0].stroke + q2[1].stroke + q2[2].stroke > 0.0;
+    if (with_passes && pick < 0.35) {
+      // The passes of one axis: stroke (their share of the motion against
+      // the sines), speeds (the pairs' shares of the period), offset.
+      const int i = static_cast<int>(uni(rng) * 3) % 3;
+      Passes& q = q2[static_cast<std::size_t>(i)];
+      const double which = uni(rng);
+      if (which < 0.4) {
+        q.stroke *= std::exp(step * 2.0 * gauss(rng));
+      } else if (which < 0.8) {
+        for (double& x : q.share) x *= std::exp(step * 2.0 * gauss(rng));
+      } else {
+        q.offset += 0.2 * step * gauss(rng);
+      }
+    } else if (pick < 0.65) {
       // One harmonic of one axis much larger or smaller: moves energy
       // between frequencies, which small steps do only slowly.
       const int i = static_cast<int>(uni(rng) * 3) % 3;
@@ -382,15 +509,14 @@ ExcitationDesign design_excitation(const ctl::Machine& model, const ExcitationLi
           }
     }
     try {
-      const MultiSine cand = scale_to_limits(
-          MultiSine(start.centre(), o.period, o.periods, o.ramp, start.harmonic(), a2, p2), model, L);
-      const ExcitationFigures F = excitation_figures(cand, model, o);
-      ++D.evaluations;
-      const double s = score(F, o);
+      const MultiSine cand = scaled_design(a2, p2, q2);
+      ExcitationFigures F;
+      const double s = score_of(cand, F);
       if (s > best) {
         best = s;
         amp = cand.amplitude();
         phi = cand.phase();
+        pas = cand.passes();
         D.trajectory = cand;
         D.figures = F;
       } else {
@@ -402,6 +528,25 @@ ExcitationDesign design_excitation(const ctl::Machine& model, const ExcitationLi
   }
   ctl::validate_trajectory(D.trajectory, model, 1e-3, L.velocity, L.acceleration);
   return D;
+}
+
+RegressorFit fit_design_regressor(const io::MotionData& log, const ctl::Machine& model) {
+  const MotionOptions mo;
+  MotionProblem P = prepare_motion(log, model, mo);
+  // The model as given at the alignment it may take (fit.cpp's choice); the
+  // delay beyond it is the delay column's.
+  P.set_delay(align_motion(log, model, mo).reference);
+  const Regressor R = regressor_of(P);
+  const Eigen::MatrixXd X = R.X.rightCols(R.X.cols() - R.base_cols);
+  const Engine E(motion_linear_problem(P));
+  const JointFit f = E.fit(X, true);
+  const Eigen::MatrixXd C = E.covariance(X, f, E.base_rank() + static_cast<int>(X.cols()), true);
+  RegressorFit out;
+  out.columns.assign(R.names.begin() + R.base_cols, R.names.end());
+  out.value = f.beta;
+  out.std_error = C.diagonal().cwiseMax(0.0).cwiseSqrt();
+  out.residual_rms = Engine::rms(f.residual);
+  return out;
 }
 
 std::vector<std::array<double, 7>> excitation_rows(const MultiSine& m, double rate) {

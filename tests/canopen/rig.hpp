@@ -61,14 +61,16 @@ struct Rig {
   // `timing`: when the drives apply a torque (synchronous: from the SYNC
   // after the one whose positions it was computed from, as real CiA 402
   // drives; lockstep: at once, as the in-process loop). `believed`: the
-  // model cpmd controls with (the truth is always the nominal machine of docs/model.md).
+  // model cpmd controls with.
   // `machine`: changes to the virtual machine's configuration (homing sensors, incremental encoders).
+  // `true_machine`: the plant the virtual drives move (default the nominal machine).
   explicit Rig(const DaemonConfig& c = canopen_config(), bool start = true,
                sim::DriveTiming timing = sim::DriveTiming::synchronous,
                const ctl::MachineModel& believed = ctl::MachineModel::elkady(),
                const sim::EncoderModel& encoder = {},
-               const std::function<void(sim::VirtualMachineConfig&)>& machine = {})
-      : cfg(c), model(believed) {
+               const std::function<void(sim::VirtualMachineConfig&)>& machine = {},
+               const ctl::MachineModel& true_machine = ctl::MachineModel::elkady())
+      : cfg(c), truth(true_machine), model(believed) {
     sim::VirtualMachineConfig vc = sim::VirtualMachineConfig::defaults();
     vc.timing = timing;
     vc.plant.encoder = encoder;

@@ -1,12 +1,16 @@
 // SPDX-License-Identifier: Apache-2.0
 // cpm excite's design (excitation.hpp): within the limits, periodic, and,
 // on the simulated machine, better than a plain multi-sine of the same
-// duration: the standard errors of the fitted effects smaller (1.35x in the
-// median over Coulomb, viscous friction and payload; the issue's 2x is not reached).
+// duration: the standard errors of the design's regressor fitted on each log
+// smaller (1.81x in the median over its 19 effect parameters within the same
+// limits, 1.18x within the plain one's peak displacement; the issue's 2x is
+// not reached).
 #include <gtest/gtest.h>
 
 #include <algorithm>
 #include <cstdio>
+#include <cstdlib>
+#include <cstdlib>
 
 #include "cpm/identification/excitation.hpp"
 #include "cpm/identification/fit.hpp"
@@ -67,73 +71,87 @@ TEST(Excitation, DesignStaysWithinTheLimitsStartsAndEndsAtRestAndRepeatsItsPerio
   EXPECT_GT(D.figures.log_det, D.start.log_det);
 }
 
-// The optimised design against the flat-spectrum Schroeder multi-sine of the
-// same harmonics, duration and peak displacement, both played by the
-// computed-torque controller on a true machine with Coulomb friction on axis
-// 1, viscous friction on axis 3 and a 0.4 kg payload; the standard errors of
-// those three fitted parameters compared.
-TEST(Excitation, OptimisedDesignLowersTheStandardErrorsOfAPlainMultiSine) {
+// The optimised design against the flat-spectrum Schroeder multi-sine (the
+// plain one, as large as the limits allow) over the same duration, played by
+// the computed-torque controller on the same true machine (Coulomb friction on
+// axis 1, viscous friction on axis 3, a 0.4 kg payload, encoder noise). The
+// standard errors are those of the design's regressor fitted on each log
+// (every library effect's column beside the base, with the noise each log
+// shows), compared column by column. Two designs: within the same limits
+// (the design may take a larger amplitude than the plain one can), and
+// within a box no larger than the plain one's peak displacement on every axis.
+TEST(Excitation, OptimisedDesignAgainstAPlainMultiSineOfTheSameDuration) {
   const ctl::Machine model(ctl::MachineModel::elkady());
   ExcitationLimits L;
   ExcitationOptions o = quick();
   o.period = 5.0;
   o.harmonics = 4;
-  o.iterations = 200;
-  const ExcitationDesign D = design_excitation(model, L, o);
-  // The plain multi-sine at the optimised design's peak displacement per axis (or less, within the limits).
-  const MultiSine flat = schroeder_multisine(model, L, o);
-  const Vec3 s = D.trajectory.peak_displacement().cwiseQuotient(flat.peak_displacement());
-  const MultiSine plain = scale_to_limits(flat.scaled(s.cwiseMin(Vec3::Ones())), model, L);
-  std::printf("peak displacement (mm): optimised %.1f %.1f %.1f, plain %.1f %.1f %.1f\n",
-              D.trajectory.peak_displacement().x() * 1e3, D.trajectory.peak_displacement().y() * 1e3,
-              D.trajectory.peak_displacement().z() * 1e3, plain.peak_displacement().x() * 1e3,
-              plain.peak_displacement().y() * 1e3, plain.peak_displacement().z() * 1e3);
-  const std::vector<FitRequest> req = {parse_fit_request("coulomb_friction:1"), parse_fit_request("viscous_friction:3"),
-                                       parse_fit_request("payload_mass")};
-  auto fitted = [&](const MultiSine& m) {
+  o.iterations = 150;
+  // The full form, by hand: CPM_EXCITE_ITERATIONS=400 (cpm excite's default), CPM_EXCITE_SEED=2 ...
+  if (const char* c = std::getenv("CPM_EXCITE_ITERATIONS")) o.iterations = std::atoi(c);
+  if (const char* c = std::getenv("CPM_EXCITE_SEED")) o.seed = std::strtoull(c, nullptr, 10);
+  const MultiSine plain = schroeder_multisine(model, L, o);
+  ExcitationLimits same = L;
+  const Vec3 room = plain.peak_displacement() / L.margin;
+  same.workspace_min = plain.centre() - room;
+  same.workspace_max = plain.centre() + room;
+  const ExcitationDesign full = design_excitation(model, L, o);
+  const ExcitationDesign boxed = design_excitation(model, same, o);
+  auto log_of = [&](const MultiSine& m) {
     test::SimSpec spec;
     spec.seed = 3;
     spec.trajectory = &m;
     spec.effects = {{"coulomb_friction", 0, {3.0}}, {"viscous_friction", 2, {20.0}}, {"payload_mass", -1, {0.4}}};
-    return fit_motion(test::simulate(spec), ctl::MachineModel::elkady(), req, {}, nullptr, false);
+    return test::simulate(spec);
   };
-  const FitResult a = fitted(D.trajectory), b = fitted(plain);
-  std::vector<double> ratio;
-  const double truth[3] = {3.0, 20.0, 0.4};
-  for (std::size_t j = 0; j < 3; ++j) {
-    const ParamEstimate& pa = a.effects[j].params[0];
-    const ParamEstimate& pb = b.effects[j].params[0];
-    std::printf("%-26s optimised %.5g +- %.3g, plain %.5g +- %.3g: standard error %.2fx smaller\n",
-                a.effects[j].label().c_str(), pa.value, pa.std_error, pb.value, pb.std_error,
-                pb.std_error / pa.std_error);
-    ratio.push_back(pb.std_error / pa.std_error);
-    // Both recover the planted value within 2 % (the plane errors of the true machine bias the fit a little).
-    EXPECT_NEAR(pa.value, truth[j], 0.02 * truth[j]);
-    EXPECT_NEAR(pb.value, truth[j], 0.02 * truth[j]);
-  }
-  {
-    const ExcitationFigures fp = excitation_figures(plain, model, o);
+  const io::MotionData lp = log_of(plain);
+  const RegressorFit fp = fit_design_regressor(lp, model);
+  auto compare = [&](const char* what, const ExcitationDesign& D) {
+    const MultiSine& m = D.trajectory;
+    EXPECT_DOUBLE_EQ(m.duration(), plain.duration());
+    const Vec3 pd = m.peak_displacement(), pp = plain.peak_displacement();
+    std::printf("%s: peak displacement %.1f %.1f %.1f mm (plain %.1f %.1f %.1f), peak speed %.0f mm/s (plain %.0f), "
+                "acceleration %.2f m/s^2 (plain %.2f), %.1f s each\n",
+                what, pd.x() * 1e3, pd.y() * 1e3, pd.z() * 1e3, pp.x() * 1e3, pp.y() * 1e3, pp.z() * 1e3,
+                D.figures.peak_speed * 1e3, D.start.peak_speed * 1e3, D.figures.peak_acceleration,
+                D.start.peak_acceleration, m.duration());
+    for (int i = 0; i < 3; ++i) {
+      const Passes& q = m.passes()[static_cast<std::size_t>(i)];
+      std::printf("  axis %d passes: stroke %.1f mm, speeds", i + 1, q.stroke * 1e3);
+      for (std::size_t j = 0; j < q.share.size(); ++j) std::printf(" %.0f", m.pass_speed(i, j) * 1e3);
+      std::printf(" mm/s\n");
+    }
+    const RegressorFit fd = fit_design_regressor(log_of(m), model);
+    EXPECT_EQ(fd.columns, fp.columns);
     std::vector<double> r;
-    for (Eigen::Index j = 0; j < fp.std_error.size(); ++j) r.push_back(fp.std_error(j) / D.figures.std_error(j));
+    for (Eigen::Index j = 0; j < fd.std_error.size(); ++j) {
+      r.push_back(fp.std_error(j) / fd.std_error(j));
+      std::printf("  %-28s +- %.3g (plain +- %.3g): %.2fx\n", fd.columns[static_cast<std::size_t>(j)].c_str(),
+                  fd.std_error(j), fp.std_error(j), r.back());
+    }
     std::sort(r.begin(), r.end());
-    std::printf("design columns: %zu, median ratio of the predicted standard errors %.2f (min %.2f max %.2f)\n", r.size(), r[r.size() / 2], r.front(), r.back());
-  }
-  std::sort(ratio.begin(), ratio.end());
-  std::printf("median ratio %.2f; design: %d candidates, D-criterion %.1f -> %.1f, sum -log sigma %.1f -> %.1f, "
-              "condition %.3g -> %.3g; peak speed %.0f / %.0f mm/s, acceleration %.2f / %.2f m/s^2\n",
-              ratio[1], D.evaluations, D.start.log_det, D.figures.log_det, D.start.log_std_errors,
-              D.figures.log_std_errors, D.start.condition, D.figures.condition, D.figures.peak_speed * 1e3,
-              excitation_figures(plain, model, o).peak_speed * 1e3, D.figures.peak_acceleration,
-              excitation_figures(plain, model, o).peak_acceleration);
-  // Measured 1.35x (issue 28 asks 2x: not reached, docs/identification.md);
-  // this bar fails if the optimiser stops improving on its start.
-  EXPECT_GE(ratio[1], 1.25);
+    const double median = r[r.size() / 2];
+    std::printf("%s: median ratio of the fitted standard errors %.2f over %zu parameters (min %.2f, max %.2f); "
+                "residual RMS %.4f N (plain %.4f); D-criterion %.1f (plain %.1f), %d designs\n",
+                what, median, r.size(), r.front(), r.back(), fd.residual_rms, fp.residual_rms, D.figures.log_det,
+                D.start.log_det, D.evaluations);
+    return median;
+  };
+  const double m_full = compare("within the same limits", full);
+  const double m_boxed = compare("within the plain one's peak displacement", boxed);
+  for (int i = 0; i < 3; ++i) EXPECT_LE(boxed.trajectory.peak_displacement()[i], plain.peak_displacement()[i] * (1 + 1e-9));
+  // Measured 1.81x and 1.18x at 150 designs; at 400 (seeds 1, 2, 3) 2.01x, 1.73x, 2.07x
+  // and 1.18x, 1.20x, 1.19x (issue 28 asks 2x: not reliably reached, docs/identification.md);
+  // these bars fail if the passes or the optimiser stop paying.
+  EXPECT_GE(m_full, 1.6);
+  EXPECT_GE(m_boxed, 1.05);
 }
 
 // What cpm identify will run on cpmd, in-process: the designed experiment
 // played on the machine of issue 28 (Coulomb 3 N on axis 1, viscous 20 N s/m
-// on axis 3, a 0.4 kg payload), then the loop on its log: every planted
-// effect named, each within 2 %, the waterfall down to the noise floor.
+// on axis 3, a 0.4 kg payload) with an actuation delay of one period (1 ms),
+// then the loop on its log: every planted effect named, each within 2 % (the
+// delay within 2 % or 3 standard errors), the waterfall down to the noise floor.
 TEST(Excitation, TheLoopOnTheDesignedExperimentNamesEveryPlantedEffect) {
   const ctl::Machine model(ctl::MachineModel::elkady());
   ExcitationOptions o = quick();
@@ -143,12 +161,18 @@ TEST(Excitation, TheLoopOnTheDesignedExperimentNamesEveryPlantedEffect) {
   test::SimSpec spec;
   spec.seed = 11;
   spec.trajectory = &D.trajectory;
-  spec.effects = {{"coulomb_friction", 0, {3.0}}, {"viscous_friction", 2, {20.0}}, {"payload_mass", -1, {0.4}}};
+  spec.effects = {{"coulomb_friction", 0, {3.0}},
+                  {"viscous_friction", 2, {20.0}},
+                  {"payload_mass", -1, {0.4}},
+                  {"actuation_delay", -1, {1e-3}}};
   const LoopResult R = run_loop(io::DataSet(test::simulate(spec)), ctl::MachineModel::elkady());
   std::fputs(loop_text(R).c_str(), stdout);
   EXPECT_FALSE(R.outside_library);
   EXPECT_LE(R.steps.back().rms, 1.2 * R.steps.back().noise_floor);
-  bool coulomb = false, viscous = false, payload = false;
+  bool coulomb = false, viscous = false, payload = false, delay = false;
+  double delay_se = -1.0;
+  for (const auto& f : R.fitted)
+    if (f.name == "effects.actuation_delay.tau") delay_se = f.std_error;
   for (const ctl::DynamicEffect& e : R.model.effects) {
     if (e.type == ctl::DynamicEffectType::coulomb_friction && e.axis == 0) {
       coulomb = true;
@@ -168,10 +192,16 @@ TEST(Excitation, TheLoopOnTheDesignedExperimentNamesEveryPlantedEffect) {
       EXPECT_NEAR(e.param[0], 0.2, 0.004);
       EXPECT_NEAR(e.param[3], 0.4 * ctl::kGravity, 0.02 * 0.4 * ctl::kGravity);
     }
+    if (e.type == ctl::DynamicEffectType::actuation_delay) {
+      delay = true;
+      std::printf("actuation_delay %.4f ms +- %.4f ms (planted 1 ms)\n", e.param[0] * 1e3, delay_se * 1e3);
+      EXPECT_NEAR(e.param[0], 1e-3, std::max(0.02e-3, 3.0 * delay_se));
+    }
   }
   EXPECT_TRUE(coulomb);
   EXPECT_TRUE(viscous);
   EXPECT_TRUE(payload);
+  EXPECT_TRUE(delay);
 }
 
 TEST(Excitation, SeparateDesignDecorrelatesTheTwoNamedEffects) {

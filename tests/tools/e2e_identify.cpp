@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 #include <sys/wait.h>
 
+#include <algorithm>
 #include <cstdlib>
 #include <fstream>
 #include <sstream>
@@ -33,6 +34,7 @@ TEST(IdentifyOnCpmd, TheExperimentRecordedAndTheLoopNameEveryPlantedEffect) {
   ctl::add_effect(truth.model, "coulomb_friction", 0, {3.0});
   ctl::add_effect(truth.model, "viscous_friction", 2, {20.0});
   ctl::add_effect(truth.model, "payload_mass", -1, {0.4});
+  ctl::add_effect(truth.model, "actuation_delay", -1, {1e-3});
   const std::string truth_path = dir / "truth.yaml";
   io::save_model_file(truth_path, truth);
   const std::string cfg_path = test::sim_config(dir.path(), "sim.yaml", ops.path(),
@@ -62,7 +64,10 @@ TEST(IdentifyOnCpmd, TheExperimentRecordedAndTheLoopNameEveryPlantedEffect) {
   ASSERT_EQ(r.status, 0) << r.out << d->log();
   EXPECT_NE(r.out.find("within cpmd's limits"), std::string::npos) << r.out;
   const io::ModelFile got = io::load_model_file(better);
-  bool coulomb = false, viscous = false, payload = false;
+  bool coulomb = false, viscous = false, payload = false, delay = false;
+  double delay_se = -1.0;
+  for (const io::FittedParameter& f : got.fitted)
+    if (f.name == "effects.actuation_delay.tau") delay_se = f.std_error;
   for (const ctl::DynamicEffect& x : got.model.effects) {
     std::printf("fitted %s: %.5g %.5g %.5g %.5g\n", x.label().c_str(), x.param[0], x.param[1], x.param[2], x.param[3]);
     if (x.type == ctl::DynamicEffectType::coulomb_friction && x.axis == 0) {
@@ -77,6 +82,11 @@ TEST(IdentifyOnCpmd, TheExperimentRecordedAndTheLoopNameEveryPlantedEffect) {
       payload = true;
       EXPECT_NEAR(x.param[0], 0.4, 0.008);
     }
+    if (x.type == ctl::DynamicEffectType::actuation_delay) {  // one period of cpmd's loop
+      delay = true;
+      std::printf("actuation_delay %.4f ms +- %.4f ms (planted 1 ms)\n", x.param[0] * 1e3, delay_se * 1e3);
+      EXPECT_NEAR(x.param[0], 1e-3, std::max(0.02e-3, 3.0 * delay_se));
+    }
     if (x.type == ctl::DynamicEffectType::inertia_error) {  // the payload in the base refit: dE = m g
       payload = true;
       EXPECT_NEAR(x.param[3], 0.4 * ctl::kGravity, 0.02 * 0.4 * ctl::kGravity);
@@ -85,6 +95,7 @@ TEST(IdentifyOnCpmd, TheExperimentRecordedAndTheLoopNameEveryPlantedEffect) {
   EXPECT_TRUE(coulomb) << r.out;
   EXPECT_TRUE(viscous) << r.out;
   EXPECT_TRUE(payload) << r.out;
+  EXPECT_TRUE(delay) << r.out;
 
   // --apply: the paper's circle before and after, and the same circle with the true model in cpmd.
   double before = 0, after = 0;

@@ -68,7 +68,7 @@ int run(Options& o) {
     throw Error("the design breaks cpmd's limits (lower --margin): " + bad);
 
   std::ostringstream os;
-  os << "# cpm excite: " << (o.plain ? "flat multi-sine, Schroeder phases" : "optimised multi-sine") << ", period "
+  os << "# cpm excite: " << (o.plain ? "flat multi-sine, Schroeder phases" : "optimised multi-sine with constant-speed passes") << ", period "
      << m.period() << " s x " << m.periods() << ", model " << model_path << "\n";
   // Positions to 1 nm: at 1 kHz rows coarser rounding is acceleration noise (docs/cli.md, cpm stream).
   os.precision(9);
@@ -91,6 +91,12 @@ int run(Options& o) {
     for (std::size_t j = 0; j < m.harmonic()[i].size(); ++j)
       std::printf(" %.2f:%.1f", m.harmonic()[i][j] / m.period(), std::abs(m.amplitude()[i][j]) * 1e3);
     std::printf("\n");
+    const ident::Passes& q = m.passes()[static_cast<std::size_t>(i)];
+    if (q.stroke > 0.0) {
+      std::printf("axis %d passes over %.1f mm (mm/s):", i + 1, q.stroke * 1e3);
+      for (std::size_t j = 0; j < q.share.size(); ++j) std::printf(" +-%.0f", m.pass_speed(i, j) * 1e3);
+      std::printf("\n");
+    }
   }
   std::printf("information (%zu columns: base, plane nuisance, every library effect): D-criterion %.1f (start %.1f), "
               "condition %.3g (start %.3g), %d designs tried\n",
@@ -116,6 +122,9 @@ Run setup(CLI::App& app) {
       ->default_val(o->design.periods);
   app.add_option("--harmonics", o->design.harmonics, "harmonics per axis (axis i: (3m + i) / period Hz)")
       ->default_val(o->design.harmonics);
+  app.add_option("--speeds", o->design.speeds,
+                 "speeds of constant-speed passes per axis and period, both ways (0: sines only)")
+      ->default_val(o->design.speeds);
   app.add_option("--iterations", o->design.iterations, "designs the optimiser tries")->default_val(o->design.iterations);
   app.add_option("--seed", o->seed, "the optimiser's random seed")->default_val(o->seed);
   add_number(app, "--margin", o->margin, "1", "share of each limit the design may use (0..1]");
@@ -125,8 +134,9 @@ Run setup(CLI::App& app) {
       ->type_name("EFFECT[:AXIS] EFFECT[:AXIS]")
       ->expected(2);
   app.add_flag("--plain", o->plain, "the flat multi-sine with Schroeder phases, not optimised (a reference)");
-  app.footer("The experiment: a periodic multi-sine per axis, each axis on its own harmonics, faded in and out,\n"
-             "scaled to the workspace box and the speed, acceleration and force limits, its amplitudes and phases\n"
+  app.footer("The experiment: a periodic multi-sine per axis, each axis on its own harmonics, with constant-speed\n"
+             "passes both ways at --speeds speeds, faded in and out, scaled to the workspace box and the speed,\n"
+             "acceleration and force limits; the amplitudes and phases and the passes' stroke, speeds and offsets\n"
              "chosen for the information of diagnosis' regressor (D-criterion). Checked with cpmd's own segment\n"
              "checks before it is written.");
   return [o] {

@@ -11,6 +11,13 @@
 // Every axis reverses at every extremum and crosses zero speed there
 // (slow passages), at the speeds the sum of its harmonics makes.
 //
+// Beside the sines, each axis may carry constant-speed passes (Passes): the
+// stroke crossed forward and back at a few speeds per period, reversing
+// through zero speed with a smooth (cosine) velocity blend. A sum of sines
+// makes speed and acceleration move together and Coulomb's sign column
+// nearly a multiple of the speed column; passes at several speeds hold the
+// speed with no acceleration and set the sign apart from the speed.
+//
 // The design: the amplitudes and phases that maximise the information of
 // the regressor diagnosis fits (the base parameters, the plane nuisance and
 // the linear columns of every library effect, motion.hpp), by the
@@ -32,6 +39,7 @@
 
 #include "cpm/control/machine.hpp"
 #include "cpm/control/trajectory.hpp"
+#include "cpm/io/data_files.hpp"
 
 namespace cpm::ident {
 
@@ -49,9 +57,10 @@ struct ExcitationOptions {
   int periods = 4;             // periods played (>= 2 to estimate noise from their differences)
   int harmonics = 6;           // harmonics per axis
   double ramp = 1.0;           // s, fade in and out
-  int iterations = 120;        // candidate designs tried by the optimiser
+  int iterations = 400;        // candidate designs tried by the optimiser
   std::uint64_t seed = 1;
   bool optimise = true;        // false: the flat spectrum with Schroeder phases
+  int speeds = 4;              // pairs of constant-speed passes per axis and period (0: sines only)
   // What the optimiser maximises: the D-criterion (log det X^T X), or the
   // product of the standard errors' inverses (sum of -log sigma_j over the
   // columns: it rewards separating each column from all the others, where
@@ -62,11 +71,25 @@ struct ExcitationOptions {
   void validate() const;       // throws Error naming the option
 };
 
-// A periodic multi-sine per axis with fade in and out (see the top).
+// Constant-speed passes of one axis over one period: pair j crosses the
+// stroke forward then back, each way in share[j] / 2 of the period (shares
+// sum to 1), so at speed stroke / ((1 - blend) share[j] period / 2): long
+// shares are slow passes. Every pass starts and ends at rest, its speed
+// blended in and out (1 - cos) over `blend` of its time. The pattern starts
+// at offset * period, at -stroke / 2 about the centre.
+struct Passes {
+  double stroke = 0.0;          // m, 0: none
+  std::vector<double> share;    // per pair of passes, summing to 1
+  double offset = 0.0;          // share of the period, [0, 1)
+  static constexpr double blend = 0.25;
+};
+
+// A periodic multi-sine per axis, with passes, faded in and out (see the top).
 class MultiSine final : public ctl::Trajectory {
  public:
   MultiSine(Vec3 centre, double period, int periods, double ramp, std::array<std::vector<int>, 3> harmonic,
-            std::array<std::vector<double>, 3> amplitude, std::array<std::vector<double>, 3> phase);
+            std::array<std::vector<double>, 3> amplitude, std::array<std::vector<double>, 3> phase,
+            std::array<Passes, 3> passes = {});
   [[nodiscard]] double duration() const noexcept override { return 2.0 * ramp_ + periods_ * period_; }
   [[nodiscard]] ctl::TrajectorySample sample(double t) const noexcept override;
   // The periodic part alone (no fade), t in s.
@@ -78,6 +101,9 @@ class MultiSine final : public ctl::Trajectory {
   [[nodiscard]] const std::array<std::vector<int>, 3>& harmonic() const noexcept { return k_; }
   [[nodiscard]] const std::array<std::vector<double>, 3>& amplitude() const noexcept { return a_; }
   [[nodiscard]] const std::array<std::vector<double>, 3>& phase() const noexcept { return phi_; }
+  [[nodiscard]] const std::array<Passes, 3>& passes() const noexcept { return passes_; }
+  // Speed of pass pair j of axis i (m/s).
+  [[nodiscard]] double pass_speed(int axis, std::size_t j) const;
   // Peak displacement from the centre per axis over a period (m).
   [[nodiscard]] Vec3 peak_displacement() const;
   // The same design with every amplitude times s (all axes) or s_i (per axis).
@@ -89,6 +115,7 @@ class MultiSine final : public ctl::Trajectory {
   int periods_;
   std::array<std::vector<int>, 3> k_;
   std::array<std::vector<double>, 3> a_, phi_;
+  std::array<Passes, 3> passes_;
 };
 
 // How a design uses the limits and what it gives.
@@ -126,6 +153,18 @@ ExcitationFigures excitation_figures(const MultiSine& m, const ctl::Machine& mod
 // Design the experiment (see the top). Throws Error for bad options or limits.
 ExcitationDesign design_excitation(const ctl::Machine& model, const ExcitationLimits& limits,
                                    const ExcitationOptions& options = {});
+
+// The design's regressor fitted on a measured log (the effect columns of
+// every library effect beside the base, as the design sees them, unbounded):
+// values and standard errors from the fit's covariance with the noise the
+// log shows (the residual's variance over its effective rows). What the
+// standard errors of two experiments are compared by.
+struct RegressorFit {
+  std::vector<std::string> columns;  // "viscous_friction[axis 1]", ..., "actuation_delay"
+  Eigen::VectorXd value, std_error;  // per unit of each column (N s/m, N, ..., s)
+  double residual_rms = 0.0;         // N, after the fit
+};
+RegressorFit fit_design_regressor(const io::MotionData& log, const ctl::Machine& model);
 
 // The stream file's rows (t, x, y, z, vx, vy, vz; SI) at `rate` Hz.
 std::vector<std::array<double, 7>> excitation_rows(const MultiSine& m, double rate);
