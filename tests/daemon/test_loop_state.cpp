@@ -223,6 +223,87 @@ TEST(Jog, TheDeadmanDropsTheTargetAtTheDeadline) {
   EXPECT_EQ(j.target, Vec3::Zero());
 }
 
+TEST(ModeState, PublishesEveryModeItEnters) {
+  ModeState m;
+  EXPECT_EQ(m.now(), Mode::init);
+  EXPECT_EQ(m.published(), Mode::init);
+  for (const Mode x : {Mode::disabled, Mode::enabling, Mode::holding, Mode::fault}) {
+    m.enter(x);
+    EXPECT_EQ(m.now(), x);
+    EXPECT_EQ(m.published(), x);
+  }
+}
+
+TEST(ModeState, AStopEndsDisabledOnlyWhenADisableAskedForItOnce) {
+  ModeState m;
+  m.enter(Mode::stopping);
+  EXPECT_EQ(m.after_stop(), Mode::holding);
+  m.disable_after_stop();
+  EXPECT_EQ(m.after_stop(), Mode::disabled);
+  m.enter(Mode::stopping);  // still stopping: the request stays
+  EXPECT_EQ(m.after_stop(), Mode::disabled);
+  m.enter(m.after_stop());
+  EXPECT_EQ(m.now(), Mode::disabled);
+  m.enter(Mode::stopping);  // the next stop: spent
+  EXPECT_EQ(m.after_stop(), Mode::holding);
+  // A fault during the stop spends it as well.
+  m.disable_after_stop();
+  m.enter(Mode::fault);
+  m.enter(Mode::stopping);
+  EXPECT_EQ(m.after_stop(), Mode::holding);
+}
+
+TEST(ModeState, TheDrivesAreOnInTheSixModesThatPowerThem) {
+  ModeState m;
+  int on = 0;
+  for (int i = 0; i <= static_cast<int>(Mode::jogging); ++i) {
+    m.enter(static_cast<Mode>(i));
+    on += m.drives_on() ? 1 : 0;
+  }
+  EXPECT_EQ(on, 6);
+  for (const Mode off : {Mode::init, Mode::disabled, Mode::fault}) {
+    m.enter(off);
+    EXPECT_FALSE(m.drives_on()) << mode_name(off);
+  }
+}
+
+TEST(ModeState, EnablingTimeCountsCyclesFromItsStart) {
+  ModeState m;
+  m.enter(Mode::enabling);
+  m.enabling_from(100);
+  EXPECT_DOUBLE_EQ(m.enabling_time(100, 1e-3), 0.0);
+  EXPECT_DOUBLE_EQ(m.enabling_time(350, 1e-3), 0.25);
+}
+
+TEST(ActiveModel, SelectKeepsTheModelAndLoadSwapsBothAndHandsTheOldBack) {
+  const ctl::Machine a{ctl::MachineModel::elkady()}, b{ctl::MachineModel::elkady()};
+  using ctl::ControlLaw;
+  ActiveModel m(a, ctl::Controller(a, ControlLaw::pd, ctl::table3_gains(ControlLaw::pd)));
+  EXPECT_EQ(&m.machine(), &a);
+  m.select(ctl::Controller(a, ControlLaw::computed_torque, ctl::table3_gains(ControlLaw::computed_torque)));
+  EXPECT_EQ(&m.machine(), &a);
+  EXPECT_EQ(m.controller().law(), ControlLaw::computed_torque);
+  const ctl::Machine* old =
+      m.load(b, ctl::Controller(b, ControlLaw::pd_gravity, ctl::table3_gains(ControlLaw::pd_gravity)));
+  EXPECT_EQ(old, &a);
+  EXPECT_EQ(&m.machine(), &b);
+  EXPECT_EQ(&m.controller().model(), &b);
+  EXPECT_EQ(m.controller().law(), ControlLaw::pd_gravity);
+}
+
+TEST(ActiveModel, KeepsWhatTheDrivesWereGivenUntilRestarted) {
+  const ctl::Machine a{ctl::MachineModel::elkady()};
+  ActiveModel m(a, ctl::Controller(a, ctl::ControlLaw::pd, ctl::table3_gains(ctl::ControlLaw::pd)));
+  m.sent().push(0.001, Vec3(1, 2, 3));
+  m.sent().push(0.002, Vec3(4, 5, 6));
+  m.sent().amend_last(Vec3(7, 8, 9));
+  ASSERT_EQ(m.sent().size(), 2);
+  EXPECT_EQ(m.sent().force(0), Vec3(7, 8, 9));
+  EXPECT_EQ(m.sent().force(1), Vec3(1, 2, 3));
+  m.restart();
+  EXPECT_EQ(m.sent().size(), 0);
+}
+
 TEST(Refusal, EachMapsToItsOwnAckReason) {
   using cpm_msgs::ack_t;
   EXPECT_EQ(ack_reason(Refusal::none), ack_t::REASON_NONE);

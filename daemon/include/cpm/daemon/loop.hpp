@@ -48,8 +48,9 @@
 // The schedule (clock_nanosleep on an absolute time) lives in rt.hpp; tests
 // call cycle() directly, deterministic and without threads.
 // The state the phases share lives in small owners with their own
-// transitions (loop_state.hpp: the fault latch, the stop profile, the
-// segment queue, homing, jog, transfer, ...); the commands' legality and
+// transitions (loop_state.hpp: the mode, the model and law in use, the
+// fault latch, the stop profile, the segment queue, homing, jog, transfer,
+// ...); the commands' legality and
 // transitions in loop_commands.cpp, the phases in loop.cpp.
 //
 // Spaces (as LinuxCNC's joint and teleop modes): until every actuator is
@@ -224,7 +225,7 @@ class ControlLoop {
   // Cycles completed (the watchdog is fed only while this advances).
   [[nodiscard]] std::int64_t cycles_done() const noexcept { return stats_.cycles_done.load(std::memory_order_acquire); }
   // Latest mode (any thread).
-  [[nodiscard]] Mode mode() const noexcept { return mode_atomic_.load(std::memory_order_acquire); }
+  [[nodiscard]] Mode mode() const noexcept { return mode_.published(); }
   void set_scheduling_info(bool realtime, bool memory_locked) noexcept;
 
   // Last state as the loop wrote it (test thread only, when no loop thread runs).
@@ -256,10 +257,6 @@ class ControlLoop {
   void write_outputs(std::int64_t k) noexcept;
   void publish(std::int64_t k) noexcept;
   void finish_cycle(std::int64_t k, const PhaseTimes& t) noexcept;
-  // The drives are (to be) powered: enabling, holding, moving, homing,
-  // jogging or stopping.
-  [[nodiscard]] bool drives_on() const noexcept;
-  // Every actuator homed: the task space.
   // The clamped force and its saturation flags of `f` (N) into this cycle's output.
   void limit_force(const Vec3& f) noexcept;
 
@@ -325,9 +322,8 @@ class ControlLoop {
 
   DaemonConfig cfg_;
   Backend* backend_;
-  const ctl::Machine* machine_;
-  ctl::Controller controller_;
   double dt_;
+  ActiveModel model_;  // the model and law in use (swapped whole by load_model, select_controller)
 
   // Queues to and from the other threads.
   struct Channels {
@@ -341,11 +337,8 @@ class ControlLoop {
   LoopRequests requests_;
 
   // State machine (the owners' transitions: loop_state.hpp).
-  Mode mode_ = Mode::init;
-  std::atomic<Mode> mode_atomic_{Mode::init};
+  ModeState mode_;
   FaultLatch fault_;
-  std::int64_t enabling_since_ = 0;
-  bool disable_after_stop_ = false;
   OverrunCount overruns_;
   std::array<std::int64_t, 3> saturated_cycles_{};  // consecutive cycles at the force limit
   Underrun underrun_;
@@ -364,7 +357,6 @@ class ControlLoop {
   } ramp_;
   Jog jog_;
   Transfer transfer_;
-  ctl::ControllerState ctl_state_;  // the commands sent since enable (actuation delay)
 
   // What one phase hands the later ones within a cycle.
   struct CycleData {
