@@ -15,19 +15,6 @@ namespace cpm::daemon {
 
 using cpm_msgs::state_t;
 
-int histogram_bin(std::int64_t ns) noexcept {
-  if (ns < 0) ns = 0;
-  const std::int64_t us = ns / 1000;
-  if (us < 200) return static_cast<int>(us);
-  if (us < 2000) return 200 + static_cast<int>((us - 200) / 50);
-  return kBins - 1;
-}
-
-std::int64_t histogram_bin_floor(int k) noexcept {
-  if (k < 200) return std::int64_t{k} * 1000;
-  return (200 + std::int64_t{k - 200} * 50) * 1000;
-}
-
 namespace {
 
 std::int64_t now_ns() noexcept {
@@ -58,11 +45,10 @@ ControlLoop::ControlLoop(const DaemonConfig& config, Backend& backend, const ctl
       backend_(&backend),
       dt_(1.0 / config.loop.rate_hz),
       model_(machine, controller),
-      homing_(config.homing) {
+      homing_(config.homing),
+      stats_(config.loop.rate_hz) {
   ctl::check_delay_fits(machine.actuation_delay(), config.loop.rate_hz);
   ctl::check_delay_fits(controller.lookahead(), config.loop.rate_hz);
-  stats_.sums.rate_hz = config.loop.rate_hz;
-  for (int s = 0; s < kSeries; ++s) stats_.sums.min_ns[s] = 0;
   pub_.state.mode = static_cast<std::int8_t>(Mode::init);
   pub_.state.segment_id = -1;
   pub_.state.last_segment_id = -1;
@@ -86,21 +72,6 @@ StartCheck check_start(const ctl::Trajectory& tr, const Vec3& end_velocity, cons
   c.velocity_allowed = limits.acceleration * dt * (1.0 + 1e-6) + 1e-9;
   c.acceleration_allowed = limits.acceleration * (1.0 + 1e-6) + 1e-9;
   return c;
-}
-
-void ControlLoop::set_scheduling_info(bool realtime, bool memory_locked) noexcept {
-  stats_.sums.realtime = realtime ? 1 : 0;
-  stats_.sums.memory_locked = memory_locked ? 1 : 0;
-}
-
-void ControlLoop::add_sample(int s, std::int64_t ns) noexcept {
-  if (ns < 0) ns = 0;
-  const auto v = static_cast<std::int32_t>(std::min<std::int64_t>(ns, INT32_MAX));
-  if (stats_.sums.count[s] == 0 || v < stats_.sums.min_ns[s]) stats_.sums.min_ns[s] = v;
-  if (v > stats_.sums.max_ns[s]) stats_.sums.max_ns[s] = v;
-  stats_.sums.count[s]++;
-  stats_.sums.sum_ns[s] += static_cast<double>(v);
-  stats_.sums.histogram[s][histogram_bin(ns)]++;
 }
 
 void ControlLoop::enter(Mode m) noexcept {
@@ -303,8 +274,7 @@ ctl::TrajectorySample ControlLoop::reference_ahead(std::int64_t k, double ahead)
 }
 
 void ControlLoop::record_schedule(bool overrun, std::int64_t skipped) noexcept {
-  stats_.sums.skipped += skipped;
-  if (overrun) stats_.sums.overruns++;
+  stats_.schedule(overrun, skipped);
   overruns_.record(overrun, cfg_.loop.max_consecutive_overruns);
 }
 
@@ -313,7 +283,7 @@ void ControlLoop::cycle(std::int64_t k, std::int64_t latency_ns) noexcept {
   // (the commands are timed with the estimate, as they always were; homing
   // and jog with the trajectory, whose reference they steer).
   PhaseTimes t{};
-  record_latency(latency_ns);
+  stats_.latency(latency_ns);
   t[0] = now_ns();
   if (mode_.now() == Mode::init) enter(Mode::disabled);
   read_inputs(k);
@@ -336,11 +306,6 @@ void ControlLoop::cycle(std::int64_t k, std::int64_t latency_ns) noexcept {
   publish(k);
   t[kSeriesPublish] = now_ns();
   finish_cycle(k, t);
-}
-
-void ControlLoop::record_latency(std::int64_t latency_ns) noexcept {
-  add_sample(kSeriesLatency, latency_ns);
-  stats_.latency_us[static_cast<std::size_t>(std::clamp<std::int64_t>(latency_ns / 1000, 0, kFineLatencyBins - 1))]++;
 }
 
 void ControlLoop::read_inputs(std::int64_t k) noexcept {
@@ -726,13 +691,11 @@ void ControlLoop::publish_drives(std::int64_t k) noexcept {
 }
 
 void ControlLoop::finish_cycle(std::int64_t k, const PhaseTimes& t) noexcept {
-  for (int s = kSeriesRead; s <= kSeriesPublish; ++s) add_sample(s, t[s] - t[s - 1]);
-  add_sample(kSeriesCycle, t[kSeriesPublish] - t[0]);
-  stats_.sums.cycles++;
+  stats_.cycle(t);
   // Statistics once a second (copied whole; the ring holds a few).
   const auto per_second = static_cast<std::int64_t>(std::lround(cfg_.loop.rate_hz));
-  if (per_second > 0 && (k + 1) % per_second == 0) (void)ch_.stats.push(stats_.sums);
-  stats_.cycles_done.store(stats_.sums.cycles, std::memory_order_release);
+  if (per_second > 0 && (k + 1) % per_second == 0) (void)ch_.stats.push(stats_.sums());
+  stats_.completed();
 }
 
 void ControlLoop::fill_state(std::int64_t k) noexcept {
@@ -794,11 +757,12 @@ void ControlLoop::fill_state(std::int64_t k) noexcept {
   s.last_segment_rmse = tracking_.last_rmse();
   s.last_segment_max = tracking_.last_max();
   s.last_segment_cycles = tracking_.last_cycles();
-  s.cycles = stats_.sums.cycles + 1;
-  s.overruns = stats_.sums.overruns;
-  s.skipped = stats_.sums.skipped;
-  s.max_latency_ns = stats_.sums.max_ns[kSeriesLatency];
-  s.max_cycle_ns = stats_.sums.max_ns[kSeriesCycle];
+  const cpm_msgs::loop_stats_t& st = stats_.sums();
+  s.cycles = st.cycles + 1;
+  s.overruns = st.overruns;
+  s.skipped = st.skipped;
+  s.max_latency_ns = st.max_ns[kSeriesLatency];
+  s.max_cycle_ns = st.max_ns[kSeriesCycle];
   s.dropped_snapshots = pub_.dropped;
 }
 

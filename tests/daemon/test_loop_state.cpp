@@ -223,6 +223,49 @@ TEST(Jog, TheDeadmanDropsTheTargetAtTheDeadline) {
   EXPECT_EQ(j.target, Vec3::Zero());
 }
 
+TEST(CycleStatistics, EachPhaseItsOwnSampleAndTheWholeCycleTheSum) {
+  CycleStatistics st(1000.0);
+  EXPECT_EQ(st.sums().rate_hz, 1000.0);
+  // Phases of 1, 2, ..., 8 us after a start at 10 us: the cycle lasts 36 us.
+  PhaseTimes t{};
+  t[0] = 10000;
+  for (int s = kSeriesRead; s <= kSeriesPublish; ++s) t[s] = t[s - 1] + 1000 * s;
+  st.cycle(t);
+  EXPECT_EQ(st.cycles_done(), 0);  // not yet handed on
+  st.completed();
+  EXPECT_EQ(st.cycles_done(), 1);
+  for (int s = kSeriesRead; s <= kSeriesPublish; ++s) {
+    EXPECT_EQ(st.sums().count[s], 1) << s;
+    EXPECT_EQ(st.sums().min_ns[s], 1000 * s);
+    EXPECT_EQ(st.sums().max_ns[s], 1000 * s);
+    EXPECT_EQ(st.sums().histogram[s][s], 1);  // [s, s + 1) us
+  }
+  EXPECT_EQ(st.sums().max_ns[kSeriesCycle], 36000);
+  EXPECT_EQ(st.sums().count[kSeriesLatency], 0);
+}
+
+TEST(CycleStatistics, LatencyInBothHistogramsAndExtremesOverSamples) {
+  CycleStatistics st(1000.0);
+  for (const std::int64_t ns : {std::int64_t{700}, std::int64_t{250'000}, std::int64_t{-5}, std::int64_t{3'000'000}})
+    st.latency(ns);
+  const cpm_msgs::loop_stats_t& s = st.sums();
+  EXPECT_EQ(s.count[kSeriesLatency], 4);
+  EXPECT_EQ(s.min_ns[kSeriesLatency], 0);  // a negative latency counts as none
+  EXPECT_EQ(s.max_ns[kSeriesLatency], 3'000'000);
+  EXPECT_DOUBLE_EQ(s.sum_ns[kSeriesLatency], 700.0 + 250'000.0 + 3'000'000.0);
+  EXPECT_EQ(s.histogram[kSeriesLatency][0], 2);
+  EXPECT_EQ(s.histogram[kSeriesLatency][201], 1);  // 250 us: the 50 us bin [250, 300)
+  EXPECT_EQ(s.histogram[kSeriesLatency][kBins - 1], 1);
+  EXPECT_EQ(st.fine_latency()[0], 2);
+  EXPECT_EQ(st.fine_latency()[250], 1);
+  EXPECT_EQ(st.fine_latency()[kFineLatencyBins - 1], 1);
+  st.schedule(true, 2);
+  st.schedule(false, 0);
+  st.schedule(true, 1);
+  EXPECT_EQ(st.sums().overruns, 2);
+  EXPECT_EQ(st.sums().skipped, 3);
+}
+
 TEST(ModeState, PublishesEveryModeItEnters) {
   ModeState m;
   EXPECT_EQ(m.now(), Mode::init);

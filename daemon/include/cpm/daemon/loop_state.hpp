@@ -16,6 +16,8 @@
 #include <memory>
 #include <variant>
 
+#include <cpm_msgs/loop_stats_t.hpp>
+
 #include "cpm/control/controller.hpp"
 #include "cpm/control/trajectory.hpp"
 #include "cpm/daemon/config.hpp"
@@ -42,6 +44,51 @@ enum class Refusal : std::uint8_t {
   not_continuous,    // the segment does not start where and how the queue ends
   limit,             // faster than a limit allows
   workspace,         // it would leave the workspace or a stroke
+};
+
+// Timing statistics: histograms as in loop_stats_t.
+inline constexpr int kSeriesLatency = 0, kSeriesRead = 1, kSeriesEstimate = 2, kSeriesTrajectory = 3,
+                     kSeriesInverseKinematics = 4, kSeriesController = 5, kSeriesSafety = 6, kSeriesWrite = 7,
+                     kSeriesPublish = 8, kSeriesCycle = 9, kSeries = 10, kBins = 237;
+int histogram_bin(std::int64_t ns) noexcept;
+// Lower edge of bin k (ns).
+std::int64_t histogram_bin_floor(int k) noexcept;
+// The wake-up latency at cyclictest's resolution (cyclictest -h 2000): bin k
+// < 2000 holds [k, k+1) us, the last bin everything from 2 ms. loop_stats_t's
+// 50 us bins above 200 us are too coarse to hold a p99 against cyclictest's
+// to within 20 %, so cpmd --stats-json writes this one for that series.
+inline constexpr int kFineLatencyBins = 2001;
+using FineLatencyHistogram = std::array<std::int32_t, kFineLatencyBins>;
+
+// The clock reading at the start of a cycle, then at the end of each phase
+// (index: the phase's series, kSeriesRead to kSeriesPublish).
+using PhaseTimes = std::array<std::int64_t, kSeriesPublish + 1>;
+
+// The cycle's timing statistics (loop_stats_t): per series the count, sum,
+// extremes and histogram; the wake-up latency also in 1 us bins; the
+// schedule's overruns and skipped slots; and the cycles completed, which
+// any thread may read (the watchdog is fed only while they advance).
+class CycleStatistics {
+ public:
+  explicit CycleStatistics(double rate_hz) noexcept;
+  // How late the thread woke for this cycle (ns).
+  void latency(std::int64_t ns) noexcept;
+  // The scheduler's verdict on the cycle just run.
+  void schedule(bool overrun, std::int64_t skipped) noexcept;
+  void scheduling(bool realtime, bool memory_locked) noexcept;
+  // A cycle ran with these phase times: each phase and the whole.
+  void cycle(const PhaseTimes& t) noexcept;
+  // ... and everything it hands on is handed on: cycles_done() advances.
+  void completed() noexcept { cycles_done_.store(sums_.cycles, std::memory_order_release); }
+  [[nodiscard]] const cpm_msgs::loop_stats_t& sums() const noexcept { return sums_; }
+  [[nodiscard]] const FineLatencyHistogram& fine_latency() const noexcept { return latency_us_; }
+  [[nodiscard]] std::int64_t cycles_done() const noexcept { return cycles_done_.load(std::memory_order_acquire); }
+
+ private:
+  void add(int series, std::int64_t ns) noexcept;
+  cpm_msgs::loop_stats_t sums_{};
+  FineLatencyHistogram latency_us_{};  // series 0 again, in 1 us bins
+  std::atomic<std::int64_t> cycles_done_{0};
 };
 
 // The state machine's mode: the loop's own copy, the one other threads read,
