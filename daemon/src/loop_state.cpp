@@ -101,19 +101,19 @@ void StopProfile::start(const Vec3& p0, const Vec3& v0, double deceleration, std
   v0_ = v;
   dir_ = v > 1e-12 ? Vec3(v0 / v) : Vec3::Zero();
   a_ = deceleration;
-  T_ = v / deceleration;
+  duration_ = v / deceleration;
   start_cycle_ = k;
   t0_ = elapsed;
 }
 
 ctl::TrajectorySample StopProfile::sample(std::int64_t k, double dt, double ahead, bool& at_rest) const noexcept {
   const double elapsed = static_cast<double>(k - start_cycle_) * dt + t0_ + ahead;
-  const double t = std::min(elapsed, T_);
+  const double t = std::min(elapsed, duration_);
   ctl::TrajectorySample r;
   r.p = p0_ + dir_ * (v0_ * t - 0.5 * a_ * t * t);
   r.v = dir_ * (v0_ - a_ * t);
-  r.a = t < T_ ? Vec3(-a_ * dir_) : Vec3::Zero();
-  at_rest = elapsed >= T_;
+  r.a = t < duration_ ? Vec3(-a_ * dir_) : Vec3::Zero();
+  at_rest = elapsed >= duration_;
   return r;
 }
 

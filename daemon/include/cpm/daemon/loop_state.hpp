@@ -220,11 +220,11 @@ class StopProfile {
   // time is past T (the sample's velocity is then zero in size, not yet set
   // to exactly zero: the caller decides what rest means).
   [[nodiscard]] ctl::TrajectorySample sample(std::int64_t k, double dt, double ahead, bool& at_rest) const noexcept;
-  [[nodiscard]] double duration() const noexcept { return T_; }
+  [[nodiscard]] double duration() const noexcept { return duration_; }
 
  private:
   Vec3 p0_ = Vec3::Zero(), dir_ = Vec3::Zero();
-  double v0_ = 0.0, T_ = 0.0, a_ = 0.0;
+  double v0_ = 0.0, duration_ = 0.0, a_ = 0.0;
   double t0_ = 0.0;  // s of the profile already elapsed at start_cycle_
   std::int64_t start_cycle_ = 0;
 };
