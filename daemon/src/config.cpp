@@ -663,24 +663,27 @@ DaemonConfig parse_config_checked(const std::string& text, const std::string& na
   const auto m = r.map(root["limits"], "limits",
                        {"workspace_min", "workspace_max", "velocity", "acceleration", "force", "following_error"},
                        {"overspeed", "stop_deceleration", "enable_timeout", "saturation_time", "allow_velocity_step"});
-  auto& L = c.limits;
-  L.workspace_min = r.param3(m["workspace_min"], "limits.workspace_min", "limits.workspace_min");
-  L.workspace_max = r.param3(m["workspace_max"], "limits.workspace_max", "limits.workspace_max");
+  auto& limits = c.limits;
+  limits.workspace_min = r.param3(m["workspace_min"], "limits.workspace_min", "limits.workspace_min");
+  limits.workspace_max = r.param3(m["workspace_max"], "limits.workspace_max", "limits.workspace_max");
   for (int i = 0; i < 3; ++i)
-    if (const ConstraintError e = workspace_error(L, i); !e.empty())
+    if (const ConstraintError e = workspace_error(limits, i); !e.empty())
       r.fail(m["workspace_max"][i], "limits.workspace_max[" + std::to_string(i) + "]", e.why);
-  L.velocity = r.param(m["velocity"], "limits.velocity", "limits.velocity");
-  L.acceleration = r.param(m["acceleration"], "limits.acceleration", "limits.acceleration");
-  L.force = r.param(m["force"], "limits.force", "limits.force");
-  L.following_error = r.param(m["following_error"], "limits.following_error", "limits.following_error");
-  L.overspeed = m["overspeed"] ? r.param(m["overspeed"], "limits.overspeed", "limits.overspeed") : 1.6 * L.velocity;
-  if (const ConstraintError e = overspeed_error(L); !e.empty()) r.fail(m["overspeed"], e.key, e.why);
+  limits.velocity = r.param(m["velocity"], "limits.velocity", "limits.velocity");
+  limits.acceleration = r.param(m["acceleration"], "limits.acceleration", "limits.acceleration");
+  limits.force = r.param(m["force"], "limits.force", "limits.force");
+  limits.following_error = r.param(m["following_error"], "limits.following_error", "limits.following_error");
+  limits.overspeed =
+      m["overspeed"] ? r.param(m["overspeed"], "limits.overspeed", "limits.overspeed") : 1.6 * limits.velocity;
+  if (const ConstraintError e = overspeed_error(limits); !e.empty()) r.fail(m["overspeed"], e.key, e.why);
   if (m["stop_deceleration"])
-    L.stop_deceleration = r.param(m["stop_deceleration"], "limits.stop_deceleration", "limits.stop_deceleration");
-  if (m["enable_timeout"]) L.enable_timeout = r.param(m["enable_timeout"], "limits.enable_timeout", "limits.enable_timeout");
+    limits.stop_deceleration = r.param(m["stop_deceleration"], "limits.stop_deceleration", "limits.stop_deceleration");
+  if (m["enable_timeout"])
+    limits.enable_timeout = r.param(m["enable_timeout"], "limits.enable_timeout", "limits.enable_timeout");
   if (m["saturation_time"])
-    L.saturation_time = r.param(m["saturation_time"], "limits.saturation_time", "limits.saturation_time");
-  if (m["allow_velocity_step"]) L.allow_velocity_step = r.boolean(m["allow_velocity_step"], "limits.allow_velocity_step");
+    limits.saturation_time = r.param(m["saturation_time"], "limits.saturation_time", "limits.saturation_time");
+  if (m["allow_velocity_step"])
+    limits.allow_velocity_step = r.boolean(m["allow_velocity_step"], "limits.allow_velocity_step");
 
   if (root["jog"]) {
     const auto j = r.map(root["jog"], "jog", {}, {"max_velocity", "acceleration", "keepalive", "stop_distance"});
@@ -689,7 +692,7 @@ DaemonConfig parse_config_checked(const std::string& text, const std::string& na
       if (j[key]) find_param(param).field(c) = r.param(j[key], param, param.c_str());
     }
   }
-  if (const ConstraintError e = jog_error(c.jog, L); !e.empty()) {
+  if (const ConstraintError e = jog_error(c.jog, limits); !e.empty()) {
     // The key it is about if the file gives it; else the jog section, or the
     // limit that the default jog breaks.
     const std::string key = e.key.substr(4);

@@ -15,19 +15,6 @@ namespace cpm::daemon {
 
 using cpm_msgs::state_t;
 
-int histogram_bin(std::int64_t ns) noexcept {
-  if (ns < 0) ns = 0;
-  const std::int64_t us = ns / 1000;
-  if (us < 200) return static_cast<int>(us);
-  if (us < 2000) return 200 + static_cast<int>((us - 200) / 50);
-  return kBins - 1;
-}
-
-std::int64_t histogram_bin_floor(int k) noexcept {
-  if (k < 200) return std::int64_t{k} * 1000;
-  return (200 + std::int64_t{k - 200} * 50) * 1000;
-}
-
 namespace {
 
 std::int64_t now_ns() noexcept {
@@ -56,14 +43,12 @@ ControlLoop::ControlLoop(const DaemonConfig& config, Backend& backend, const ctl
                          const ctl::Controller& controller)
     : cfg_(config),
       backend_(&backend),
-      machine_(&machine),
-      controller_(controller),
       dt_(1.0 / config.loop.rate_hz),
-      homing_(config.homing) {
+      model_(machine, controller),
+      homing_(config.homing),
+      stats_(config.loop.rate_hz) {
   ctl::check_delay_fits(machine.actuation_delay(), config.loop.rate_hz);
   ctl::check_delay_fits(controller.lookahead(), config.loop.rate_hz);
-  stats_.sums.rate_hz = config.loop.rate_hz;
-  for (int s = 0; s < kSeries; ++s) stats_.sums.min_ns[s] = 0;
   pub_.state.mode = static_cast<std::int8_t>(Mode::init);
   pub_.state.segment_id = -1;
   pub_.state.last_segment_id = -1;
@@ -89,25 +74,9 @@ StartCheck check_start(const ctl::Trajectory& tr, const Vec3& end_velocity, cons
   return c;
 }
 
-void ControlLoop::set_scheduling_info(bool realtime, bool memory_locked) noexcept {
-  stats_.sums.realtime = realtime ? 1 : 0;
-  stats_.sums.memory_locked = memory_locked ? 1 : 0;
-}
-
-void ControlLoop::add_sample(int s, std::int64_t ns) noexcept {
-  if (ns < 0) ns = 0;
-  const auto v = static_cast<std::int32_t>(std::min<std::int64_t>(ns, INT32_MAX));
-  if (stats_.sums.count[s] == 0 || v < stats_.sums.min_ns[s]) stats_.sums.min_ns[s] = v;
-  if (v > stats_.sums.max_ns[s]) stats_.sums.max_ns[s] = v;
-  stats_.sums.count[s]++;
-  stats_.sums.sum_ns[s] += static_cast<double>(v);
-  stats_.sums.histogram[s][histogram_bin(ns)]++;
-}
-
 void ControlLoop::enter(Mode m) noexcept {
   if (m != Mode::stopping) underrun_.pending = false;
-  mode_ = m;
-  mode_atomic_.store(m, std::memory_order_release);
+  mode_.enter(m);
 }
 
 void ControlLoop::latch(std::uint32_t bit, int axis, double value, double limit, std::int64_t k,
@@ -121,10 +90,9 @@ void ControlLoop::latch(std::uint32_t bit, int axis, double value, double limit,
   fault_.set(bit, axis, value, limit, k, why);
   saturated_cycles_ = {};
   underrun_.pending = false;
-  if (mode_ != Mode::fault) {
+  if (mode_.now() != Mode::fault) {
     if (queue_.playing()) finish_segment();
     flush_queue();
-    disable_after_stop_ = false;
     // Homing ends: the actuator being homed stays unhomed.
     if (homing_.axis() >= 0) homing_.end(false);
     jog_.target.setZero();
@@ -210,7 +178,7 @@ void ControlLoop::ramp_box(Vec3& lo, Vec3& hi) const noexcept {
     hi = jog_.box_hi;
     return;
   }
-  const kin::Strokes& s = machine_->model().strokes;
+  const kin::Strokes& s = model_.machine().model().strokes;
   for (int i = 0; i < 3; ++i) {
     lo[i] = homing_.homed[i] ? s.min[i] : -std::numeric_limits<double>::infinity();
     hi[i] = homing_.homed[i] ? s.max[i] : std::numeric_limits<double>::infinity();
@@ -219,7 +187,7 @@ void ControlLoop::ramp_box(Vec3& lo, Vec3& hi) const noexcept {
 
 ctl::TrajectorySample ControlLoop::reference(std::int64_t k) noexcept {
   ctl::TrajectorySample r;
-  switch (mode_) {
+  switch (mode_.now()) {
     case Mode::moving: {
       while (queue_.playing()) {
         const Segment& s = queue_.at(0);
@@ -264,8 +232,7 @@ ctl::TrajectorySample ControlLoop::reference(std::int64_t k) noexcept {
           latch(kFaultStreamUnderrun, -1, underrun_.speed, kStreamRestSpeed, underrun_.cycle);
           return r;
         }
-        enter(disable_after_stop_ ? Mode::disabled : Mode::holding);
-        disable_after_stop_ = false;
+        enter(mode_.after_stop());
       }
       return r;
     }
@@ -286,7 +253,7 @@ ctl::TrajectorySample ControlLoop::reference_ahead(std::int64_t k, double ahead)
   // their side effects (a segment finishes, a stop ends, when reference()
   // reaches them). A segment that follows another starts at the first cycle
   // at or after its predecessor's end, as reference() starts it.
-  if (mode_ == Mode::moving && queue_.playing()) {
+  if (mode_.now() == Mode::moving && queue_.playing()) {
     double t = static_cast<double>(k - queue_.start_cycle()) * dt_ + ahead;
     for (int i = 0; i < queue_.count(); ++i) {
       const Segment& s = queue_.at(i);
@@ -299,7 +266,7 @@ ctl::TrajectorySample ControlLoop::reference_ahead(std::int64_t k, double ahead)
     r.p = queue_.at(queue_.count() - 1).end;
     return r;
   }
-  if (mode_ == Mode::stopping) {
+  if (mode_.now() == Mode::stopping) {
     bool at_rest = false;
     return stop_.sample(k, dt_, ahead, at_rest);
   }
@@ -307,8 +274,7 @@ ctl::TrajectorySample ControlLoop::reference_ahead(std::int64_t k, double ahead)
 }
 
 void ControlLoop::record_schedule(bool overrun, std::int64_t skipped) noexcept {
-  stats_.sums.skipped += skipped;
-  if (overrun) stats_.sums.overruns++;
+  stats_.schedule(overrun, skipped);
   overruns_.record(overrun, cfg_.loop.max_consecutive_overruns);
 }
 
@@ -317,9 +283,9 @@ void ControlLoop::cycle(std::int64_t k, std::int64_t latency_ns) noexcept {
   // (the commands are timed with the estimate, as they always were; homing
   // and jog with the trajectory, whose reference they steer).
   PhaseTimes t{};
-  record_latency(latency_ns);
+  stats_.latency(latency_ns);
   t[0] = now_ns();
-  if (mode_ == Mode::init) enter(Mode::disabled);
+  if (mode_.now() == Mode::init) enter(Mode::disabled);
   read_inputs(k);
   t[kSeriesRead] = now_ns();
   estimate(k);
@@ -342,16 +308,6 @@ void ControlLoop::cycle(std::int64_t k, std::int64_t latency_ns) noexcept {
   finish_cycle(k, t);
 }
 
-void ControlLoop::record_latency(std::int64_t latency_ns) noexcept {
-  add_sample(kSeriesLatency, latency_ns);
-  stats_.latency_us[static_cast<std::size_t>(std::clamp<std::int64_t>(latency_ns / 1000, 0, kFineLatencyBins - 1))]++;
-}
-
-bool ControlLoop::drives_on() const noexcept {
-  return mode_ == Mode::enabling || mode_ == Mode::holding || mode_ == Mode::moving || mode_ == Mode::stopping ||
-         mode_ == Mode::homing || mode_ == Mode::jogging;
-}
-
 void ControlLoop::read_inputs(std::int64_t k) noexcept {
   io_.read_result = backend_->read(k, io_.in);
   io_.backend_ok = io_.read_result == BackendResult::ok && io_.backend_write_ok;
@@ -372,13 +328,14 @@ void ControlLoop::estimate(std::int64_t k) noexcept {
   for (int i = 0; i < 3; ++i)
     if (std::abs(io_.cin.d_dot[i]) > 1e-6) io_.cin.kin.dir[i] = io_.cin.d_dot[i] > 0 ? 1 : -1;
   io_.cin.kin.t = static_cast<double>(k) * dt_;
-  io_.estimate_status = io_.read_result == BackendResult::ok ? machine_->task_state(io_.cin.d, io_.cin.d_dot, io_.cin.kin, io_.est)
-                                                       : Status::failure(Fault::not_finite);
+  io_.estimate_status = io_.read_result == BackendResult::ok
+                            ? model_.machine().task_state(io_.cin.d, io_.cin.d_dot, io_.cin.kin, io_.est)
+                            : Status::failure(Fault::not_finite);
   io_.estimate_ok = io_.estimate_status.ok();
 }
 
 void ControlLoop::apply_commands(std::int64_t k) noexcept {
-  if (requests_.shutdown_requested() && mode_ != Mode::fault && mode_ != Mode::disabled) {
+  if (requests_.shutdown_requested() && mode_.now() != Mode::fault && mode_.now() != Mode::disabled) {
     flush_queue();
     enter(Mode::disabled);
   }
@@ -386,7 +343,7 @@ void ControlLoop::apply_commands(std::int64_t k) noexcept {
 }
 
 void ControlLoop::homing(std::int64_t k) noexcept {
-  if (mode_ != Mode::homing || homing_.axis() < 0) {
+  if (mode_.now() != Mode::homing || homing_.axis() < 0) {
     homing_.request = {};
     return;
   }
@@ -426,7 +383,7 @@ void ControlLoop::homing(std::int64_t k) noexcept {
 
 void ControlLoop::jog(std::int64_t k) noexcept {
   // The deadman: a jog holds for jog.keepalive after its command.
-  if (mode_ == Mode::jogging) jog_.deadman(k);
+  if (mode_.now() == Mode::jogging) jog_.deadman(k);
 }
 
 void ControlLoop::trajectory(std::int64_t k) noexcept {
@@ -436,7 +393,7 @@ void ControlLoop::trajectory(std::int64_t k) noexcept {
   }
   Vec3 lo, hi;
   ramp_box(lo, hi);
-  switch (mode_) {
+  switch (mode_.now()) {
     case Mode::homing: {
       const int i = homing_.axis();
       const double acc = cfg_.homing.axes[static_cast<std::size_t>(i)].acceleration;
@@ -463,8 +420,7 @@ void ControlLoop::trajectory(std::int64_t k) noexcept {
     case Mode::stopping: {
       ramp_.step(Vec3::Zero(), std::max(cfg_.jog.acceleration, cfg_.limits.stop_deceleration), lo, hi, dt_);
       if (ramp_.at_rest()) {
-        enter(disable_after_stop_ ? Mode::disabled : Mode::holding);
-        disable_after_stop_ = false;
+        enter(mode_.after_stop());
       }
       break;
     }
@@ -492,12 +448,12 @@ void ControlLoop::trajectory(std::int64_t k) noexcept {
   }
   // A ramp motion in the task space (a jog, or the first hold after homing)
   // ends at rest: the hold point takes over.
-  if (mode_ == Mode::holding && homing_.all_homed() && ramp_.at_rest()) leave_ramp();
+  if (mode_.now() == Mode::holding && homing_.all_homed() && ramp_.at_rest()) leave_ramp();
 }
 
 void ControlLoop::reference_of_actuators(const Vec3& d, const Vec3& d_dot, const Vec3& d_dd) noexcept {
   ctl::TaskState ts;
-  if (machine_->task_state(d, d_dot, io_.cin.kin, ts).ok()) {
+  if (model_.machine().task_state(d, d_dot, io_.cin.kin, ts).ok()) {
     io_.ref.p = ts.p;
     io_.ref.v = ts.p_dot;
     io_.ref.a = ts.J * d_dd;
@@ -512,11 +468,11 @@ void ControlLoop::inverse_kinematics() noexcept {
     io_.ik_status = Status{};
     return;
   }
-  io_.ik_status = kin::inverse(machine_->kinematics(), io_.ref.p, io_.cin.kin, io_.d_ref);
+  io_.ik_status = kin::inverse(model_.machine().kinematics(), io_.ref.p, io_.cin.kin, io_.d_ref);
 }
 
 void ControlLoop::control(std::int64_t k) noexcept {
-  io_.powered = drives_on();
+  io_.powered = mode_.drives_on();
   io_.control_status = Status{};
   const bool actuator_law = !homing_.all_homed();
   if (io_.powered) {
@@ -527,9 +483,9 @@ void ControlLoop::control(std::int64_t k) noexcept {
     } else {
       // With an actuation delay in the model the command acts from t + tau:
       // the controller aims at the reference then.
-      const double ahead = controller_.lookahead();
+      const double ahead = model_.controller().lookahead();
       io_.cin.ref = ahead > 0.0 && !ramp_.active ? reference_ahead(k, ahead) : io_.ref;
-      io_.control_status = controller_.step(io_.cin, ctl_state_, io_.cout);
+      io_.control_status = model_.step(io_.cin, io_.cout);
     }
     fade_transfer(k);
     return;
@@ -550,15 +506,15 @@ void ControlLoop::control_actuators() noexcept {
   const ctl::Gains& g = cfg_.homing.actuator_gains;
   Vec3 hold = Vec3::Zero();
   const Vec3 at = io_.estimate_ok ? io_.est.p : Vec3(0.5 * (cfg_.limits.workspace_min + cfg_.limits.workspace_max));
-  if (!machine_->holding_command(at, io_.cin.kin, hold).ok()) hold.setZero();
+  if (!model_.machine().holding_command(at, io_.cin.kin, hold).ok()) hold.setZero();
   Vec3 f = g.kp.cwiseProduct(io_.d_ref - io_.cin.d) + g.kd.cwiseProduct(ramp_.v - io_.cin.d_dot) + hold;
-  if (mode_ == Mode::homing && homing_.axis() >= 0 && homing_.drive_homes(homing_.axis()))
+  if (mode_.now() == Mode::homing && homing_.axis() >= 0 && homing_.drive_homes(homing_.axis()))
     f[homing_.axis()] = 0.0;  // the drive drives itself
   io_.cout.force_unlimited = f;
   limit_force(f);
   io_.cout.d_ref = io_.d_ref;
   io_.cout.d_dot_ref = ramp_.v;
-  ctl_state_.sent.push(io_.cin.kin.t, io_.cout.force);
+  model_.sent().push(io_.cin.kin.t, io_.cout.force);
 }
 
 void ControlLoop::fade_transfer(std::int64_t k) noexcept {
@@ -568,11 +524,11 @@ void ControlLoop::fade_transfer(std::int64_t k) noexcept {
   if (!transfer_.fade(k, written, io_.cout.force_unlimited, dt_, cfg_.controller.transfer_time)) return;
   limit_force(io_.cout.force_unlimited + transfer_.now());
   // What the drives are given is what the prediction across a delay uses.
-  ctl_state_.sent.amend_last(io_.cout.force);
+  model_.sent().amend_last(io_.cout.force);
 }
 
 void ControlLoop::limit_force(const Vec3& f) noexcept {
-  const double lim = machine_->force_limit();
+  const double lim = model_.machine().force_limit();
   for (int i = 0; i < 3; ++i) {
     io_.cout.saturated[static_cast<std::size_t>(i)] = std::abs(f[i]) > lim;
     io_.cout.force[i] = std::clamp(f[i], -lim, lim);
@@ -581,7 +537,7 @@ void ControlLoop::limit_force(const Vec3& f) noexcept {
 
 void ControlLoop::safety(std::int64_t k) noexcept {
   latch_input_faults(k);
-  if (!io_.powered || mode_ == Mode::fault) return;
+  if (!io_.powered || mode_.now() == Mode::fault) return;
   // The error is measured before any latch below ends the segment it
   // belongs to; in the actuator space, of the actuators (the platform's
   // position is not known).
@@ -615,8 +571,8 @@ void ControlLoop::latch_motion_faults(std::int64_t k, double error) noexcept {
   if (error > cfg_.limits.following_error) latch(kFaultFollowingError, -1, error, cfg_.limits.following_error, k);
   if (!homing_.all_homed()) {
     // The actuator space: the strokes of the homed actuators, the speed of all.
-    const kin::Strokes& st = machine_->model().strokes;
-    for (int i = 0; i < 3 && mode_ != Mode::fault; ++i) {
+    const kin::Strokes& st = model_.machine().model().strokes;
+    for (int i = 0; i < 3 && mode_.now() != Mode::fault; ++i) {
       if (!homing_.homed[static_cast<std::size_t>(i)]) continue;
       if (io_.cin.d[i] < st.min[i]) latch(kFaultSoftLimit, i, io_.cin.d[i], st.min[i], k, "stroke_low");
       else if (io_.cin.d[i] > st.max[i]) latch(kFaultSoftLimit, i, io_.cin.d[i], st.max[i], k, "stroke_high");
@@ -640,10 +596,11 @@ void ControlLoop::latch_motion_faults(std::int64_t k, double error) noexcept {
   // the reference one cycle ahead is checked first, so that a path running
   // towards a stroke end or a singularity stops before the platform (which
   // follows the reference within micrometres) gets there.
-  if (mode_ != Mode::fault) {
+  if (mode_.now() != Mode::fault) {
     const Vec3 ahead = io_.ref.p + io_.ref.v * dt_;
-    const Status wr = kin::check_pose(machine_->kinematics(), machine_->model().strokes, ahead, io_.cin.kin);
-    const Status wm = wr.ok() ? kin::check_pose(machine_->kinematics(), machine_->model().strokes, io_.est.p, io_.cin.kin) : wr;
+    const ctl::Machine& machine = model_.machine();
+    const Status wr = kin::check_pose(machine.kinematics(), machine.model().strokes, ahead, io_.cin.kin);
+    const Status wm = wr.ok() ? kin::check_pose(machine.kinematics(), machine.model().strokes, io_.est.p, io_.cin.kin) : wr;
     if (!wm.ok()) latch(kFaultSoftLimit, wm.index, wm.value, wm.limit, k, cpm::fault_name(wm.fault));
   }
   if (io_.est.p_dot.norm() > cfg_.limits.overspeed) latch(kFaultOverspeed, -1, io_.est.p_dot.norm(), cfg_.limits.overspeed, k);
@@ -652,7 +609,7 @@ void ControlLoop::latch_motion_faults(std::int64_t k, double error) noexcept {
 void ControlLoop::latch_saturation(std::int64_t k) noexcept {
   // Force saturation held too long: the axis cannot follow (blocked,
   // overloaded, a gain too high); the following error may not show it yet.
-  for (int i = 0; i < 3 && mode_ != Mode::fault; ++i) {
+  for (int i = 0; i < 3 && mode_.now() != Mode::fault; ++i) {
     saturated_cycles_[i] = io_.cout.saturated[i] ? saturated_cycles_[i] + 1 : 0;
     const double held = static_cast<double>(saturated_cycles_[i]) * dt_;
     if (held > cfg_.limits.saturation_time + 1e-12) latch(kFaultSaturation, i, held, cfg_.limits.saturation_time, k);
@@ -660,21 +617,21 @@ void ControlLoop::latch_saturation(std::int64_t k) noexcept {
 }
 
 void ControlLoop::finish_enabling(std::int64_t k) noexcept {
-  if (mode_ != Mode::enabling) return;
+  if (mode_.now() != Mode::enabling) return;
   if (io_.in.drive_enabled[0] && io_.in.drive_enabled[1] && io_.in.drive_enabled[2]) {
     enter(Mode::holding);
-  } else if (static_cast<double>(k - enabling_since_) * dt_ > cfg_.limits.enable_timeout) {
-    latch(kFaultEnableTimeout, -1, static_cast<double>(k - enabling_since_) * dt_, cfg_.limits.enable_timeout, k);
+  } else if (const double waited = mode_.enabling_time(k, dt_); waited > cfg_.limits.enable_timeout) {
+    latch(kFaultEnableTimeout, -1, waited, cfg_.limits.enable_timeout, k);
   }
 }
 
 void ControlLoop::write_outputs(std::int64_t k) noexcept {
-  const bool on = drives_on();
+  const bool on = mode_.drives_on();
   for (int i = 0; i < 3; ++i) io_.out.force[i] = on ? io_.cout.force[i] : 0.0;
   io_.out.enable = on;
   // The actuator a drive homes itself: its own homing mode, started.
   for (int i = 0; i < 3; ++i) {
-    const bool drive_homes = on && mode_ == Mode::homing && homing_.drive_homes(i);
+    const bool drive_homes = on && mode_.now() == Mode::homing && homing_.drive_homes(i);
     io_.out.axis_drive[static_cast<std::size_t>(i)] = drive_homes ? AxisDrive::homing : AxisDrive::torque;
     io_.out.start_homing[static_cast<std::size_t>(i)] = drive_homes;
   }
@@ -734,13 +691,11 @@ void ControlLoop::publish_drives(std::int64_t k) noexcept {
 }
 
 void ControlLoop::finish_cycle(std::int64_t k, const PhaseTimes& t) noexcept {
-  for (int s = kSeriesRead; s <= kSeriesPublish; ++s) add_sample(s, t[s] - t[s - 1]);
-  add_sample(kSeriesCycle, t[kSeriesPublish] - t[0]);
-  stats_.sums.cycles++;
+  stats_.cycle(t);
   // Statistics once a second (copied whole; the ring holds a few).
   const auto per_second = static_cast<std::int64_t>(std::lround(cfg_.loop.rate_hz));
-  if (per_second > 0 && (k + 1) % per_second == 0) (void)ch_.stats.push(stats_.sums);
-  stats_.cycles_done.store(stats_.sums.cycles, std::memory_order_release);
+  if (per_second > 0 && (k + 1) % per_second == 0) (void)ch_.stats.push(stats_.sums());
+  stats_.completed();
 }
 
 void ControlLoop::fill_state(std::int64_t k) noexcept {
@@ -748,8 +703,8 @@ void ControlLoop::fill_state(std::int64_t k) noexcept {
   s.utime = 0;  // stamped by the publisher with the wall clock
   s.cycle = k;
   s.t = static_cast<double>(k) * dt_;
-  s.mode = static_cast<std::int8_t>(mode_);
-  s.controller = static_cast<std::int8_t>(controller_.law());
+  s.mode = static_cast<std::int8_t>(mode_.now());
+  s.controller = static_cast<std::int8_t>(model_.controller().law());
   put(s.position, io_.est.p);
   put(s.velocity, io_.est.p_dot);
   put(s.position_ref, io_.ref.p);
@@ -795,18 +750,19 @@ void ControlLoop::fill_state(std::int64_t k) noexcept {
   s.homing_phase = static_cast<std::int8_t>(homing_.axis() >= 0 ? homing_.axis_homing.phase() : HomingPhase::idle);
   s.control_space = homing_.all_homed() ? state_t::SPACE_TASK : state_t::SPACE_ACTUATOR;
   s.jog_frame = jog_.frame;
-  put(s.jog_velocity, mode_ == Mode::jogging ? jog_.target : Vec3::Zero());
-  s.jog_keepalive_left = mode_ == Mode::jogging ? std::max<double>(0.0, static_cast<double>(jog_.deadline - k) * dt_) : 0.0;
+  put(s.jog_velocity, mode_.now() == Mode::jogging ? jog_.target : Vec3::Zero());
+  s.jog_keepalive_left = mode_.now() == Mode::jogging ? std::max<double>(0.0, static_cast<double>(jog_.deadline - k) * dt_) : 0.0;
   put(s.transfer_force, transfer_.now());
   s.last_segment_id = tracking_.last_id();
   s.last_segment_rmse = tracking_.last_rmse();
   s.last_segment_max = tracking_.last_max();
   s.last_segment_cycles = tracking_.last_cycles();
-  s.cycles = stats_.sums.cycles + 1;
-  s.overruns = stats_.sums.overruns;
-  s.skipped = stats_.sums.skipped;
-  s.max_latency_ns = stats_.sums.max_ns[kSeriesLatency];
-  s.max_cycle_ns = stats_.sums.max_ns[kSeriesCycle];
+  const cpm_msgs::loop_stats_t& st = stats_.sums();
+  s.cycles = st.cycles + 1;
+  s.overruns = st.overruns;
+  s.skipped = st.skipped;
+  s.max_latency_ns = st.max_ns[kSeriesLatency];
+  s.max_cycle_ns = st.max_ns[kSeriesCycle];
   s.dropped_snapshots = pub_.dropped;
 }
 

@@ -20,7 +20,7 @@ void ControlLoop::reply(const Command& c, Refusal refusal, const char* msg, cons
   a.accepted = refusal == Refusal::none;
   a.refusal = refusal;
   a.message = msg;
-  a.mode = mode_;
+  a.mode = mode_.now();
   a.queue_depth = static_cast<std::int16_t>(queue_.count());
   a.retired = retired;
   a.queue_end = queue_.end();
@@ -33,7 +33,7 @@ void ControlLoop::reply(const Command& c, Refusal refusal, const char* msg, cons
 
 void ControlLoop::handle_commands(std::int64_t k) noexcept {
   // A stop rung in from the server's stop listener: before any command.
-  if (requests_.take_stop() && (mode_ == Mode::moving || mode_ == Mode::homing || mode_ == Mode::jogging))
+  if (requests_.take_stop() && (mode_.now() == Mode::moving || mode_.now() == Mode::homing || mode_.now() == Mode::jogging))
     start_stop(k);
   // A bounded number per cycle keeps the cycle's time bounded.
   for (int n = 0; n < kCommandsPerCycle; ++n) {
@@ -68,28 +68,28 @@ void ControlLoop::hold_where_measured() noexcept {
 }
 
 void ControlLoop::handle_enable(const Command& c, std::int64_t k) noexcept {
-  if (mode_ == Mode::fault) return refuse(c, Refusal::fault_active, "a fault is latched: reset first");
-  if (mode_ != Mode::disabled) return refuse(c, Refusal::illegal_in_mode, "enable is legal only when disabled");
+  if (mode_.now() == Mode::fault) return refuse(c, Refusal::fault_active, "a fault is latched: reset first");
+  if (mode_.now() != Mode::disabled) return refuse(c, Refusal::illegal_in_mode, "enable is legal only when disabled");
   hold_where_measured();  // resynchronise: nothing jumps
-  ctl_state_.reset();     // the drives were given nothing while off
-  enabling_since_ = k;
+  model_.restart();       // the drives were given nothing while off
   enter(Mode::enabling);
+  mode_.enabling_from(k);
   accept(c, "enabling");
 }
 
 void ControlLoop::handle_disable(const Command& c, std::int64_t k) noexcept {
-  if (mode_ == Mode::enabling || mode_ == Mode::holding) {
+  if (mode_.now() == Mode::enabling || mode_.now() == Mode::holding) {
     flush_queue();
     enter(Mode::disabled);
     accept(c, "disabled");
-  } else if (mode_ == Mode::moving || mode_ == Mode::homing || mode_ == Mode::jogging) {
+  } else if (mode_.now() == Mode::moving || mode_.now() == Mode::homing || mode_.now() == Mode::jogging) {
     start_stop(k);
-    disable_after_stop_ = true;
+    mode_.disable_after_stop();
     accept(c, "stopping, then disabling");
-  } else if (mode_ == Mode::stopping) {
-    disable_after_stop_ = true;
+  } else if (mode_.now() == Mode::stopping) {
+    mode_.disable_after_stop();
     accept(c, "disabling once stopped");
-  } else if (mode_ == Mode::fault) {
+  } else if (mode_.now() == Mode::fault) {
     refuse(c, Refusal::illegal_in_mode, "in fault the drives are already off");
   } else {
     refuse(c, Refusal::illegal_in_mode, "already disabled");
@@ -97,10 +97,10 @@ void ControlLoop::handle_disable(const Command& c, std::int64_t k) noexcept {
 }
 
 void ControlLoop::handle_stop(const Command& c, std::int64_t k) noexcept {
-  if (mode_ == Mode::moving || mode_ == Mode::homing || mode_ == Mode::jogging) {
+  if (mode_.now() == Mode::moving || mode_.now() == Mode::homing || mode_.now() == Mode::jogging) {
     start_stop(k);
     accept(c, "stopping");
-  } else if (mode_ == Mode::holding || mode_ == Mode::stopping) {
+  } else if (mode_.now() == Mode::holding || mode_.now() == Mode::stopping) {
     flush_queue();
     accept(c, "already at rest or stopping; queue cleared");
   } else {
@@ -109,7 +109,7 @@ void ControlLoop::handle_stop(const Command& c, std::int64_t k) noexcept {
 }
 
 void ControlLoop::handle_reset(const Command& c) noexcept {
-  if (mode_ != Mode::fault) return refuse(c, Refusal::illegal_in_mode, "no fault latched");
+  if (mode_.now() != Mode::fault) return refuse(c, Refusal::illegal_in_mode, "no fault latched");
   if (io_.in.estop) return refuse(c, Refusal::fault_active, "the e-stop chain is still open");
   if (io_.in.drive_fault[0] || io_.in.drive_fault[1] || io_.in.drive_fault[2])
     return refuse(c, Refusal::fault_active, "a drive still reports a fault");
@@ -123,22 +123,19 @@ void ControlLoop::handle_reset(const Command& c) noexcept {
 }
 
 void ControlLoop::handle_select(const Command& c) noexcept {
-  if (mode_ != Mode::disabled && mode_ != Mode::holding)
+  if (mode_.now() != Mode::disabled && mode_.now() != Mode::holding)
     return refuse(c, Refusal::illegal_in_mode, "select the controller when disabled or holding");
   // While holding in the task space the new law starts from the force the
   // old one gave: the difference is faded out (bumpless).
-  if (mode_ == Mode::holding && homing_.all_homed() && !ramp_.active) transfer_.request();
-  controller_ = *c.controller;
-  accept(c, mode_ == Mode::holding ? "controller selected; the force difference fades out" : "controller selected");
+  if (mode_.now() == Mode::holding && homing_.all_homed() && !ramp_.active) transfer_.request();
+  model_.select(*c.controller);
+  accept(c, mode_.now() == Mode::holding ? "controller selected; the force difference fades out" : "controller selected");
 }
 
 void ControlLoop::handle_load(const Command& c) noexcept {
   // Refused, the unused model goes back so that it is freed.
-  if (mode_ != Mode::disabled) return refuse(c, Refusal::illegal_in_mode, "load a model only when disabled", c.machine);
-  const ctl::Machine* old = machine_;
-  machine_ = c.machine;
-  controller_ = *c.controller;
-  accept(c, "model loaded", old);
+  if (mode_.now() != Mode::disabled) return refuse(c, Refusal::illegal_in_mode, "load a model only when disabled", c.machine);
+  accept(c, "model loaded", model_.load(*c.machine, *c.controller));
 }
 
 void ControlLoop::handle_segment(const Command& c, std::int64_t k) noexcept {
@@ -147,7 +144,7 @@ void ControlLoop::handle_segment(const Command& c, std::int64_t k) noexcept {
           "not every actuator is homed: the platform's position is not known; home the machine first (cpm home)");
     return;
   }
-  if (mode_ != Mode::holding && mode_ != Mode::moving) {
+  if (mode_.now() != Mode::holding && mode_.now() != Mode::moving) {
     refuse(c, Refusal::illegal_in_mode, "trajectories are accepted only when holding or moving");
     return;
   }
@@ -168,7 +165,7 @@ void ControlLoop::handle_segment(const Command& c, std::int64_t k) noexcept {
     return;
   }
   queue_.push(c.segment, c.id);  // the command's id is the segment's
-  if (mode_ == Mode::holding) {
+  if (mode_.now() == Mode::holding) {
     enter(Mode::moving);
     start_next_segment(k);
   }
@@ -176,9 +173,9 @@ void ControlLoop::handle_segment(const Command& c, std::int64_t k) noexcept {
 }
 
 void ControlLoop::handle_home(const Command& c, std::int64_t k) noexcept {
-  if (mode_ != Mode::holding) {
+  if (mode_.now() != Mode::holding) {
     refuse(c, Refusal::illegal_in_mode,
-          mode_ == Mode::homing ? "homing already runs" : "homing needs the drives enabled and the platform at rest (holding)");
+          mode_.now() == Mode::homing ? "homing already runs" : "homing needs the drives enabled and the platform at rest (holding)");
     return;
   }
   // The configured order, filtered by the request; absolute actuators asked
@@ -205,7 +202,7 @@ void ControlLoop::begin_axis_homing(std::int64_t k) noexcept {
 }
 
 void ControlLoop::handle_jog(const Command& c, std::int64_t k) noexcept {
-  if (mode_ != Mode::holding && mode_ != Mode::jogging) {
+  if (mode_.now() != Mode::holding && mode_.now() != Mode::jogging) {
     refuse(c, Refusal::illegal_in_mode, "jogging needs the drives enabled and no other motion (holding or jogging)");
     return;
   }
@@ -220,18 +217,18 @@ void ControlLoop::handle_jog(const Command& c, std::int64_t k) noexcept {
     refuse(c, Refusal::limit, "the jog is faster than jog.max_velocity");
     return;
   }
-  if (mode_ == Mode::jogging && machine_frame != ramp_.task && !ramp_.at_rest()) {
+  if (mode_.now() == Mode::jogging && machine_frame != ramp_.task && !ramp_.at_rest()) {
     refuse(c, Refusal::illegal_in_mode, "the jog in the other frame is still moving: let it stop first");
     return;
   }
   // Where the jog starts from, in its frame.
-  if (mode_ == Mode::holding || machine_frame != ramp_.task || !ramp_.active) {
+  if (mode_.now() == Mode::holding || machine_frame != ramp_.task || !ramp_.active) {
     // The ramp starts at rest; a target of the other frame means nothing in
     // this one (and must not drive it if this command is refused).
     jog_.target.setZero();
     if (machine_frame) {
       // From the hold point, or where the other frame's jog came to rest.
-      ramp_.reset(mode_ == Mode::holding ? hold_ : io_.ref.p);
+      ramp_.reset(mode_.now() == Mode::holding ? hold_ : io_.ref.p);
       ramp_.task = true;
       ramp_.active = true;
     } else {
@@ -254,7 +251,7 @@ void ControlLoop::handle_jog(const Command& c, std::int64_t k) noexcept {
     const double v = c.jog_velocity[i];
     const bool up = v > 0.0 && ramp_.p[i] >= hi[i] - 1e-9, down = v < 0.0 && ramp_.p[i] <= lo[i] + 1e-9;
     if (up || down) {
-      if (mode_ == Mode::holding && homing_.all_homed()) {
+      if (mode_.now() == Mode::holding && homing_.all_homed()) {
         ramp_.active = false;  // nothing moved: the task space holds as before
       }
       const bool workspace = machine_frame || (by_workspace & (1u << (2 * i + (up ? 1 : 0)))) != 0;
@@ -268,7 +265,7 @@ void ControlLoop::handle_jog(const Command& c, std::int64_t k) noexcept {
   }
   if (actuator_box) jog_.keep_box(lo, hi);
   jog_.take(c.jog_frame, c.jog_velocity, k + static_cast<std::int64_t>(std::ceil(cfg_.jog.keepalive / dt_ - 1e-9)));
-  if (mode_ == Mode::holding) {
+  if (mode_.now() == Mode::holding) {
     flush_queue();
     enter(Mode::jogging);
   }
@@ -276,8 +273,8 @@ void ControlLoop::handle_jog(const Command& c, std::int64_t k) noexcept {
 }
 
 void ControlLoop::handle_settings(const Command& c) noexcept {
-  const bool at_rest = mode_ == Mode::disabled || mode_ == Mode::holding || mode_ == Mode::fault ||
-                       mode_ == Mode::init || mode_ == Mode::enabling;
+  const bool at_rest = mode_.now() == Mode::disabled || mode_.now() == Mode::holding || mode_.now() == Mode::fault ||
+                       mode_.now() == Mode::init || mode_.now() == Mode::enabling;
   if (!at_rest && !c.while_moving) {
     refuse(c, Refusal::illegal_in_mode,
           "this parameter may change only when disabled or holding: what moves now was checked against its old value");
@@ -297,8 +294,8 @@ unsigned ControlLoop::actuator_jog_box(const Vec3& v_target, Vec3& lo, Vec3& hi)
   // one-actuator jog, whatever the model's effects) or the stroke's end;
   // an end it does not drive to gets the distance the reference still
   // needs to stop there, nothing if it does not move that way.
-  const kin::KinematicModel& km = machine_->kinematics();
-  const kin::Strokes& st = machine_->model().strokes;
+  const kin::KinematicModel& km = model_.machine().kinematics();
+  const kin::Strokes& st = model_.machine().model().strokes;
   const Vec3& wmin = cfg_.limits.workspace_min;
   const Vec3& wmax = cfg_.limits.workspace_max;
   const Vec3 d0 = ramp_.p;

@@ -17,6 +17,55 @@ const ctl::Trajectory* Segment::get() const noexcept {
   return nullptr;
 }
 
+int histogram_bin(std::int64_t ns) noexcept {
+  if (ns < 0) ns = 0;
+  const std::int64_t us = ns / 1000;
+  if (us < 200) return static_cast<int>(us);
+  if (us < 2000) return 200 + static_cast<int>((us - 200) / 50);
+  return kBins - 1;
+}
+
+std::int64_t histogram_bin_floor(int k) noexcept {
+  if (k < 200) return std::int64_t{k} * 1000;
+  return (200 + std::int64_t{k - 200} * 50) * 1000;
+}
+
+CycleStatistics::CycleStatistics(double rate_hz) noexcept {
+  sums_.rate_hz = rate_hz;
+  for (int s = 0; s < kSeries; ++s) sums_.min_ns[s] = 0;
+}
+
+void CycleStatistics::add(int s, std::int64_t ns) noexcept {
+  if (ns < 0) ns = 0;
+  const auto v = static_cast<std::int32_t>(std::min<std::int64_t>(ns, INT32_MAX));
+  if (sums_.count[s] == 0 || v < sums_.min_ns[s]) sums_.min_ns[s] = v;
+  if (v > sums_.max_ns[s]) sums_.max_ns[s] = v;
+  sums_.count[s]++;
+  sums_.sum_ns[s] += static_cast<double>(v);
+  sums_.histogram[s][histogram_bin(ns)]++;
+}
+
+void CycleStatistics::latency(std::int64_t ns) noexcept {
+  add(kSeriesLatency, ns);
+  latency_us_[static_cast<std::size_t>(std::clamp<std::int64_t>(ns / 1000, 0, kFineLatencyBins - 1))]++;
+}
+
+void CycleStatistics::schedule(bool overrun, std::int64_t skipped) noexcept {
+  sums_.skipped += skipped;
+  if (overrun) sums_.overruns++;
+}
+
+void CycleStatistics::scheduling(bool realtime, bool memory_locked) noexcept {
+  sums_.realtime = realtime ? 1 : 0;
+  sums_.memory_locked = memory_locked ? 1 : 0;
+}
+
+void CycleStatistics::cycle(const PhaseTimes& t) noexcept {
+  for (int s = kSeriesRead; s <= kSeriesPublish; ++s) add(s, t[s] - t[s - 1]);
+  add(kSeriesCycle, t[kSeriesPublish] - t[0]);
+  sums_.cycles++;
+}
+
 void segment_end_motion(const Segment& s, Vec3& velocity, Vec3& acceleration) noexcept {
   const ctl::Trajectory* tr = s.get();
   const auto* stream = std::get_if<StreamTrajectory>(&s.traj);
@@ -52,19 +101,19 @@ void StopProfile::start(const Vec3& p0, const Vec3& v0, double deceleration, std
   v0_ = v;
   dir_ = v > 1e-12 ? Vec3(v0 / v) : Vec3::Zero();
   a_ = deceleration;
-  T_ = v / deceleration;
+  duration_ = v / deceleration;
   start_cycle_ = k;
   t0_ = elapsed;
 }
 
 ctl::TrajectorySample StopProfile::sample(std::int64_t k, double dt, double ahead, bool& at_rest) const noexcept {
   const double elapsed = static_cast<double>(k - start_cycle_) * dt + t0_ + ahead;
-  const double t = std::min(elapsed, T_);
+  const double t = std::min(elapsed, duration_);
   ctl::TrajectorySample r;
   r.p = p0_ + dir_ * (v0_ * t - 0.5 * a_ * t * t);
   r.v = dir_ * (v0_ - a_ * t);
-  r.a = t < T_ ? Vec3(-a_ * dir_) : Vec3::Zero();
-  at_rest = elapsed >= T_;
+  r.a = t < duration_ ? Vec3(-a_ * dir_) : Vec3::Zero();
+  at_rest = elapsed >= duration_;
   return r;
 }
 

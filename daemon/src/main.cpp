@@ -113,98 +113,177 @@ int parse(int argc, char** argv, Options& o) {
   return -1;
 }
 
-int run(int argc, char** argv) {
-  Options o;
-  if (const int rc = parse(argc, argv, o); rc >= 0) return rc;
-  const std::string& config_path = o.config_path;
-  const std::string& stats_path = o.stats_path;
-  const double duration = o.duration;
-  const std::optional<int>& loop_cpu = o.loop_cpu;
-  const std::optional<std::string>& operators_dir = o.operators_dir;
-  const bool check = o.check;
+// The configuration file with the command line's overrides.
+DaemonConfig load_daemon_config(const Options& o) {
+  DaemonConfig c = load_config(o.config_path);
+  if (o.loop_cpu) c.loop.cpu = *o.loop_cpu;
+  if (o.operators_dir) c.security.operators_dir = *o.operators_dir;
+  return c;
+}
 
-  const DaemonConfig cfg = [&] {
-    DaemonConfig c = load_config(config_path);
-    if (loop_cpu) c.loop.cpu = *loop_cpu;
-    if (operators_dir) c.security.operators_dir = *operators_dir;
-    return c;
-  }();
-  keep_off_the_loops_cpu(cfg.loop.cpu);  // before any thread exists: they inherit it
+// The model the loop starts with, its force limit within the configured one.
+std::unique_ptr<ModelStore> load_models(const DaemonConfig& cfg) {
   ctl::MachineModel model = load_model(cfg.model_file);
   model.force_limit = std::min(model.force_limit, cfg.limits.force);
-  auto models = std::make_unique<ModelStore>(std::make_unique<ctl::Machine>(model));
-  const ctl::Controller controller(models->current(), cfg.controller.law, cfg.controller.gains);
-  std::unique_ptr<Backend> backend;
-  if (cfg.backend == "sim") {
-    backend = std::make_unique<SimBackend>(std::make_unique<ctl::Machine>(load_model(cfg.sim.truth_model_file)),
-                                           sim_backend_options(cfg.sim));
+  return std::make_unique<ModelStore>(std::make_unique<ctl::Machine>(model));
+}
+
+std::unique_ptr<Backend> make_backend(const DaemonConfig& cfg) {
+  if (cfg.backend == "sim")
+    return std::make_unique<SimBackend>(std::make_unique<ctl::Machine>(load_model(cfg.sim.truth_model_file)),
+                                        sim_backend_options(cfg.sim));
+  log::info("CAN %s: %s", cfg.canopen.interface.c_str(), cfg.canopen.load.describe().c_str());
+  return std::make_unique<CanopenBackend>(cfg.canopen);
+}
+
+// --check: the configuration, model and backend passed; say who may command.
+int report_check(const DaemonConfig& cfg, const std::string& config_path) {
+  try {
+    const auto t = load_operators(cfg.security.operators_dir);
+    for (const auto& p : t->problems) std::printf("warning: operators: %s\n", p.c_str());
+    std::printf("%s: %s\n", cfg.security.operators_dir.c_str(), t->who_may_command().c_str());
+  } catch (const Error& e) {
+    std::printf("warning: operators: %s: nobody could command this cpmd but stop\n", e.what());
+  }
+  if (cfg.security.signing_key.empty()) {
+    std::printf("warning: security.signing_key is not set: clients cannot verify what cpmd publishes\n");
   } else {
-    backend = std::make_unique<CanopenBackend>(cfg.canopen);
-    log::info("CAN %s: %s", cfg.canopen.interface.c_str(), cfg.canopen.load.describe().c_str());
-  }
-  // The configuration, the model and the backend fit together (gains, homing).
-  preflight(cfg, models->current(), *backend);
-  if (check) {
     try {
-      const auto t = load_operators(cfg.security.operators_dir);
-      for (const auto& p : t->problems) std::printf("warning: operators: %s\n", p.c_str());
-      std::printf("%s: %s\n", cfg.security.operators_dir.c_str(), t->who_may_command().c_str());
+      (void)read_key_file(cfg.security.signing_key);  // a missing or loose key: the file and why
     } catch (const Error& e) {
-      std::printf("warning: operators: %s: nobody could command this cpmd but stop\n", e.what());
+      // cpmd would not start: fail. The owner rule is the reader's, so say whose check this was.
+      throw Error(std::string(e.what()) + " (cpmd would not start; check as the user the unit runs cpmd as: " +
+                  "runuser -u cpmd -- cpmd --config " + config_path + " --check)");
     }
-    if (cfg.security.signing_key.empty()) {
-      std::printf("warning: security.signing_key is not set: clients cannot verify what cpmd publishes\n");
-    } else {
-      try {
-        (void)read_key_file(cfg.security.signing_key);  // a missing or loose key: the file and why
-      } catch (const Error& e) {
-        // cpmd would not start: fail. The owner rule is the reader's, so say whose check this was.
-        throw Error(std::string(e.what()) + " (cpmd would not start; check as the user the unit runs cpmd as: " +
-                    "runuser -u cpmd -- cpmd --config " + config_path + " --check)");
-      }
-      std::printf("%s: cpmd seals what it publishes with this key\n", cfg.security.signing_key.c_str());
-    }
-    std::printf("%s: configuration and model files are valid\n", config_path.c_str());
-    return 0;
+    std::printf("%s: cpmd seals what it publishes with this key\n", cfg.security.signing_key.c_str());
   }
-  // One daemon per bus: a second would take the same commands and publish a
-  // second state (docs/security.md). Heard before anything is powered.
+  std::printf("%s: configuration and model files are valid\n", config_path.c_str());
+  return 0;
+}
+
+// One daemon per bus: a second would take the same commands and publish a
+// second state (docs/security.md). Heard before anything is powered.
+void refuse_a_second_daemon(const DaemonConfig& cfg) {
   if (bus_has_another_daemon(cfg.lcm, cfg.loop.rate_hz))
     throw Error("another cpmd is already publishing on " + cfg.lcm.state_channel + " at " + cfg.lcm.url +
                 ": two daemons on one bus would both take the same commands; stop the other one, or give this one "
                 "its own LCM URL or channels");
-  const double period = 1.0 / cfg.loop.rate_hz;
-  backend->start(period);
+}
 
-  // Block the termination signals in every thread; the main thread waits for
-  // them. SIGHUP: re-read the operators directory.
+// Block the termination signals in every thread (those started after this
+// inherit the mask); the main thread waits for them. SIGHUP: re-read the
+// operators directory.
+sigset_t block_signals() {
   sigset_t sigs;
   sigemptyset(&sigs);
   sigaddset(&sigs, SIGINT);
   sigaddset(&sigs, SIGTERM);
   sigaddset(&sigs, SIGHUP);
   pthread_sigmask(SIG_BLOCK, &sigs, nullptr);
+  return sigs;
+}
+
+// Keys and roles: loaded at start and on every change, outside the loop and
+// outside the LCM thread, and handed to the server whole.
+class OperatorsReload {
+ public:
+  OperatorsReload(const DaemonConfig& cfg, Server& server)
+      : cfg_(cfg), server_(server), watch_(cfg.security.operators_dir) {}
+  void operator()(const char* why) {
+    try {
+      const auto t = load_operators(cfg_.security.operators_dir);
+      for (const auto& p : t->problems) log::warning("operators: %s", p.c_str());
+      server_.set_operators(t);
+      log::info("operators: %s (%s, %s)", t->who_may_command().c_str(), cfg_.security.operators_dir.c_str(), why);
+    } catch (const Error& e) {
+      server_.note_reload_failure();
+      log::warning("operators: %s; %s", e.what(),
+                   server_.operators() ? "the operators loaded before stay"
+                                       : "nobody can command this cpmd but stop (docs/security.md)");
+    }
+    watch_.rearm();
+  }
+  [[nodiscard]] bool changed() { return watch_.changed(); }
+
+ private:
+  const DaemonConfig& cfg_;
+  Server& server_;
+  OperatorsWatch watch_;
+};
+
+// The main thread while the loop runs: systemd's READY once it runs, the
+// watchdog fed only while it advances, the mode as STATUS, the operators
+// re-read on SIGHUP or a change; returns on SIGINT, SIGTERM or after
+// `duration` s (< 0: never).
+void housekeep(const sigset_t& sigs, const ControlLoop& loop, const RtThread& rt, OperatorsReload& reload,
+               double duration) {
+  sd_notify("READY=1\nSTATUS=running");
+  const double wd = sd_watchdog_interval();
+  const double tick = wd > 0 ? std::min(0.25, wd / 4) : 0.25;
+  const auto started = std::chrono::steady_clock::now();
+  std::int64_t last_cycles = -1;
+  Mode last_mode = Mode::init;
+  for (;;) {
+    timespec ts{};
+    ts.tv_sec = static_cast<time_t>(tick);
+    ts.tv_nsec = static_cast<long>((tick - static_cast<double>(ts.tv_sec)) * 1e9);
+    const int sig = sigtimedwait(&sigs, nullptr, &ts);
+    if (sig == SIGINT || sig == SIGTERM) {
+      log::notice("%s: disabling the drives and stopping", strsignal(sig));
+      return;
+    }
+    if (sig == SIGHUP) reload("SIGHUP");
+    else if (reload.changed()) reload("the directory changed");
+    const std::int64_t cycles = loop.cycles_done();
+    if (cycles != last_cycles && rt.running()) sd_notify("WATCHDOG=1");
+    last_cycles = cycles;
+    if (loop.mode() != last_mode) {
+      last_mode = loop.mode();
+      sd_notify(std::string("STATUS=") + mode_name(last_mode));
+    }
+    if (duration >= 0 && std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count() >= duration)
+      return;
+  }
+}
+
+// The loop disables the drives (a few cycles), then the loop's thread ends.
+void stop_the_loop(ControlLoop& loop, RtThread& rt) {
+  loop.request_shutdown();
+  const std::int64_t c0 = loop.cycles_done();
+  while (rt.running() && loop.cycles_done() < c0 + 5) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  rt.request_stop();
+  rt.join();
+}
+
+void report_statistics(const ControlLoop& loop, const std::string& stats_path) {
+  const cpm_msgs::loop_stats_t& st = loop.current_stats();
+  if (!stats_path.empty()) write_atomically(stats_path, stats_json(st, loop.fine_latency_histogram()));
+  log::info("stopped after %lld cycles, %lld overruns, worst wake-up latency %s", static_cast<long long>(st.cycles),
+            static_cast<long long>(st.overruns), worst_us_text(st.max_ns[kSeriesLatency], st.cycles > 0).c_str());
+}
+
+// cpmd's life, step by step: the configuration, the model and the backend,
+// checked together; then the loop, the server (LCM) and their threads; the
+// housekeeping until a signal; the shutdown in the reverse order.
+int run(int argc, char** argv) {
+  Options o;
+  if (const int rc = parse(argc, argv, o); rc >= 0) return rc;
+  const DaemonConfig cfg = load_daemon_config(o);
+  keep_off_the_loops_cpu(cfg.loop.cpu);  // before any thread exists: they inherit it
+  const std::unique_ptr<ModelStore> models = load_models(cfg);
+  const ctl::Controller controller(models->current(), cfg.controller.law, cfg.controller.gains);
+  const std::unique_ptr<Backend> backend = make_backend(cfg);
+  // The configuration, the model and the backend fit together (gains, homing).
+  preflight(cfg, models->current(), *backend);
+  if (o.check) return report_check(cfg, o.config_path);
+  refuse_a_second_daemon(cfg);
+  backend->start(1.0 / cfg.loop.rate_hz);
+  const sigset_t sigs = block_signals();
 
   auto loop = std::make_unique<ControlLoop>(cfg, *backend, models->current(), controller);
   Server server(cfg, *loop, *models);  // LCM up before the loop runs
-  // Keys and roles: loaded here and on every change, outside the loop and
-  // outside the LCM thread, and handed to the server whole.
-  OperatorsWatch watch(cfg.security.operators_dir);
-  auto reload_operators = [&](const char* why) {
-    try {
-      const auto t = load_operators(cfg.security.operators_dir);
-      for (const auto& p : t->problems) log::warning("operators: %s", p.c_str());
-      server.set_operators(t);
-      log::info("operators: %s (%s, %s)", t->who_may_command().c_str(), cfg.security.operators_dir.c_str(), why);
-    } catch (const Error& e) {
-      server.note_reload_failure();
-      log::warning("operators: %s; %s", e.what(),
-                   server.operators() ? "the operators loaded before stay"
-                                      : "nobody can command this cpmd but stop (docs/security.md)");
-    }
-    watch.rearm();
-  };
-  reload_operators("at start");
+  OperatorsReload reload(cfg, server);
+  reload("at start");
   RtThread rt(*loop, cfg.loop);
   rt.start();
   for (const auto& w : rt.setup().warnings) log::warning("%s", w.c_str());
@@ -219,48 +298,14 @@ int run(int argc, char** argv) {
     }
   });
 
-  // Housekeeping: READY once the loop runs, the watchdog fed only while it advances.
-  sd_notify("READY=1\nSTATUS=running");
-  const double wd = sd_watchdog_interval();
-  const double tick = wd > 0 ? std::min(0.25, wd / 4) : 0.25;
-  const auto started = std::chrono::steady_clock::now();
-  std::int64_t last_cycles = -1;
-  Mode last_mode = Mode::init;
-  for (;;) {
-    timespec ts{};
-    ts.tv_sec = static_cast<time_t>(tick);
-    ts.tv_nsec = static_cast<long>((tick - static_cast<double>(ts.tv_sec)) * 1e9);
-    const int sig = sigtimedwait(&sigs, nullptr, &ts);
-    if (sig == SIGINT || sig == SIGTERM) {
-      log::notice("%s: disabling the drives and stopping", strsignal(sig));
-      break;
-    }
-    if (sig == SIGHUP) reload_operators("SIGHUP");
-    else if (watch.changed()) reload_operators("the directory changed");
-    const std::int64_t c = loop->cycles_done();
-    if (c != last_cycles && rt.running()) sd_notify("WATCHDOG=1");
-    last_cycles = c;
-    if (loop->mode() != last_mode) {
-      last_mode = loop->mode();
-      sd_notify(std::string("STATUS=") + mode_name(last_mode));
-    }
-    if (duration >= 0 &&
-        std::chrono::duration<double>(std::chrono::steady_clock::now() - started).count() >= duration)
-      break;
-  }
+  housekeep(sigs, *loop, rt, reload, o.duration);
+
   sd_notify("STOPPING=1");
-  loop->request_shutdown();
-  const std::int64_t c0 = loop->cycles_done();
-  while (rt.running() && loop->cycles_done() < c0 + 5) std::this_thread::sleep_for(std::chrono::milliseconds(1));
-  rt.request_stop();
-  rt.join();
+  stop_the_loop(*loop, rt);
   stop_server.store(true);
   lcm_thread.join();
   backend->stop();
-  const cpm_msgs::loop_stats_t& st = loop->current_stats();
-  if (!stats_path.empty()) write_atomically(stats_path, stats_json(st, loop->fine_latency_histogram()));
-  log::info("stopped after %lld cycles, %lld overruns, worst wake-up latency %s", static_cast<long long>(st.cycles),
-            static_cast<long long>(st.overruns), cpm::daemon::worst_us_text(st.max_ns[kSeriesLatency], st.cycles > 0).c_str());
+  report_statistics(*loop, o.stats_path);
   return 0;
 }
 

@@ -119,17 +119,17 @@ PlannedPath PathService::plan(const Job& job) {
   }
   try {
     const ctl::Machine machine(*job.model);
-    path::MachineLimits L;
-    L.velocity = limits_.velocity;
-    L.acceleration = limits_.acceleration;
-    L.force = limits_.force;
-    L.soft = path::SoftLimits{limits_.workspace_min, limits_.workspace_max};
-    auto plan = std::make_unique<path::Plan>(path::plan_path(q, machine, path::planner_options(L, machine)));
+    path::MachineLimits limits;
+    limits.velocity = limits_.velocity;
+    limits.acceleration = limits_.acceleration;
+    limits.force = limits_.force;
+    limits.soft = path::SoftLimits{limits_.workspace_min, limits_.workspace_max};
+    auto plan = std::make_unique<path::Plan>(path::plan_path(q, machine, path::planner_options(limits, machine)));
     // The planner bounds the actuators, not |a|: corners may exceed
     // limits.acceleration by design; its own check is what counts.
     if (!plan->summary().actuators_within_limits)
       return refuse(ack_t::REASON_LIMIT, "the plan does not keep every actuator within its limits");
-    if (const auto f = path::check_plan(*plan, machine, L.soft)) {
+    if (const auto f = path::check_plan(*plan, machine, limits.soft)) {
       std::snprintf(b, sizeof b, "line %d: the planned path passes (%.3f, %.3f, %.3f) mm at t = %.3f s: %s", f->line,
                     f->p.x() * 1e3, f->p.y() * 1e3, f->p.z() * 1e3, f->t, f->why.c_str());
       return refuse(ack_t::REASON_WORKSPACE, b);

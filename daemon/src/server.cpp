@@ -87,16 +87,16 @@ Validation reject(std::int16_t reason, std::string msg) {
 }
 
 // Every sample inside the soft-limit box.
-std::string box_violation(const ctl::Trajectory& tr, const LimitsConfig& L, double dt) {
+std::string box_violation(const ctl::Trajectory& tr, const LimitsConfig& limits, double dt) {
   const long n = static_cast<long>(std::ceil(tr.duration() / dt));
   for (long k = 0; k <= n; ++k) {
     const double t = std::min(k * dt, tr.duration());
     const Vec3 p = tr.sample(t).p;
     for (int i = 0; i < 3; ++i)
-      if (p[i] < L.workspace_min[i] - 1e-9 || p[i] > L.workspace_max[i] + 1e-9) {
+      if (p[i] < limits.workspace_min[i] - 1e-9 || p[i] > limits.workspace_max[i] + 1e-9) {
         std::ostringstream os;
         os << "at t = " << t << " s the platform would be at " << mm(p) << ", outside the soft limits on "
-           << "xyz"[i] << " [" << L.workspace_min[i] * 1e3 << ", " << L.workspace_max[i] * 1e3 << "] mm";
+           << "xyz"[i] << " [" << limits.workspace_min[i] * 1e3 << ", " << limits.workspace_max[i] * 1e3 << "] mm";
         return os.str();
       }
   }
@@ -227,7 +227,7 @@ class ModelLoader {
 // Long (about 80 lines) on purpose: one switch over the trajectory kinds,
 // each checked before the segment is built, then the checks every kind shares.
 Validation validate_segment(const trajectory_command_t& c, const Vec3& start, const ctl::Machine& machine,
-                            const LimitsConfig& L, double dt) {
+                            const LimitsConfig& limits, double dt) {
   Validation out;
   out.segment.id = c.id;
   out.segment.start = start;
@@ -237,13 +237,14 @@ Validation validate_segment(const trajectory_command_t& c, const Vec3& start, co
       if (!std::isfinite(c.max_velocity) || !std::isfinite(c.max_acceleration) || !std::isfinite(c.max_jerk) ||
           c.max_velocity <= 0 || c.max_acceleration <= 0 || c.max_jerk <= 0)
         return reject(ack_t::REASON_INVALID, "move: max_velocity, max_acceleration and max_jerk must be finite and > 0");
-      if (c.max_velocity > L.velocity)
+      if (c.max_velocity > limits.velocity)
         return reject(ack_t::REASON_LIMIT, "move: max_velocity " + std::to_string(c.max_velocity) +
-                                               " m/s exceeds limits.velocity " + std::to_string(L.velocity) + " m/s");
-      if (c.max_acceleration > L.acceleration)
+                                               " m/s exceeds limits.velocity " + std::to_string(limits.velocity) +
+                                               " m/s");
+      if (c.max_acceleration > limits.acceleration)
         return reject(ack_t::REASON_LIMIT, "move: max_acceleration " + std::to_string(c.max_acceleration) +
                                                " m/s^2 exceeds limits.acceleration " +
-                                               std::to_string(L.acceleration) + " m/s^2");
+                                               std::to_string(limits.acceleration) + " m/s^2");
       const Vec3 target(c.target[0], c.target[1], c.target[2]);
       if (Status s = kin::check_pose(machine.kinematics(), machine.model().strokes, target, {}); !s)
         return reject(ack_t::REASON_WORKSPACE, "move: target " + mm(target) + " is outside the workspace: " + describe(s));
@@ -258,9 +259,9 @@ Validation validate_segment(const trajectory_command_t& c, const Vec3& start, co
         return reject(ack_t::REASON_INVALID, "circle: a parameter is not finite");
       if (c.plane < 0 || c.plane > 2) return reject(ack_t::REASON_INVALID, "circle: plane must be 0 (xy), 1 (yz) or 2 (zx)");
       const double speed = std::abs(c.radius * c.angular_speed);
-      if (speed > L.velocity)
+      if (speed > limits.velocity)
         return reject(ack_t::REASON_LIMIT, "circle: speed " + std::to_string(speed) + " m/s exceeds limits.velocity " +
-                                               std::to_string(L.velocity) + " m/s");
+                                               std::to_string(limits.velocity) + " m/s");
       ctl::CircleSpec s;
       s.centre = Vec3(c.centre[0], c.centre[1], c.centre[2]);
       s.radius = c.radius;
@@ -283,20 +284,20 @@ Validation validate_segment(const trajectory_command_t& c, const Vec3& start, co
   const ctl::Trajectory& tr = *out.segment.get();
   // Bounded before anything samples it: the checks below walk the segment
   // at the loop's period, in the thread that also publishes the state.
-  const double T = tr.duration();
-  if (!std::isfinite(T) || T < 0.0)
+  const double duration = tr.duration();
+  if (!std::isfinite(duration) || duration < 0.0)
     return reject(ack_t::REASON_INVALID, "the segment's duration is not a finite time >= 0 s");
-  if (T > kMaxSegmentDuration)
-    return reject(ack_t::REASON_LIMIT, "the segment lasts " + std::to_string(T) + " s, more than the " +
+  if (duration > kMaxSegmentDuration)
+    return reject(ack_t::REASON_LIMIT, "the segment lasts " + std::to_string(duration) + " s, more than the " +
                                            std::to_string(kMaxSegmentDuration) +
                                            " s one segment may last; send a long motion as consecutive segments");
   const Vec3 p0 = tr.sample(0.0).p;
   if ((p0 - start).norm() > 1e-6)
     return reject(ack_t::REASON_NOT_CONTINUOUS,
                   "the segment starts at " + mm(p0) + " but the queue ends at " + mm(start));
-  if (std::string b = box_violation(tr, L, dt); !b.empty()) return reject(ack_t::REASON_WORKSPACE, b);
+  if (std::string b = box_violation(tr, limits, dt); !b.empty()) return reject(ack_t::REASON_WORKSPACE, b);
   try {
-    ctl::validate_trajectory(tr, machine, dt, L.velocity * (1 + 1e-9), L.acceleration * (1 + 1e-9));
+    ctl::validate_trajectory(tr, machine, dt, limits.velocity * (1 + 1e-9), limits.acceleration * (1 + 1e-9));
   } catch (const Error& e) {
     const std::string m = e.what();
     const bool limit = m.find("velocity") != std::string::npos || m.find("acceleration") != std::string::npos ||

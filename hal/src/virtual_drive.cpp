@@ -771,9 +771,9 @@ void VirtualDrive::homing_step() {
   speed_search_ = find(cia402::kHomingSpeeds, 1)->value;
   speed_zero_ = find(cia402::kHomingSpeeds, 2)->value;
   acceleration_ = find(cia402::kHomingAcceleration, 0)->value;
-  const double T = period_s();
+  const double period = period_s();
   const double v_rest = std::max(1.0, 0.05 * speed_zero_);
-  const double window = std::max(1.0, speed_zero_ * T / cfg_.velocity_per_count);  // counts
+  const double window = std::max(1.0, speed_zero_ * period / cfg_.velocity_per_count);  // counts
 
   if (interrupt_pending_) {
     interrupt_pending_ = false;
@@ -844,7 +844,7 @@ void VirtualDrive::homing_step() {
 }
 
 void VirtualDrive::run_loops(double v_target, bool position_target, std::int64_t target_raw) {
-  const double T = period_s();
+  const double period = period_s();
   const double a = acceleration_;
   double v_des = v_target;
   if (position_target) {
@@ -857,13 +857,13 @@ void VirtualDrive::run_loops(double v_target, bool position_target, std::int64_t
     v_des = e >= 0 ? mag : -mag;
   }
   // Acceleration-limited speed profile (0x609A).
-  if (a > 0) v_profile_ += std::clamp(v_des - v_profile_, -a * T, a * T);
+  if (a > 0) v_profile_ += std::clamp(v_des - v_profile_, -a * period, a * period);
   else v_profile_ = v_des;
   // PI velocity loop, integrating only while the torque is within 0x6072
   // (no wind-up at the limit).
   const double max = find(cia402::kMaxTorque, 0)->value;
   const double err = v_profile_ - raw_velocity_;
-  const double integral = integral_ + cfg_.velocity_ki * err * T;
+  const double integral = integral_ + cfg_.velocity_ki * err * period;
   const double torque = cfg_.velocity_kp * err + integral;
   saturated_ = std::abs(torque) > max;
   if (!saturated_) integral_ = integral;

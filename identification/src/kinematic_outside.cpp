@@ -17,7 +17,7 @@
 
 #include "cpm/calibration/workflow.hpp"
 #include "cpm/identification/kinematic.hpp"
-#include "cpm/identification/loop.hpp"
+#include "cpm/identification/model_loop.hpp"
 #include "kinematic_internal.hpp"
 
 namespace cpm::ident {

@@ -223,6 +223,130 @@ TEST(Jog, TheDeadmanDropsTheTargetAtTheDeadline) {
   EXPECT_EQ(j.target, Vec3::Zero());
 }
 
+TEST(CycleStatistics, EachPhaseItsOwnSampleAndTheWholeCycleTheSum) {
+  CycleStatistics st(1000.0);
+  EXPECT_EQ(st.sums().rate_hz, 1000.0);
+  // Phases of 1, 2, ..., 8 us after a start at 10 us: the cycle lasts 36 us.
+  PhaseTimes t{};
+  t[0] = 10000;
+  for (int s = kSeriesRead; s <= kSeriesPublish; ++s) t[s] = t[s - 1] + 1000 * s;
+  st.cycle(t);
+  EXPECT_EQ(st.cycles_done(), 0);  // not yet handed on
+  st.completed();
+  EXPECT_EQ(st.cycles_done(), 1);
+  for (int s = kSeriesRead; s <= kSeriesPublish; ++s) {
+    EXPECT_EQ(st.sums().count[s], 1) << s;
+    EXPECT_EQ(st.sums().min_ns[s], 1000 * s);
+    EXPECT_EQ(st.sums().max_ns[s], 1000 * s);
+    EXPECT_EQ(st.sums().histogram[s][s], 1);  // [s, s + 1) us
+  }
+  EXPECT_EQ(st.sums().max_ns[kSeriesCycle], 36000);
+  EXPECT_EQ(st.sums().count[kSeriesLatency], 0);
+}
+
+TEST(CycleStatistics, LatencyInBothHistogramsAndExtremesOverSamples) {
+  CycleStatistics st(1000.0);
+  for (const std::int64_t ns : {std::int64_t{700}, std::int64_t{250'000}, std::int64_t{-5}, std::int64_t{3'000'000}})
+    st.latency(ns);
+  const cpm_msgs::loop_stats_t& s = st.sums();
+  EXPECT_EQ(s.count[kSeriesLatency], 4);
+  EXPECT_EQ(s.min_ns[kSeriesLatency], 0);  // a negative latency counts as none
+  EXPECT_EQ(s.max_ns[kSeriesLatency], 3'000'000);
+  EXPECT_DOUBLE_EQ(s.sum_ns[kSeriesLatency], 700.0 + 250'000.0 + 3'000'000.0);
+  EXPECT_EQ(s.histogram[kSeriesLatency][0], 2);
+  EXPECT_EQ(s.histogram[kSeriesLatency][201], 1);  // 250 us: the 50 us bin [250, 300)
+  EXPECT_EQ(s.histogram[kSeriesLatency][kBins - 1], 1);
+  EXPECT_EQ(st.fine_latency()[0], 2);
+  EXPECT_EQ(st.fine_latency()[250], 1);
+  EXPECT_EQ(st.fine_latency()[kFineLatencyBins - 1], 1);
+  st.schedule(true, 2);
+  st.schedule(false, 0);
+  st.schedule(true, 1);
+  EXPECT_EQ(st.sums().overruns, 2);
+  EXPECT_EQ(st.sums().skipped, 3);
+}
+
+TEST(ModeState, PublishesEveryModeItEnters) {
+  ModeState m;
+  EXPECT_EQ(m.now(), Mode::init);
+  EXPECT_EQ(m.published(), Mode::init);
+  for (const Mode x : {Mode::disabled, Mode::enabling, Mode::holding, Mode::fault}) {
+    m.enter(x);
+    EXPECT_EQ(m.now(), x);
+    EXPECT_EQ(m.published(), x);
+  }
+}
+
+TEST(ModeState, AStopEndsDisabledOnlyWhenADisableAskedForItOnce) {
+  ModeState m;
+  m.enter(Mode::stopping);
+  EXPECT_EQ(m.after_stop(), Mode::holding);
+  m.disable_after_stop();
+  EXPECT_EQ(m.after_stop(), Mode::disabled);
+  m.enter(Mode::stopping);  // still stopping: the request stays
+  EXPECT_EQ(m.after_stop(), Mode::disabled);
+  m.enter(m.after_stop());
+  EXPECT_EQ(m.now(), Mode::disabled);
+  m.enter(Mode::stopping);  // the next stop: spent
+  EXPECT_EQ(m.after_stop(), Mode::holding);
+  // A fault during the stop spends it as well.
+  m.disable_after_stop();
+  m.enter(Mode::fault);
+  m.enter(Mode::stopping);
+  EXPECT_EQ(m.after_stop(), Mode::holding);
+}
+
+TEST(ModeState, TheDrivesAreOnInTheSixModesThatPowerThem) {
+  ModeState m;
+  int on = 0;
+  for (int i = 0; i <= static_cast<int>(Mode::jogging); ++i) {
+    m.enter(static_cast<Mode>(i));
+    on += m.drives_on() ? 1 : 0;
+  }
+  EXPECT_EQ(on, 6);
+  for (const Mode off : {Mode::init, Mode::disabled, Mode::fault}) {
+    m.enter(off);
+    EXPECT_FALSE(m.drives_on()) << mode_name(off);
+  }
+}
+
+TEST(ModeState, EnablingTimeCountsCyclesFromItsStart) {
+  ModeState m;
+  m.enter(Mode::enabling);
+  m.enabling_from(100);
+  EXPECT_DOUBLE_EQ(m.enabling_time(100, 1e-3), 0.0);
+  EXPECT_DOUBLE_EQ(m.enabling_time(350, 1e-3), 0.25);
+}
+
+TEST(ActiveModel, SelectKeepsTheModelAndLoadSwapsBothAndHandsTheOldBack) {
+  const ctl::Machine a{ctl::MachineModel::elkady()}, b{ctl::MachineModel::elkady()};
+  using ctl::ControlLaw;
+  ActiveModel m(a, ctl::Controller(a, ControlLaw::pd, ctl::table3_gains(ControlLaw::pd)));
+  EXPECT_EQ(&m.machine(), &a);
+  m.select(ctl::Controller(a, ControlLaw::computed_torque, ctl::table3_gains(ControlLaw::computed_torque)));
+  EXPECT_EQ(&m.machine(), &a);
+  EXPECT_EQ(m.controller().law(), ControlLaw::computed_torque);
+  const ctl::Machine* old =
+      m.load(b, ctl::Controller(b, ControlLaw::pd_gravity, ctl::table3_gains(ControlLaw::pd_gravity)));
+  EXPECT_EQ(old, &a);
+  EXPECT_EQ(&m.machine(), &b);
+  EXPECT_EQ(&m.controller().model(), &b);
+  EXPECT_EQ(m.controller().law(), ControlLaw::pd_gravity);
+}
+
+TEST(ActiveModel, KeepsWhatTheDrivesWereGivenUntilRestarted) {
+  const ctl::Machine a{ctl::MachineModel::elkady()};
+  ActiveModel m(a, ctl::Controller(a, ctl::ControlLaw::pd, ctl::table3_gains(ctl::ControlLaw::pd)));
+  m.sent().push(0.001, Vec3(1, 2, 3));
+  m.sent().push(0.002, Vec3(4, 5, 6));
+  m.sent().amend_last(Vec3(7, 8, 9));
+  ASSERT_EQ(m.sent().size(), 2);
+  EXPECT_EQ(m.sent().force(0), Vec3(7, 8, 9));
+  EXPECT_EQ(m.sent().force(1), Vec3(1, 2, 3));
+  m.restart();
+  EXPECT_EQ(m.sent().size(), 0);
+}
+
 TEST(Refusal, EachMapsToItsOwnAckReason) {
   using cpm_msgs::ack_t;
   EXPECT_EQ(ack_reason(Refusal::none), ack_t::REASON_NONE);

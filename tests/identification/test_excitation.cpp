@@ -14,7 +14,7 @@
 
 #include "cpm/identification/excitation.hpp"
 #include "cpm/identification/fit.hpp"
-#include "cpm/identification/loop.hpp"
+#include "cpm/identification/model_loop.hpp"
 #include "identification/sim_data.hpp"
 
 namespace cpm::ident {

@@ -34,7 +34,7 @@
 #include "cpm/calibration/simulate.hpp"
 #include "cpm/identification/kinematic.hpp"
 #include "cpm/identification/kinematic_stages.hpp"
-#include "cpm/identification/loop.hpp"
+#include "cpm/identification/model_loop.hpp"
 #include "cpm/io/model_file.hpp"
 #include "cpm/identification/report.hpp"
 #include "identification/kin_data.hpp"

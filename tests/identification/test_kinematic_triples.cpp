@@ -13,7 +13,7 @@
 #include <iostream>
 #include <random>
 
-#include "cpm/identification/loop.hpp"
+#include "cpm/identification/model_loop.hpp"
 #include "identification/kin_cells.hpp"
 
 namespace cpm::test {

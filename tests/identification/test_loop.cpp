@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: Apache-2.0
-// The user's loop as one command (loop.hpp): several effects planted at once,
+// The user's loop as one command (model_loop.hpp): several effects planted at once,
 // the loop names every one, and the waterfall ends within 20 % of the noise
 // floor, on a motion log and on ball-bar data.
 #include <gtest/gtest.h>
@@ -7,7 +7,7 @@
 #include <algorithm>
 
 #include "cpm/identification/kinematic.hpp"
-#include "cpm/identification/loop.hpp"
+#include "cpm/identification/model_loop.hpp"
 #include "cpm/io/model_file.hpp"
 #include "identification/kin_data.hpp"
 #include "identification/sim_data.hpp"

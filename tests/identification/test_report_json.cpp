@@ -10,7 +10,7 @@
 #include <nlohmann/json.hpp>
 
 #include "cpm/identification/kinematic.hpp"
-#include "cpm/identification/loop.hpp"
+#include "cpm/identification/model_loop.hpp"
 #include "cpm/identification/report.hpp"
 
 namespace cpm::ident {

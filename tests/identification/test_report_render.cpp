@@ -1,6 +1,6 @@
 // SPDX-License-Identifier: Apache-2.0
 // What the diagnosis' reports show a person (identification/src/report.cpp,
-// loop.cpp's waterfall, verdict.cpp's sentence): plot ticks that tell their
+// model_loop.cpp's waterfall, verdict.cpp's sentence): plot ticks that tell their
 // values apart, the waterfall's axis, labels and legend, a noise floor above
 // the residual reached said as what it is, an implausible effect not called
 // missing in the same breath.
@@ -10,7 +10,7 @@
 #include <string>
 
 #include "../../identification/src/internal.hpp"
-#include "cpm/identification/loop.hpp"
+#include "cpm/identification/model_loop.hpp"
 #include "cpm/identification/report.hpp"
 
 namespace cpm::ident {

@@ -12,7 +12,7 @@
 #include "cli.hpp"
 #include "cmd_client_common.hpp"
 #include "cpm/daemon/config.hpp"
-#include "cpm/identification/loop.hpp"
+#include "cpm/identification/model_loop.hpp"
 #include "cpm/io/data_files.hpp"
 #include "cpm/io/model_file.hpp"
 #include "ident_common.hpp"

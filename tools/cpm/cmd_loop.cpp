@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: Apache-2.0
-// cpm loop: the identification loop as one command (identification/loop.hpp):
+// cpm loop: the identification loop as one command (identification/model_loop.hpp):
 // diagnose, add the effect found, refit, diagnose again, until nothing is
 // missing; prints the waterfall, writes the new model file (never the input)
 // and, on request, the waterfall as JSON and as an HTML page.
@@ -8,7 +8,7 @@
 #include <sstream>
 
 #include "ident_common.hpp"
-#include "cpm/identification/loop.hpp"
+#include "cpm/identification/model_loop.hpp"
 #include "cpm/io/data_files.hpp"
 #include "cpm/io/model_file.hpp"
 #include "state_log.hpp"

@@ -14,7 +14,7 @@
 #include <nlohmann/json.hpp>
 
 #include "cpm/identification/engine.hpp"
-#include "cpm/identification/loop.hpp"
+#include "cpm/identification/model_loop.hpp"
 #include "cpm/identification/motion.hpp"
 
 namespace cpm::indep {

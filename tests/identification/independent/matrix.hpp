@@ -24,7 +24,7 @@
 
 #include "cpm/identification/diagnose.hpp"
 #include "cpm/identification/engine.hpp"
-#include "cpm/identification/loop.hpp"
+#include "cpm/identification/model_loop.hpp"
 #include "cpm/identification/motion.hpp"
 #include "generator.hpp"
 

@@ -10,7 +10,7 @@
 #include <cmath>
 
 #include "cpm/identification/fit.hpp"
-#include "cpm/identification/loop.hpp"
+#include "cpm/identification/model_loop.hpp"
 #include "cpm/io/model_file.hpp"
 #include "generator.hpp"
 #include "matrix.hpp"

@@ -48,8 +48,9 @@
 // The schedule (clock_nanosleep on an absolute time) lives in rt.hpp; tests
 // call cycle() directly, deterministic and without threads.
 // The state the phases share lives in small owners with their own
-// transitions (loop_state.hpp: the fault latch, the stop profile, the
-// segment queue, homing, jog, transfer, ...); the commands' legality and
+// transitions (loop_state.hpp: the mode, the model and law in use, the
+// fault latch, the stop profile, the segment queue, homing, jog, transfer,
+// ...); the commands' legality and
 // transitions in loop_commands.cpp, the phases in loop.cpp.
 //
 // Spaces (as LinuxCNC's joint and teleop modes): until every actuator is
@@ -161,19 +162,6 @@ struct Ack {
   Vec3 queue_end_acceleration = Vec3::Zero();
 };
 
-// Timing statistics: histograms as in loop_stats_t.
-inline constexpr int kSeriesLatency = 0, kSeriesRead = 1, kSeriesEstimate = 2, kSeriesTrajectory = 3,
-                     kSeriesInverseKinematics = 4, kSeriesController = 5, kSeriesSafety = 6, kSeriesWrite = 7,
-                     kSeriesPublish = 8, kSeriesCycle = 9, kSeries = 10, kBins = 237;
-int histogram_bin(std::int64_t ns) noexcept;
-// Lower edge of bin k (ns).
-std::int64_t histogram_bin_floor(int k) noexcept;
-// The wake-up latency at cyclictest's resolution (cyclictest -h 2000): bin k
-// < 2000 holds [k, k+1) us, the last bin everything from 2 ms. loop_stats_t's
-// 50 us bins above 200 us are too coarse to hold a p99 against cyclictest's
-// to within 20 %, so cpmd --stats-json writes this one for that series.
-inline constexpr int kFineLatencyBins = 2001;
-using FineLatencyHistogram = std::array<std::int32_t, kFineLatencyBins>;
 
 class ControlLoop {
  public:
@@ -222,22 +210,19 @@ class ControlLoop {
   // for the server to free. Larger than the queue: it never fills.
   RetiredPlans& retired_plans() noexcept { return ch_.retired_plans; }
   // Cycles completed (the watchdog is fed only while this advances).
-  [[nodiscard]] std::int64_t cycles_done() const noexcept { return stats_.cycles_done.load(std::memory_order_acquire); }
+  [[nodiscard]] std::int64_t cycles_done() const noexcept { return stats_.cycles_done(); }
   // Latest mode (any thread).
-  [[nodiscard]] Mode mode() const noexcept { return mode_atomic_.load(std::memory_order_acquire); }
-  void set_scheduling_info(bool realtime, bool memory_locked) noexcept;
+  [[nodiscard]] Mode mode() const noexcept { return mode_.published(); }
+  void set_scheduling_info(bool realtime, bool memory_locked) noexcept { stats_.scheduling(realtime, memory_locked); }
 
   // Last state as the loop wrote it (test thread only, when no loop thread runs).
   [[nodiscard]] const cpm_msgs::state_t& last_state() const noexcept { return pub_.state; }
-  [[nodiscard]] const cpm_msgs::loop_stats_t& current_stats() const noexcept { return stats_.sums; }
-  [[nodiscard]] const FineLatencyHistogram& fine_latency_histogram() const noexcept { return stats_.latency_us; }
+  [[nodiscard]] const cpm_msgs::loop_stats_t& current_stats() const noexcept { return stats_.sums(); }
+  [[nodiscard]] const FineLatencyHistogram& fine_latency_histogram() const noexcept { return stats_.fine_latency(); }
   [[nodiscard]] double period() const noexcept { return dt_; }
 
  private:
   // The phases of cycle(), in order (the list at the top of this file).
-  // The clock reading at the start of the cycle, then at the end of each phase.
-  using PhaseTimes = std::array<std::int64_t, kSeriesPublish + 1>;
-  void record_latency(std::int64_t latency_ns) noexcept;
   void read_inputs(std::int64_t k) noexcept;
   void estimate(std::int64_t k) noexcept;
   void apply_commands(std::int64_t k) noexcept;
@@ -256,10 +241,6 @@ class ControlLoop {
   void write_outputs(std::int64_t k) noexcept;
   void publish(std::int64_t k) noexcept;
   void finish_cycle(std::int64_t k, const PhaseTimes& t) noexcept;
-  // The drives are (to be) powered: enabling, holding, moving, homing,
-  // jogging or stopping.
-  [[nodiscard]] bool drives_on() const noexcept;
-  // Every actuator homed: the task space.
   // The clamped force and its saturation flags of `f` (N) into this cycle's output.
   void limit_force(const Vec3& f) noexcept;
 
@@ -321,13 +302,11 @@ class ControlLoop {
   ctl::TrajectorySample reference(std::int64_t k) noexcept;
   ctl::TrajectorySample reference_ahead(std::int64_t k, double ahead) const noexcept;
   void fill_state(std::int64_t k) noexcept;
-  void add_sample(int series, std::int64_t ns) noexcept;
 
   DaemonConfig cfg_;
   Backend* backend_;
-  const ctl::Machine* machine_;
-  ctl::Controller controller_;
   double dt_;
+  ActiveModel model_;  // the model and law in use (swapped whole by load_model, select_controller)
 
   // Queues to and from the other threads.
   struct Channels {
@@ -341,11 +320,8 @@ class ControlLoop {
   LoopRequests requests_;
 
   // State machine (the owners' transitions: loop_state.hpp).
-  Mode mode_ = Mode::init;
-  std::atomic<Mode> mode_atomic_{Mode::init};
+  ModeState mode_;
   FaultLatch fault_;
-  std::int64_t enabling_since_ = 0;
-  bool disable_after_stop_ = false;
   OverrunCount overruns_;
   std::array<std::int64_t, 3> saturated_cycles_{};  // consecutive cycles at the force limit
   Underrun underrun_;
@@ -364,7 +340,6 @@ class ControlLoop {
   } ramp_;
   Jog jog_;
   Transfer transfer_;
-  ctl::ControllerState ctl_state_;  // the commands sent since enable (actuation delay)
 
   // What one phase hands the later ones within a cycle.
   struct CycleData {
@@ -389,12 +364,7 @@ class ControlLoop {
     cpm_msgs::drives_t drives{};
     std::int64_t dropped = 0;  // snapshots the full ring lost
   } pub_;
-  // The timing statistics (add_sample, record_latency, finish_cycle).
-  struct Statistics {
-    cpm_msgs::loop_stats_t sums{};
-    FineLatencyHistogram latency_us{};  // series 0 again, in 1 us bins
-    std::atomic<std::int64_t> cycles_done{0};
-  } stats_;
+  CycleStatistics stats_;
 };
 
 }  // namespace cpm::daemon

@@ -1,9 +1,10 @@
 // SPDX-License-Identifier: Apache-2.0
 // The control loop's state in small owners, each with its own transitions
-// (as LinuxCNC keeps homing.c and command.c apart from control.c): the fault
-// latch, the stop profile, the segment queue and its tracking, the homing
-// sequence, the jog, the bumpless transfer, the overrun count, the stream
-// underrun, the stop and shutdown requests. ControlLoop (loop.hpp) holds one
+// (as LinuxCNC keeps homing.c and command.c apart from control.c): the mode,
+// the model and law in use, the fault latch, the stop profile, the segment
+// queue and its tracking, the homing sequence, the jog, the bumpless
+// transfer, the overrun count, the stream underrun, the stop and shutdown
+// requests. ControlLoop (loop.hpp) holds one
 // of each and decides when each transition happens; each is tested on its
 // own (tests/daemon/test_loop_state.cpp). All real-time: no allocation after
 // construction, no lock, noexcept.
@@ -15,9 +16,13 @@
 #include <memory>
 #include <variant>
 
+#include <cpm_msgs/loop_stats_t.hpp>
+
+#include "cpm/control/controller.hpp"
 #include "cpm/control/trajectory.hpp"
 #include "cpm/daemon/config.hpp"
 #include "cpm/daemon/homing.hpp"
+#include "cpm/daemon/modes.hpp"
 #include "cpm/daemon/spsc.hpp"
 #include "cpm/daemon/stream_trajectory.hpp"
 
@@ -39,6 +44,126 @@ enum class Refusal : std::uint8_t {
   not_continuous,    // the segment does not start where and how the queue ends
   limit,             // faster than a limit allows
   workspace,         // it would leave the workspace or a stroke
+};
+
+// Timing statistics: histograms as in loop_stats_t.
+inline constexpr int kSeriesLatency = 0, kSeriesRead = 1, kSeriesEstimate = 2, kSeriesTrajectory = 3,
+                     kSeriesInverseKinematics = 4, kSeriesController = 5, kSeriesSafety = 6, kSeriesWrite = 7,
+                     kSeriesPublish = 8, kSeriesCycle = 9, kSeries = 10, kBins = 237;
+int histogram_bin(std::int64_t ns) noexcept;
+// Lower edge of bin k (ns).
+std::int64_t histogram_bin_floor(int k) noexcept;
+// The wake-up latency at cyclictest's resolution (cyclictest -h 2000): bin k
+// < 2000 holds [k, k+1) us, the last bin everything from 2 ms. loop_stats_t's
+// 50 us bins above 200 us are too coarse to hold a p99 against cyclictest's
+// to within 20 %, so cpmd --stats-json writes this one for that series.
+inline constexpr int kFineLatencyBins = 2001;
+using FineLatencyHistogram = std::array<std::int32_t, kFineLatencyBins>;
+
+// The clock reading at the start of a cycle, then at the end of each phase
+// (index: the phase's series, kSeriesRead to kSeriesPublish).
+using PhaseTimes = std::array<std::int64_t, kSeriesPublish + 1>;
+
+// The cycle's timing statistics (loop_stats_t): per series the count, sum,
+// extremes and histogram; the wake-up latency also in 1 us bins; the
+// schedule's overruns and skipped slots; and the cycles completed, which
+// any thread may read (the watchdog is fed only while they advance).
+class CycleStatistics {
+ public:
+  explicit CycleStatistics(double rate_hz) noexcept;
+  // How late the thread woke for this cycle (ns).
+  void latency(std::int64_t ns) noexcept;
+  // The scheduler's verdict on the cycle just run.
+  void schedule(bool overrun, std::int64_t skipped) noexcept;
+  void scheduling(bool realtime, bool memory_locked) noexcept;
+  // A cycle ran with these phase times: each phase and the whole.
+  void cycle(const PhaseTimes& t) noexcept;
+  // ... and everything it hands on is handed on: cycles_done() advances.
+  void completed() noexcept { cycles_done_.store(sums_.cycles, std::memory_order_release); }
+  [[nodiscard]] const cpm_msgs::loop_stats_t& sums() const noexcept { return sums_; }
+  [[nodiscard]] const FineLatencyHistogram& fine_latency() const noexcept { return latency_us_; }
+  [[nodiscard]] std::int64_t cycles_done() const noexcept { return cycles_done_.load(std::memory_order_acquire); }
+
+ private:
+  void add(int series, std::int64_t ns) noexcept;
+  cpm_msgs::loop_stats_t sums_{};
+  FineLatencyHistogram latency_us_{};  // series 0 again, in 1 us bins
+  std::atomic<std::int64_t> cycles_done_{0};
+};
+
+// The state machine's mode: the loop's own copy, the one other threads read,
+// and what two transitions remember: the cycle enabling began (the enable
+// timeout counts from it) and whether the stop under way ends disabled.
+class ModeState {
+ public:
+  [[nodiscard]] Mode now() const noexcept { return now_; }
+  // Any thread.
+  [[nodiscard]] Mode published() const noexcept { return published_.load(std::memory_order_acquire); }
+  // Leaving stopping spends a disable asked for during the stop (a fault or
+  // a shutdown ends the stop as well).
+  void enter(Mode m) noexcept {
+    if (m != Mode::stopping) disable_after_stop_ = false;
+    now_ = m;
+    published_.store(m, std::memory_order_release);
+  }
+  // Enabling began at cycle k.
+  void enabling_from(std::int64_t k) noexcept { enabling_since_ = k; }
+  // How long enabling has waited for the drives at cycle k (s).
+  [[nodiscard]] double enabling_time(std::int64_t k, double dt) const noexcept {
+    return static_cast<double>(k - enabling_since_) * dt;
+  }
+  // A disable while stopping (or a motion about to stop): the stop ends disabled.
+  void disable_after_stop() noexcept { disable_after_stop_ = true; }
+  // The mode a stop at rest enters: disabled when a disable asked for it, else holding.
+  [[nodiscard]] Mode after_stop() const noexcept { return disable_after_stop_ ? Mode::disabled : Mode::holding; }
+  // The drives are (to be) powered: enabling, holding, moving, homing,
+  // jogging or stopping.
+  [[nodiscard]] bool drives_on() const noexcept {
+    return now_ == Mode::enabling || now_ == Mode::holding || now_ == Mode::moving || now_ == Mode::stopping ||
+           now_ == Mode::homing || now_ == Mode::jogging;
+  }
+
+ private:
+  Mode now_ = Mode::init;
+  std::atomic<Mode> published_{Mode::init};
+  std::int64_t enabling_since_ = 0;
+  bool disable_after_stop_ = false;
+};
+
+// The model and the law the loop runs, and the forces the drives were given
+// since they were enabled (the law's prediction across the actuation delay
+// reads them). The server builds a new model or law off the real-time
+// thread; the loop swaps it in whole, so a law never refers to a model the
+// loop no longer holds.
+class ActiveModel {
+ public:
+  ActiveModel(const ctl::Machine& machine, const ctl::Controller& controller) noexcept
+      : machine_(&machine), controller_(controller) {}
+  [[nodiscard]] const ctl::Machine& machine() const noexcept { return *machine_; }
+  [[nodiscard]] const ctl::Controller& controller() const noexcept { return controller_; }
+  // The law's step at `in`; its force is kept as given.
+  Status step(const ctl::ControlInput& in, ctl::ControlOutput& out) noexcept { return controller_.step(in, state_, out); }
+  // The forces given, for what another law gave (the actuator space's PD
+  // law, a fade): the prediction must see what the drives were given.
+  [[nodiscard]] ctl::CommandHistory& sent() noexcept { return state_.sent; }
+  [[nodiscard]] const ctl::CommandHistory& sent() const noexcept { return state_.sent; }
+  // The drives are enabled: while off they were given nothing.
+  void restart() noexcept { state_.reset(); }
+  // Another law on the same model.
+  void select(const ctl::Controller& c) noexcept { controller_ = c; }
+  // Another model and its law; returns the model no longer used (for the
+  // server to free).
+  [[nodiscard]] const ctl::Machine* load(const ctl::Machine& machine, const ctl::Controller& c) noexcept {
+    const ctl::Machine* old = machine_;
+    machine_ = &machine;
+    controller_ = c;
+    return old;
+  }
+
+ private:
+  const ctl::Machine* machine_;
+  ctl::Controller controller_;
+  ctl::ControllerState state_;
 };
 
 // A queued trajectory segment: one of the trajectory kinds, by value, or a
@@ -95,11 +220,11 @@ class StopProfile {
   // time is past T (the sample's velocity is then zero in size, not yet set
   // to exactly zero: the caller decides what rest means).
   [[nodiscard]] ctl::TrajectorySample sample(std::int64_t k, double dt, double ahead, bool& at_rest) const noexcept;
-  [[nodiscard]] double duration() const noexcept { return T_; }
+  [[nodiscard]] double duration() const noexcept { return duration_; }
 
  private:
   Vec3 p0_ = Vec3::Zero(), dir_ = Vec3::Zero();
-  double v0_ = 0.0, T_ = 0.0, a_ = 0.0;
+  double v0_ = 0.0, duration_ = 0.0, a_ = 0.0;
   double t0_ = 0.0;  // s of the profile already elapsed at start_cycle_
   std::int64_t start_cycle_ = 0;
 };

@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: Apache-2.0
-#include "cpm/identification/loop.hpp"
+#include "cpm/identification/model_loop.hpp"
 
 #include <algorithm>
 #include <cmath>
