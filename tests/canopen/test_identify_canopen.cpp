@@ -18,7 +18,7 @@
 #include "canopen/circle.hpp"
 #include "canopen/record_log.hpp"
 #include "cpm/identification/excitation.hpp"
-#include "cpm/identification/loop.hpp"
+#include "cpm/identification/model_loop.hpp"
 
 namespace cpm::daemon::test {
 namespace {
