@@ -157,12 +157,31 @@ def copy(root, pkgs, names):
         f.write("\n\n".join(status) + "\n")
     for f in ("available", "diversions", "statoverride"):
         open(f"{root}/var/lib/dpkg/{f}", "a").close()
-    # the alternatives the copied packages registered (update-alternatives' links)
+    # the alternatives whose chosen file was copied (update-alternatives' links,
+    # in no dpkg list: /usr/bin/awk -> /etc/alternatives/awk -> /usr/bin/mawk),
+    # the master link and its slaves as the host has them
     for alt in os.listdir("/var/lib/dpkg/alternatives"):
         link = f"/etc/alternatives/{alt}"
-        if os.path.islink(link) and os.path.lexists(root + os.readlink(link)):
-            shutil.copy2(f"/var/lib/dpkg/alternatives/{alt}", f"{root}/var/lib/dpkg/alternatives/{alt}")
-            os.symlink(os.readlink(link), f"{root}{link}")
+        if not (os.path.islink(link) and os.path.lexists(root + os.readlink(link))):
+            continue
+        shutil.copy2(f"/var/lib/dpkg/alternatives/{alt}", f"{root}/var/lib/dpkg/alternatives/{alt}")
+        with open(f"/var/lib/dpkg/alternatives/{alt}", encoding="utf-8") as f:
+            lines = f.read().split("\n")
+        names = [(alt, lines[1])]
+        i = 2
+        while i + 1 < len(lines) and lines[i]:
+            names.append((lines[i], lines[i + 1]))
+            i += 2
+        for name, path in names:
+            target = f"/etc/alternatives/{name}"
+            if not (os.path.islink(target) and os.path.lexists(root + os.readlink(target))):
+                continue
+            if not os.path.lexists(root + target):
+                os.symlink(os.readlink(target), root + target)
+            path = real_parent(path)
+            if os.path.islink(path) and os.readlink(path) == target and not os.path.lexists(root + path):
+                os.makedirs(os.path.dirname(root + path), exist_ok=True)
+                os.symlink(target, root + path)
     # the host's system users and groups, without cpmd
     for f, mode in (("passwd", 0o644), ("group", 0o644), ("shadow", 0o640), ("gshadow", 0o640)):
         with open(f"/etc/{f}", encoding="utf-8") as src:
