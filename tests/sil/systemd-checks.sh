@@ -202,7 +202,11 @@ since j.txt "$t_r" | grep -q 'SIGHUP' || fail "no SIGHUP line after the second r
 CPM_KEY_FILE=/root/op/sil2.key CPM_OPERATOR=sil2 cpm_try enable > enable.err
 if grep -q 'not authorized' enable.err; then ok "the removed key is refused: $(grep 'not authorized' enable.err | head -n 1)"
 else fail "the removed key is not refused: $(cat enable.err)"; cpm_try disable; fi
-[ "$(prop MainPID)" = "$pid" ] && ok "same process (pid $pid): reloaded, not restarted" || fail "the reload restarted cpmd"
+if [ "$(prop MainPID)" = "$pid" ]; then ok "same process (pid $pid): reloaded, not restarted"
+else
+  fail "cpmd was restarted during the reload steps (pid $pid -> $(prop MainPID)); systemd said:"
+  jrnl | grep -E 'Watchdog|Main process exited|Failed with result|Scheduled restart' | sed 's/^/  /'
+fi
 
 # -- the paper's circle ----------------------------------------------------------
 step "the paper's circle from the guest's cpm, against the same circle in process"
@@ -295,7 +299,7 @@ wait_for 60 cpm status || fatal "cpmd does not answer"
 cpm drives 2>/dev/null | head -n 8
 echo "drives: $(vd_status)"
 [ "$(value 8)" = 0 ] && ok "z brake on (brake_z 0) while disabled" || fail "brake_z $(value 8) while disabled"
-cpm_try enable || fail "cpm enable on canopen"
+cpm_try enable || { fail "cpm enable on canopen"; cpm status 2>/dev/null | head -n 5; jrnl | grep -iE 'fault|watchdog' | tail -n 5; }
 wait_for 60 sh -c 'cpm status --json 2>/dev/null | grep -q "\"mode\": *\"holding\""' || fail "not holding after enable"
 s=$(vd_status); echo "drives: $s"
 echo "$s" | grep -q 'states operation enabled operation enabled operation enabled' && ok "the drives are operation enabled" \
