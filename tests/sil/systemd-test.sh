@@ -4,6 +4,7 @@
 # build with cpack, then boot the systemd guest (tests/sil/systemd-vm.sh) and
 # run tests/sil/systemd-checks.sh there. With --prepare: the image only.
 #   usage: systemd-test.sh BUILD_DIR [--prepare] [PART]
+# PART: ci (ctest sil.systemd), all (the long form, by hand), sim, canopen.
 set -euo pipefail
 BUILD=$(cd "$1" && pwd); shift
 SIL_DIR=$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)
@@ -25,7 +26,16 @@ vd=$BUILD/bin/virtual-drives
 mkdir -p "$T/lib"
 ldd "$vd" | awk '/libgomp/ { print $3 }' | xargs -r cp -t "$T/lib"
 CONF=$SIL_DIR/../../config
+# The circle's in-process reference: the same build's cpm on the host, in a
+# second instead of a minute of the guest's emulated CPU (the drop-in's 200 Hz).
+ref=()
+if "$BUILD/bin/cpm" sim --trajectory paper-circle --controller computed_torque --rate 200 \
+    --json "$T/circle-ref.json" >"$T/circle-ref.log" 2>&1; then
+  ref=(--file "$T/circle-ref.json")
+else
+  echo "cpm-sil-systemd: cpm sim on the host failed, the guest computes the reference:"; cat "$T/circle-ref.log"
+fi
 rc=0
 bash "$SIL_DIR/systemd-vm.sh" --timeout "${CPM_SIL_TIMEOUT:-1100}" --deb "$deb" --file "$vd" --file "$T/lib" \
-  --file "$CONF/sil.yaml" --file "$CONF/machine-sil.yaml" -- "$SIL_DIR/systemd-checks.sh" "$@" || rc=$?
+  --file "$CONF/sil.yaml" --file "$CONF/machine-sil.yaml" "${ref[@]}" -- "$SIL_DIR/systemd-checks.sh" "$@" || rc=$?
 exit $rc

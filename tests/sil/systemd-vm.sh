@@ -66,7 +66,10 @@ customize_rootfs() {  # mmdebstrap customize hook; $1 is the root
   echo cpm-sil > "$r/etc/hostname"
   : > "$r/etc/fstab"
   ln -sf /lib/systemd/system/multi-user.target "$r/etc/systemd/system/default.target"
-  # Boot time under TCG: nothing that waits for a login, a clock, a timer.
+  # Boot time under TCG: nothing that waits for a login, a clock, a timer;
+  # nothing the image has done already (users, machine-id, a read-write root,
+  # the initramfs's modules) or that cpmd does not use (a random seed, mqueue,
+  # tracing, binfmt).
   local u
   for u in getty@tty1.service serial-getty@ttyS0.service console-getty.service systemd-logind.service \
            systemd-timesyncd.service systemd-networkd-wait-online.service e2scrub_reap.service \
@@ -74,7 +77,10 @@ customize_rootfs() {  # mmdebstrap customize hook; $1 is the root
            man-db.timer systemd-tmpfiles-clean.timer systemd-update-utmp.service \
            systemd-update-utmp-runlevel.service getty-static.service dev-hugepages.mount \
            modprobe@configfs.service modprobe@dm_mod.service modprobe@drm.service modprobe@efi_pstore.service \
-           modprobe@fuse.service modprobe@loop.service systemd-pstore.service; do
+           modprobe@fuse.service modprobe@loop.service systemd-pstore.service \
+           systemd-sysusers.service systemd-random-seed.service systemd-modules-load.service \
+           systemd-remount-fs.service systemd-firstboot.service dev-mqueue.mount sys-kernel-tracing.mount \
+           sys-kernel-debug.mount proc-sys-fs-binfmt_misc.automount; do
     ln -sf /dev/null "$r/etc/systemd/system/$u"
   done
   # LCM asks for a 4 MB receive buffer (lcm-proj.github.io/multicast_setup.html).
@@ -137,17 +143,35 @@ EOF
 }
 
 prepare() {
-  for t in mmdebstrap mke2fs qemu-system-x86_64 dpkg-deb; do
+  for t in mke2fs qemu-system-x86_64 dpkg-deb; do
     command -v $t >/dev/null || die "$t is missing (bash tools/setup.sh installs it)"
   done
   mkdir -p "$CACHE_ROOT"
   local parts=$CACHE_ROOT/systemd-parts
   local pkgs; pkgs=$(printf '%s\n' "${BASE_PACKAGES[@]}" $(deb_depends) | sort -u | tr '\n' ' ')
-  local versions
-  versions=$(apt-cache policy $pkgs 2>/dev/null | awk '/^[^ ]/ { p = $1 } /Candidate:/ { print p, $2 }')
-  if echo "$versions" | grep -q '(none)'; then
-    die "packages without an installable version in the apt lists: $(echo "$versions" | awk '$2 == "(none)" { printf "%s ", $1 }')(apt-get update?)"
+  # Where the root file system comes from: this host's own installed packages
+  # when it runs bookworm and has them all (seconds), else Debian's mirror
+  # through mmdebstrap (minutes). CPM_SIL_ROOTFS=host|mmdebstrap forces one.
+  local source=${CPM_SIL_ROOTFS:-auto} versions
+  if [ "$source" = auto ]; then
+    source=mmdebstrap
+    if grep -q '^12\.' /etc/debian_version 2>/dev/null && command -v python3 >/dev/null \
+        && python3 "$SIL_DIR/host-rootfs.py" list $pkgs >/dev/null 2>&1; then
+      source=host
+    fi
   fi
+  case $source in
+    host)
+      versions=$(python3 "$SIL_DIR/host-rootfs.py" list $pkgs) || die "host-rootfs.py list failed (above)"
+      versions+=$'\n'"host-rootfs $(sha256sum < "$SIL_DIR/host-rootfs.py" | cut -c1-16)" ;;
+    mmdebstrap)
+      command -v mmdebstrap >/dev/null || die "mmdebstrap is missing (bash tools/setup.sh installs it)"
+      versions=$(apt-cache policy $pkgs 2>/dev/null | awk '/^[^ ]/ { p = $1 } /Candidate:/ { print p, $2 }')
+      if echo "$versions" | grep -q '(none)'; then
+        die "packages without an installable version in the apt lists: $(echo "$versions" | awk '$2 == "(none)" { printf "%s ", $1 }')(apt-get update?)"
+      fi ;;
+    *) die "CPM_SIL_ROOTFS=$source: host or mmdebstrap" ;;
+  esac
   local key; key=$( { echo "$versions"; declare -f customize_rootfs init_script; } | sha256sum | cut -c1-16)
   IMG_DIR=$CACHE_ROOT/systemd-$key
   exec 8>"$CACHE_ROOT/.systemd-lock"
@@ -159,11 +183,22 @@ prepare() {
   if [ ! -f "$IMG_DIR/rootfs.img" ]; then
     local t0=$SECONDS x
     x=$(mktemp -d "$CACHE_ROOT/.sd.XXXXXX")
-    note "building the systemd guest's root file system with mmdebstrap (packages: $pkgs)"
+    note "building the systemd guest's root file system from $source (packages: $pkgs)"
     local sources=/etc/apt/sources.list.d/debian.sources
     [ -f $sources ] || sources=/etc/apt/sources.list
     { declare -f customize_rootfs; echo 'customize_rootfs "$1"'; } > "$x/customize.sh"
-    if ! mmdebstrap --variant=essential --mode=root --include="${pkgs// /,}" \
+    if [ "$source" = host ]; then
+      if ! python3 "$SIL_DIR/host-rootfs.py" copy "$x/root" $pkgs > "$x/host-rootfs.log" 2>&1; then
+        tail -30 "$x/host-rootfs.log" >&2; rm -rf "$x"; die "host-rootfs.py copy failed (log above)"
+      fi
+      mkdir -p "$x/root"/usr/local/{bin,sbin,lib,share} "$x/root/etc/sysctl.d" "$x/root/etc/systemd/system"
+      # What the packages' maintainer scripts did on the host: system users,
+      # the library cache, a machine-id (no first-boot presets in the guest).
+      systemd-sysusers --root "$x/root" >/dev/null && ldconfig -r "$x/root" \
+        && systemd-machine-id-setup --root "$x/root" >/dev/null \
+        || { rm -rf "$x"; die "systemd-sysusers, ldconfig or systemd-machine-id-setup on the new root failed"; }
+      bash "$x/customize.sh" "$x/root"
+    elif ! mmdebstrap --variant=essential --mode=root --include="${pkgs// /,}" \
         --aptopt='APT::Install-Recommends "false"' \
         --dpkgopt='path-exclude=/usr/share/man/*' --dpkgopt='path-exclude=/usr/share/doc/*' \
         --dpkgopt='path-exclude=/usr/share/locale/*' --dpkgopt='path-exclude=/usr/share/info/*' \
@@ -224,7 +259,10 @@ qemu=(qemu-system-x86_64 -accel tcg -cpu max -m "$MEM" -smp 1
   -chardev "file,id=con,path=$run/console.log" -serial chardev:con
   -virtfs "local,path=${run//,/,,},mount_tag=silrun,security_model=none")
 t1=$SECONDS qrc=0
-timeout -k 5 "$TIMEOUT" "${qemu[@]}" </dev/null >"$run/qemu.log" 2>&1 &
+# QEMU's CPU seconds (user + system, from bash's `times`): what the guest
+# costs the host, which a loaded host's wall time hides.
+( qrc=0; timeout -k 5 "$TIMEOUT" "${qemu[@]}" </dev/null >"$run/qemu.log" 2>&1 || qrc=$?
+  times > "$run/qemu-cpu"; exit $qrc ) &
 qpid=$!
 tail -n +1 -s 0.2 -f --pid=$qpid "$run/output.log" &
 tpid=$!
@@ -245,6 +283,7 @@ if [ -z "$rc" ]; then
 elif [ "$rc" != 0 ]; then
   KEEP=1
 fi
-note "guest run took $((SECONDS - t1)) s; exit $rc"
+cpu=$(awk 'END { for (i = 1; i <= 2; i++) { split($i, t, /[ms]/); s += t[1] * 60 + t[2] } printf "%.1f", s }' "$run/qemu-cpu" 2>/dev/null)
+note "guest run took $((SECONDS - t1)) s, QEMU ${cpu:-?} s of CPU; exit $rc"
 if [ "$KEEP" = 1 ]; then note "run folder kept: $run"; else rm -rf "$run"; fi
 exit "$rc"
