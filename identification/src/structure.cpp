@@ -316,8 +316,8 @@ double correlation(const std::vector<double>& a, const std::vector<double>& b) {
   return saa > 0.0 && sbb > 0.0 ? sab / std::sqrt(saa * sbb) : 0.0;
 }
 
-// The same variable as a table: piecewise linear between kSmoothTableNodes at
-// quantiles of its values (the hats of the nodes but the first, centred). A
+// A speed as a table: piecewise linear between table_nodes of its values
+// (the hats of the nodes but the first, centred). A
 // narrow hump (a force of v1 that peaks at 35 mm/s over +-275 mm/s) escapes a
 // degree-5 polynomial and left its rest to be taken by library effects. Where
 // the table removes more by BIC it gives the variable's
@@ -325,6 +325,9 @@ double correlation(const std::vector<double>& a, const std::vector<double>& b) {
 // freedom for the z the verdict's |z| >= 8 reads (the polynomial keeps the
 // shape said to people).
 void table_fit(const std::vector<double>& x, const Eigen::VectorXd& y, SmoothFit& s) {
+  // Of a speed only: a local excess along a position is the bump finder's (a
+  // table of d1 took a 3x bump's place there and cogging with a spring were named).
+  if (s.var.empty() || s.var[0] != 'v') return;
   const int R = static_cast<int>(x.size());
   const std::vector<double> n = table_nodes(x);
   const int m = static_cast<int>(n.size()), K = m - 1;
