@@ -114,6 +114,13 @@ void select_motion_effects(Diagnosis& D, const Engine& E, const DiagnoseOptions&
 void verdict_text_motion(Diagnosis& D);
 // Why a fitted value is physically implausible for this machine, or empty (verdict.cpp).
 std::string implausible(const CandidateResult& c);
+// Why a fitted value is no missing effect's (implausible, or a parameter held
+// at a physical bound other than 0), or empty (verdict.cpp).
+std::string unphysical(const CandidateResult& c);
+// Beside structure outside the library: why an effect's refit there is part
+// of that structure rather than a missing effect (unphysical, or a parameter
+// the data do not determine), or empty (verdict.cpp).
+std::string not_missing_beside_outside(const CandidateResult& c);
 // Motion logs, outside the library (outside.cpp): the strong findings of the
 // structure scan in what the chosen effects leave (bump_beside_step as for
 // find_motion_structure); the problem with their columns as nuisance (to

@@ -88,10 +88,27 @@ std::vector<StructureFinding> strong_structure(const Diagnosis& D, const MotionP
   return out;
 }
 
+namespace {
+
+// A finding's columns as nuisance beside the library: a smooth one as a table
+// of its variable (piecewise linear, table_nodes), which
+// follows a narrow hump the scan's degree-5 polynomial only finds: a hump of
+// v1 peaking at 35 mm/s over +-275 mm/s left by the polynomial was taken by a
+// -4.3 kg rotor inertia, a spring and a Stribeck friction beside it.
+Eigen::MatrixXd nuisance_columns(const StructureFinding& f, const MotionProblem& P) {
+  if (f.kind == "smooth") {
+    Eigen::MatrixXd T = table_columns(P, f.axis, f.coordinate);
+    if (T.cols() > 0) return T;
+  }
+  return structure_columns(f, P);
+}
+
+}  // namespace
+
 LinearProblem with_structure(const LinearProblem& L, const std::vector<StructureFinding>& S, const MotionProblem& P) {
   LinearProblem out = L;
   for (const auto& f : S) {
-    const Eigen::MatrixXd c = structure_columns(f, P);
+    const Eigen::MatrixXd c = nuisance_columns(f, P);
     const Eigen::Index nb = out.B.cols();
     out.B.conservativeResize(Eigen::NoChange, nb + c.cols());
     out.B.rightCols(c.cols()) = c;
@@ -110,6 +127,12 @@ namespace {
 // The same structure found again: same axis and kind, at the same place (a
 // bump or step within its width, a period within 10 %).
 bool same_finding(const StructureFinding& a, const StructureFinding& b) {
+  // A smooth force found again in a variable alike (d2 first, then v1: on a circle the same curve).
+  auto listed = [](const StructureFinding& f, const std::string& v) {
+    return std::find(f.also_in.begin(), f.also_in.end(), v) != f.also_in.end();
+  };
+  if (a.kind == "smooth" && b.kind == "smooth" && a.axis == b.axis)
+    return a.coordinate == b.coordinate || listed(a, b.coordinate) || listed(b, a.coordinate);
   if (a.axis != b.axis || a.kind != b.kind || a.coordinate != b.coordinate) return false;
   const double width = std::max({a.hi - a.lo, b.hi - b.lo, 1e-3});
   if (a.kind == "bump" || a.kind == "step") return std::fabs(a.location - b.location) <= width;
@@ -155,6 +178,24 @@ std::vector<StructureFinding> confirmed_outside_library(const Diagnosis& D, cons
 }
 
 namespace {
+
+// How a force of variable b is told from one of variable a (d1..a3 or t):
+// vary b where a holds still.
+std::string separate_variables(const std::string& a, const std::string& b) {
+  if (a == "t" || b == "t") return "repeat the log: a force of time does not repeat with the motion";
+  const int ja = a[1] - '1', jb = b[1] - '1';
+  const std::string A = std::to_string(ja + 1), B = std::to_string(jb + 1);
+  auto how = [](char kind) -> std::string {
+    return kind == 'd' ? "across its stroke" : kind == 'v' ? "at several speeds" : "with several accelerations";
+  };
+  if (ja != jb)
+    return "move axis " + B + " alone " + how(b[0]) + " while axis " + A + " holds still: a force that follows " + b +
+           " then shows, one that follows " + a + " does not";
+  if ((a[0] == 'd' && b[0] == 'v') || (a[0] == 'v' && b[0] == 'd'))
+    return "run axis " + A + " across its stroke at several constant feeds: a force of position comes back at the "
+           "same place at every feed, one of speed changes with the feed";
+  return "run axis " + A + " with other accelerations at the same speeds and places";
+}
 
 // The measurement that would show the finding for what it is.
 std::string settle_outside(const StructureFinding& f) {
@@ -232,16 +273,37 @@ void lead_with_outside_library(Diagnosis& D) {
     os << (k ? "; " : "") << D.outside_library[k].text << " (" << std::lround(std::fabs(D.outside_library[k].z)) << " σ)";
   const StructureFinding& lead = D.outside_library.front();
   if (!lead.also_in.empty()) {
-    os << ". These data cannot tell " << lead.coordinate;
-    for (const auto& v : lead.also_in) os << " from " << v;
+    os << ". These data cannot tell " << lead.coordinate << " from ";
+    for (std::size_t k = 0; k < lead.also_in.size(); ++k)
+      os << (k == 0 ? "" : k + 1 < lead.also_in.size() ? ", " : " nor from ") << lead.also_in[k];
     os << " apart";
   }
-  if (!D.partial.empty()) {
+  std::vector<std::string> partial;  // named before, fitted without an unphysical value
+  for (const std::string& p : D.partial)
+    if (std::none_of(D.partial_unphysical.begin(), D.partial_unphysical.end(),
+                     [&](const Diagnosis::UnphysicalPartial& u) { return u.label() == p; }))
+      partial.push_back(p);
+  if (!partial.empty()) {
     os << ". Partly explained by";
-    for (std::size_t k = 0; k < D.partial.size(); ++k) os << (k ? "," : "") << " " << D.partial[k];
+    for (std::size_t k = 0; k < partial.size(); ++k) os << (k ? "," : "") << " " << partial[k];
     os << " (named before the structure was fitted, not beside it)";
   }
+  if (!D.partial_unphysical.empty()) {
+    os << ". Partial, with values outside the physical range or not determined (part of this force, not missing "
+          "effects):";
+    for (std::size_t k = 0; k < D.partial_unphysical.size(); ++k) {
+      const Diagnosis::UnphysicalPartial& u = D.partial_unphysical[k];
+      os << (k ? ";" : "") << " " << u.label() << " (";
+      for (std::size_t q = 0; q < u.params.size(); ++q)
+        os << (q ? ", " : "") << u.params[q].name << " = " << human_value(u.params[q]);
+      os << ": " << u.why << ")";
+    }
+  }
   os << ". To settle it: " << settle_outside(lead);
+  // The measurements that tell the lead variable from the first alike ones.
+  for (std::size_t k = 0; k < std::min<std::size_t>(lead.also_in.size(), 3); ++k)
+    os << "; to tell " << lead.coordinate << " from " << lead.also_in[k] << ", "
+       << separate_variables(lead.coordinate, lead.also_in[k]);
   if (D.verdict >= 0) os << ". Beside it, " << D.verdict_text;
   else os << ". No library effect is missing beside it";
   D.verdict_text = os.str();

@@ -98,9 +98,15 @@ Json structure_json(const std::vector<StructureFinding>& items) {
               {"size", f.size},
               {"z", f.z},
               {"text", f.text}};
-    if (f.kind == "smooth")
+    if (f.kind == "smooth") {
       j["smooth"] = {{"range", {f.lo, f.hi}}, {"shape", f.shape}, {"slope", f.slope},
                      {"nodes", f.nodes}, {"values", f.values}, {"also_in", f.also_in}};
+      // Why each is alike: correlation with the finding's variable, share of its fit.
+      Json alike = Json::array();
+      for (const AlikeVariable& w : f.alike)
+        alike.push_back({{"variable", w.var}, {"correlation", w.correlation}, {"share", w.share}});
+      j["smooth"]["alike"] = std::move(alike);
+    }
     a.push_back(std::move(j));
   }
   return a;
@@ -132,6 +138,18 @@ Json verdict_json(const Diagnosis& D) {
   v["outside_library"] = structure_json(D.outside_library);
   // Library effects that explain part of the outside finding, not named beside it (labels).
   v["partial"] = D.partial;
+  // Of those, the ones fitted beside it to a value outside the physical range, with the value.
+  Json unphysical = Json::array();
+  for (const auto& u : D.partial_unphysical) {
+    Json params = Json::object(), errors = Json::object();
+    for (const auto& p : u.params) {
+      params[p.name] = p.value;
+      errors[p.name] = p.std_error >= 0.0 ? Json(p.std_error) : Json();
+    }
+    unphysical.push_back({{"effect", u.effect}, {"axis", axis_json(u.axis)}, {"params", params},
+                          {"std_errors", errors}, {"why", u.why}});
+  }
+  v["partial_unphysical"] = std::move(unphysical);
   // User effects that would describe it, as model-file data (user_effects:).
   Json user = Json::array();
   for (const auto& u : D.suggested_user_effects) {

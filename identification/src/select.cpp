@@ -309,7 +309,7 @@ std::vector<Term> selection_terms(const Diagnosis& D, const Engine& E) {
   std::vector<Term> terms;
   for (std::size_t j = 0; j < D.candidates.size(); ++j) {
     const CandidateResult& c = D.candidates[j];
-    if (!c.identifiable || is_alignment(c.effect)) continue;
+    if (!c.identifiable || c.held_out || is_alignment(c.effect)) continue;
     if (!c.params.empty() && c.params[0].at_bound && c.params[0].value == 0.0) continue;
     Term t;
     t.candidate = static_cast<int>(j);

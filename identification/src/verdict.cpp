@@ -29,6 +29,11 @@ constexpr Implausible kImplausible[] = {
     {"viscous_friction", [](double v) { return v > 200.0; }, "more than 200 N s/m of viscous friction"},
     {"cogging", [](double v) { return v > 20.0; }, "more than 20 N of cogging"},
     {"actuation_delay", [](double v) { return v > 0.02; }, "a dead time of more than 20 ms"},
+    // The bound lets a model that carries too much mass on one actuator be
+    // corrected; a rotor the model lacks only adds inertia.
+    {"actuator_inertia", [](double v) { return v < 0.0; },
+     "a negative reflected inertia: no rotor takes mass off an axis; the model's masses on it too large, or "
+     "something else that follows its acceleration"},
 };
 
 // Ambiguity: an effect chosen that another explains as well (alternatives),
@@ -67,6 +72,22 @@ std::string implausible(const CandidateResult& c) {
   const double v = c.params[0].value;
   for (const Implausible& i : kImplausible)
     if (c.effect == i.effect && i.off(v)) return i.why;
+  return {};
+}
+
+std::string unphysical(const CandidateResult& c) {
+  if (std::string why = implausible(c); !why.empty()) return why;
+  for (const ParamEstimate& p : c.params)
+    if (p.at_bound && p.value != 0.0)
+      return "its best fit lies beyond the physical range of " + p.name + ", held at the bound " + human_value(p);
+  return {};
+}
+
+std::string not_missing_beside_outside(const CandidateResult& c) {
+  if (std::string why = unphysical(c); !why.empty()) return why;
+  for (const ParamEstimate& p : c.params)
+    if (p.std_error > std::fabs(p.value))
+      return "these data do not determine its " + p.name + " (standard error above the value)";
   return {};
 }
 

@@ -96,6 +96,8 @@ Excitation::Excitation(std::uint64_t seed) {
     for (double& p : axis) p = ph(rng);
 }
 
+Excitation::Excitation(double radius, double omega) : radius_(radius), omega_(omega) {}
+
 Reference excitation(double t, std::uint64_t seed) { return Excitation(seed)(t); }
 
 Reference Excitation::operator()(double t) const noexcept {
@@ -104,7 +106,13 @@ Reference Excitation::operator()(double t) const noexcept {
   Reference r;
   for (int i = 0; i < 3; ++i) {
     double f = 0.0, fd = 0.0, fdd = 0.0;
-    for (int j = 0; j < 3; ++j) {
+    if (radius_ > 0.0 && i < 2) {
+      const double x = omega_ * t, w = omega_;
+      f = radius_ * (i == 0 ? std::sin(x) : std::cos(x));
+      fd = radius_ * w * (i == 0 ? std::cos(x) : -std::sin(x));
+      fdd = -w * w * f;
+    }
+    for (int j = 0; j < 3 && radius_ <= 0.0; ++j) {
       const double w = kTwoPi * kFreq[i][j], phi = phase_[i][j];
       // No offset: the ramp (s(0) = 0) starts the path at the centre at rest,
       // and the excursion stays within the centre +- the sum of the amplitudes.
@@ -124,7 +132,18 @@ const char* outside_kind_name(OutsideForce::Kind k) noexcept {
   switch (k) {
     case OutsideForce::Kind::cross_velocity: return "cross_velocity";
     case OutsideForce::Kind::bump: return "bump";
+    case OutsideForce::Kind::velocity_hump: return "velocity_hump";
+    case OutsideForce::Kind::cross_velocity_hump: return "cross_velocity_hump";
     default: return "cubic";
+  }
+}
+
+int outside_velocity_axis(const OutsideForce& f) noexcept {
+  switch (f.kind) {
+    case OutsideForce::Kind::cross_velocity:
+    case OutsideForce::Kind::cross_velocity_hump: return f.from_axis;
+    case OutsideForce::Kind::velocity_hump: return f.axis;
+    default: return -1;
   }
 }
 
@@ -136,6 +155,12 @@ Vec3 outside_forces(const std::vector<OutsideForce>& forces, const Vec3& d, cons
       case OutsideForce::Kind::cross_velocity: f[o.axis] += o.size * v[o.from_axis]; break;
       case OutsideForce::Kind::bump: f[o.axis] += o.size * std::exp(-0.5 * u * u); break;
       case OutsideForce::Kind::cubic: f[o.axis] += o.size * u * u * u; break;
+      case OutsideForce::Kind::velocity_hump:
+      case OutsideForce::Kind::cross_velocity_hump: {
+        const double w = v[outside_velocity_axis(o)] / o.width;
+        f[o.axis] += o.size * w * std::exp(0.5 * (1.0 - w * w));
+        break;
+      }
     }
   }
   return f;
@@ -188,7 +213,8 @@ GeneratedLog generate(const GeneratorSpec& spec) {
 
   // The controller: PD + the nominal model's feed-forward along the
   // reference, in task space, mapped to the actuators by J^T, clamped.
-  const Excitation path(spec.seed);
+  const Excitation path = spec.circle_radius > 0.0 ? Excitation(spec.circle_radius, spec.circle_omega)
+                                                  : Excitation(spec.seed);
   auto control = [&](double t, const Vec3& d_meas, const Vec3& v_meas) {
     const Reference ref = path(t);
     ctl::TaskState ts;

@@ -66,17 +66,26 @@ struct PlantedEffect {
 //   bump:           size * exp(-((d_axis - centre) / width)^2 / 2) (N): a tight
 //                   spot over a short stretch of one guide;
 //   cubic:          size * ((d_axis - centre) / width)^3 (N): a force that grows
-//                   along the travel (a guide that narrows, a cable's pull).
+//                   along the travel (a guide that narrows, a cable's pull);
+//   velocity_hump:  size * u * exp((1 - u^2) / 2), u = v_axis / width (N): a
+//                   force of the axis' own speed that rises like viscous
+//                   friction, peaks (at `size`) at |v| = width and dies away
+//                   above (a wiper seal, a lubricant film that lifts);
+//   cross_velocity_hump: the same in v_from on `axis` (a carrier dragged at
+//                   low speed only).
 struct OutsideForce {
-  enum class Kind { cross_velocity, bump, cubic };
+  enum class Kind { cross_velocity, bump, cubic, velocity_hump, cross_velocity_hump };
   Kind kind = Kind::cubic;
   int axis = 0;          // 0..2: the axis the force acts on
-  int from_axis = -1;    // cross_velocity: the axis whose velocity it follows
+  int from_axis = -1;    // cross_velocity, cross_velocity_hump: the axis whose velocity it follows
   double size = 0.0;     // N s/m (cross_velocity) or N
   double centre = 0.0;   // m (bump, cubic)
-  double width = 1.0;    // m (bump, cubic)
+  double width = 1.0;    // m (bump, cubic); m/s (the humps)
 };
-const char* outside_kind_name(OutsideForce::Kind k) noexcept;  // "cross_velocity", "bump", "cubic"
+// "cross_velocity", "bump", "cubic", "velocity_hump", "cross_velocity_hump"
+const char* outside_kind_name(OutsideForce::Kind k) noexcept;
+// The velocity the force follows (0..2), or -1 when it follows a position.
+int outside_velocity_axis(const OutsideForce& f) noexcept;
 // Their sum per axis at the actuator state (d, v) (N).
 Vec3 outside_forces(const std::vector<OutsideForce>& forces, const Vec3& d, const Vec3& v);
 
@@ -92,6 +101,9 @@ struct GeneratorSpec {
   // forces at the state, so a formula may not read a1..a3 and sees t = 0.
   std::vector<std::string> user_effects;
   std::vector<OutsideForce> outside;   // on the true machine, beyond the library
+  // The path: the seed's sines (0), or a circle of this radius (m) in the xy
+  // plane at circle_omega (rad/s), axis 3 still (Excitation).
+  double circle_radius = 0.0, circle_omega = 1.0;
   double disturbance_sigma = 0.3;      // N per axis, per sample period (plant noise)
   double force_noise_sigma = 0.3;      // N per axis, white on the logged force (command noise)
   double position_noise = 1e-6;        // m, white on logged d
@@ -128,10 +140,15 @@ struct Reference {
 class Excitation {
  public:
   explicit Excitation(std::uint64_t seed);
+  // A circle in the xy plane instead: p = centre + s(t) (R sin wt, R cos wt, 0),
+  // grown from rest at the centre by the same ramp (axis 3 holds still; after
+  // the ramp v1 = w (d2 - centre): the two cannot be told apart).
+  Excitation(double radius, double omega);
   [[nodiscard]] Reference operator()(double t) const noexcept;
 
  private:
   double phase_[3][3] = {};
+  double radius_ = 0.0, omega_ = 0.0;  // m, rad/s: the circle when radius_ > 0
 };
 Reference excitation(double t, std::uint64_t seed);
 

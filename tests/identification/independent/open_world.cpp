@@ -47,6 +47,7 @@ void diagnose_into(OpenWorldLog& L, const GeneratedLog& g, const OpenWorldOption
   const ident::Diagnosis D = ident::diagnose_motion(g.log, nominal, o.diagnose);
   L.diagnose_s = seconds_since(t0);
   L.floor = rms3(D.axis_floor);
+  L.axis_floor = D.axis_floor;
   for (const NamedEffect& n : named_effects(D)) L.named.push_back(n.label());
   L.partial = D.partial;
   L.verdict = D.verdict_text;
@@ -57,7 +58,7 @@ void diagnose_into(OpenWorldLog& L, const GeneratedLog& g, const OpenWorldOption
     L.lead = f.text;
     L.right_axis = f.axis == L.axis;
     const std::string want = "v" + std::to_string(L.from_axis + 1);
-    if (L.kind == "cross_velocity") {
+    if (L.from_axis >= 0) {
       L.right_variable = L.right_axis && f.coordinate == want;
       L.variable_listed = L.right_axis && (f.coordinate == want ||
                                            std::find(f.also_in.begin(), f.also_in.end(), want) != f.also_in.end());
@@ -90,9 +91,9 @@ OpenWorldResult run_open_world(const OpenWorldOptions& o) {
           try {
             g0 = generate(spec);
             diagnose_into(null_log, g0, o);
-            const ctl::Machine nominal(ctl::MachineModel::elkady());
-            floor0 = ident::diagnose_motion(g0.log, nominal, o.diagnose).axis_floor;
+            floor0 = null_log.axis_floor;
             // The true model of a zoh null log is the nominal one.
+            const ctl::Machine nominal(ctl::MachineModel::elkady());
             if (timing == Timing::zoh) null_log.true_rms = ident::motion_rms(g0.log, nominal.model(), o.diagnose.motion);
           } catch (const std::exception& e) {
             null_log.error = e.what();
@@ -105,7 +106,7 @@ OpenWorldResult run_open_world(const OpenWorldOptions& o) {
               OpenWorldLog L{timing, noise, rate, seed};
               L.kind = outside_kind_name(o.kinds[k]);
               L.axis = (seed + static_cast<int>(o.kinds[k])) % 3;
-              L.from_axis = (L.axis + 1 + seed % 2) % 3;
+              const int other = (L.axis + 1 + seed % 2) % 3;
               L.multiple = m;
               const int i = L.axis;
               const double peak = m * floor0[i];
@@ -113,11 +114,19 @@ OpenWorldResult run_open_world(const OpenWorldOptions& o) {
               OutsideForce f;
               f.kind = o.kinds[k];
               f.axis = i;
-              if (f.kind == OutsideForce::Kind::cross_velocity) {
-                double vmax = 0.0;
+              if (f.kind == OutsideForce::Kind::cross_velocity || f.kind == OutsideForce::Kind::cross_velocity_hump)
+                f.from_axis = other;
+              L.from_axis = outside_velocity_axis(f);
+              double vmax = 0.0;
+              if (L.from_axis >= 0)
                 for (const Vec3& v : g0.v_true) vmax = std::max(vmax, std::fabs(v[L.from_axis]));
-                f.from_axis = L.from_axis;
+              if (f.kind == OutsideForce::Kind::cross_velocity) {
                 f.size = peak / std::max(vmax, 1e-6);
+              } else if (L.from_axis >= 0) {
+                // A hump that peaks at a sixth of the speed the axis reaches (the
+                // expression of the hump found on a circle peaked at an eighth).
+                f.width = std::max(vmax, 1e-6) / 6.0;
+                f.size = peak;
               } else if (f.kind == OutsideForce::Kind::bump) {
                 // A tight spot a third of the way along the travel, 1/30 of it wide.
                 f.centre = lo + (hi - lo) / 3.0;
@@ -228,7 +237,7 @@ std::vector<std::string> open_world_failures(const OpenWorldResult& r) {
     if (!miss) continue;
     std::ostringstream os;
     os << "  " << (L.kind.empty() ? "null" : L.kind) << " axis " << L.axis + 1;
-    if (L.from_axis >= 0 && L.kind == "cross_velocity") os << " from v" << L.from_axis + 1;
+    if (L.from_axis >= 0) os << " following v" << L.from_axis + 1;
     os << " x" << L.multiple << " " << timing_name(L.timing) << "/" << noise_name(L.noise) << " " << L.rate
        << " Hz seed " << L.seed << ": named";
     for (const auto& n : L.named) os << " " << n;

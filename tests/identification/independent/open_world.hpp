@@ -23,7 +23,8 @@ struct OpenWorldOptions {
   std::vector<NoisePlacement> noises = {NoisePlacement::plant, NoisePlacement::command};
   std::vector<double> rates = {1000.0};
   std::vector<OutsideForce::Kind> kinds = {OutsideForce::Kind::cross_velocity, OutsideForce::Kind::bump,
-                                           OutsideForce::Kind::cubic};
+                                           OutsideForce::Kind::cubic, OutsideForce::Kind::velocity_hump,
+                                           OutsideForce::Kind::cross_velocity_hump};
   // The force's largest value over the log, in multiples of the honest floor
   // of its axis on the null log of the same cell and seed.
   std::vector<double> multiples = {3.0, 10.0};
@@ -43,13 +44,16 @@ struct OpenWorldLog {
   double multiple = 0.0, size = 0.0;
   bool outside = false;         // the verdict leads with outside_library
   bool right_axis = false;      // ... on the planted axis
-  bool right_variable = false;  // cross_velocity: on v_from (lead variable); others: = right_axis
-  bool variable_listed = false; // cross_velocity: v_from is the lead variable or among those seen alike
+  // Forces of a velocity (cross_velocity, the humps): on the v it follows (lead
+  // variable); others: = right_axis.
+  bool right_variable = false;
+  bool variable_listed = false; // ... that v is the lead variable or among those seen alike
   bool library_named = false;   // a library effect named as missing (beyond the delay cells' own delay)
   std::vector<std::string> named{}, partial{};
   std::string verdict{};        // the diagnosis' verdict text
   std::string lead{};           // the leading outside finding's text
   double floor = 0.0;           // the honest floor (RMS over the axes, N)
+  Vec3 axis_floor = Vec3::Zero();  // per axis (N)
   double true_rms = 0.0;        // residual RMS of the true model (N), null logs in zoh cells
   double diagnose_s = 0.0;
   std::string error{};

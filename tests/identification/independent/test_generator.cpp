@@ -125,6 +125,37 @@ TEST(IndependentGenerator, OutsideForcesAreWhatTheyStateOnTheirAxis) {
   EXPECT_LT(worst_left, 2e-3);
 }
 
+// The humps of a velocity (own on axis 1, axis 2's on axis 3): size at
+// |v| = width, odd in v, from the drive's force less the rigid body's.
+TEST(IndependentGenerator, VelocityHumpsAreWhatTheyStateOnTheirAxis) {
+  GeneratorSpec s = quiet(Timing::zoh);
+  s.effects.clear();
+  const double own = 1.5, cross = 2.0, w0 = 0.02, w1 = 0.03;
+  s.outside = {{OutsideForce::Kind::velocity_hump, 0, -1, own, 0.0, w0},
+               {OutsideForce::Kind::cross_velocity_hump, 2, 1, cross, 0.0, w1}};
+  const GeneratedLog g = generate(s);
+  const ctl::Machine truth(true_model({}));
+  const auto need = needed_force(g, truth);
+  const auto& L = g.log;
+  double worst_left = 0.0;
+  Vec3 largest = Vec3::Zero();
+  for (std::size_t k = 2; k < need.size(); ++k) {
+    const Vec3 vm = 0.5 * (L.v[k] + L.v[k + 1]);
+    const double u0 = vm[0] / w0, u1 = vm[1] / w1;
+    const Vec3 outside(own * u0 * std::exp(0.5 - 0.5 * u0 * u0), 0.0, cross * u1 * std::exp(0.5 - 0.5 * u1 * u1));
+    const Vec3 extra = L.f[k] - need[k];
+    worst_left = std::max(worst_left, (extra - outside).cwiseAbs().maxCoeff());
+    largest = largest.cwiseMax(outside.cwiseAbs());
+  }
+  std::printf("velocity humps: largest %.3g, %.3g N, |f - needed - outside| <= %.3g N\n", largest[0], largest[2],
+              worst_left);
+  // Both humps are crossed at their peaks (the path reaches well beyond w).
+  EXPECT_GT(largest[0], 0.95 * own);
+  EXPECT_GT(largest[2], 0.95 * cross);
+  EXPECT_EQ(largest[1], 0.0);
+  EXPECT_LT(worst_left, 2e-3);
+}
+
 TEST(IndependentGenerator, Delay1IsZohWithTheAppliedForceShiftedByOneSample) {
   const GeneratorSpec s = quiet(Timing::delay1);
   const GeneratedLog g = generate(s);

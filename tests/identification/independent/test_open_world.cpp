@@ -284,5 +284,79 @@ TEST(OpenWorld, LoopAddsTheBumpAsATableDownToTheNoiseFloor) {
   EXPECT_EQ(back.model.user_effects, R.model.user_effects);
 }
 
+// A force of axis 1's own speed that peaks at low speed and dies away above
+// (c v1 exp(-(v1/w)^2) on the project's own simulator, planted as an
+// expression), on a circle: there d2 - centre = v1 / w, so the scan may lead
+// with d2 or v1, and the other must be listed alike. Before, the lead was d2
+// "seen alike in d1 d3", and beside it the verdict named spring[axis 1]
+// (-25 N/m at its rest-position bound) and actuator_inertia[axis 1] (-4.3 kg)
+// as missing, with a -90 % drive gain.
+GeneratorSpec hump_on_a_circle(double size) {
+  GeneratorSpec s = spec(Timing::zoh, NoisePlacement::plant, 7);
+  s.circle_radius = 0.1;
+  s.circle_omega = 1.5;  // rad/s: |v| up to 0.15 m/s
+  if (size > 0.0) s.outside = {{OutsideForce::Kind::velocity_hump, 0, -1, size, 0.0, 0.15 / 8.0}};
+  return s;
+}
+
+const ident::AlikeVariable* alike(const ident::StructureFinding& f, const std::string& var) {
+  for (const auto& a : f.alike)
+    if (a.var == var) return &a;
+  return nullptr;
+}
+
+// On the generator's own path (three sines per axis; on its circle the
+// alignment is not determined: the null circle names a 6 ms delay on a zoh
+// log, and the hump is then not found: not yet fixed).
+TEST(OpenWorld, HumpInItsOwnSpeedNamesNoLibraryEffect) {
+  GeneratorSpec s = spec(Timing::zoh, NoisePlacement::plant, 7);
+  const GeneratedLog g0 = generate(s);
+  const ident::Diagnosis D0 = diagnose(g0);
+  double vmax = 0.0;
+  for (const Vec3& v : g0.v_true) vmax = std::max(vmax, std::fabs(v[0]));
+  s.outside = {{OutsideForce::Kind::velocity_hump, 0, -1, 15.0 * D0.axis_floor[0], 0.0, vmax / 8.0}};
+  const ident::Diagnosis D = diagnose(generate(s));
+  std::printf("hump: %s\n", D.verdict_text.c_str());
+  ASSERT_FALSE(D.outside_library.empty());
+  const ident::StructureFinding& f = D.outside_library.front();
+  EXPECT_EQ(f.axis, 0);
+  const bool v1 = f.coordinate == "v1" || alike(f, "v1");
+  EXPECT_TRUE(v1) << f.text;
+  // Nothing of the library named as missing beside it; what was fitted to an
+  // unphysical value is said as partial, with why.
+  EXPECT_TRUE(D.found().empty()) << D.verdict_text;
+  for (const auto& u : D.partial_unphysical) EXPECT_FALSE(u.why.empty()) << u.label();
+  EXPECT_NE(D.verdict_text.find("To settle it"), std::string::npos);
+  EXPECT_TRUE(D0.outside_library.empty()) << D0.verdict_text;
+  EXPECT_TRUE(D0.found().empty()) << D0.verdict_text;
+}
+
+// The alike listing: on the circle d2 and v1 are affine in each other, and a
+// smooth force of one is listed with the other (|corr| >= 0.9 stated); d1, at
+// 90 degrees to both (corr ~ 0), is not listed for its correlation.
+TEST(OpenWorld, VariablesAffineInTheLeadAreListedAlike) {
+  const ident::Diagnosis D0 = diagnose(generate(hump_on_a_circle(0.0)));
+  GeneratorSpec s = hump_on_a_circle(0.0);
+  // A carrier dragged at low speed by axis 1, on axis 3 (which holds still).
+  s.outside = {{OutsideForce::Kind::cross_velocity_hump, 2, 0, 15.0 * D0.axis_floor[2], 0.0, 0.15 / 6.0}};
+  const ident::Diagnosis D = diagnose(generate(s));
+  std::printf("hump of v1 on axis 3, on a circle: %s\n", D.verdict_text.c_str());
+  ASSERT_FALSE(D.outside_library.empty());
+  const ident::StructureFinding& f = D.outside_library.front();
+  EXPECT_EQ(f.axis, 2);
+  ASSERT_TRUE(f.coordinate == "v1" || f.coordinate == "d2") << f.text;
+  const std::string partner = f.coordinate == "v1" ? "d2" : "v1";
+  const ident::AlikeVariable* a = alike(f, partner);
+  ASSERT_NE(a, nullptr) << f.text;
+  EXPECT_GT(std::fabs(a->correlation), 0.9);
+  EXPECT_NE(std::find(f.also_in.begin(), f.also_in.end(), partner), f.also_in.end());
+  if (const ident::AlikeVariable* d1 = alike(f, "d1")) {
+    EXPECT_LT(std::fabs(d1->correlation), 0.9);
+  }
+  // The verdict says the data cannot tell them apart, and how to.
+  EXPECT_NE(D.verdict_text.find("cannot tell"), std::string::npos);
+  EXPECT_NE(D.verdict_text.find("to tell " + f.coordinate + " from " + partner), std::string::npos);
+}
+
 }  // namespace
 }  // namespace cpm::indep

@@ -79,7 +79,19 @@ struct CandidateResult {
   Eigen::MatrixXd columns;  // unweighted columns at the fitted nonlinear parameters
   Eigen::VectorXd fitted;   // unweighted contribution of the candidate (data units)
   Eigen::VectorXd residual_after;
+  // Beside structure outside the library its refit came out unphysical: kept
+  // out of the selection (Diagnosis::partial_unphysical says it with the value).
+  bool held_out = false;
   [[nodiscard]] std::string label() const;  // "coulomb_friction[axis 2]"
+};
+
+// A variable the data cannot tell from a smooth finding's own (structure.cpp):
+// nearly affine in it over the log (|correlation| >= 0.9), or its own fit
+// explains at least 80 % of what the finding's does (share).
+struct AlikeVariable {
+  std::string var;           // d1..d3, v1..v3, a1..a3, t
+  double correlation = 0.0;  // of the two variables over the log's rows
+  double share = 0.0;        // its fit's removed sum of squares / the finding's
 };
 
 struct StructureFinding {
@@ -99,8 +111,10 @@ struct StructureFinding {
   std::string shape{};                // "linear", "odd", "even" or "mixed"
   double slope = 0.0;                 // N per SI unit of the variable (the linear part)
   // Other variables where the same structure is seen (explaining at least
-  // 80 % of what `coordinate` does): the data cannot tell them apart.
+  // 80 % of what `coordinate` does, or nearly affine in it over the log):
+  // the data cannot tell them apart. The most alike first; `alike` says why.
   std::vector<std::string> also_in{};
+  std::vector<AlikeVariable> alike{};
 };
 
 // A user effect that would describe structure no library effect describes,
@@ -154,6 +168,19 @@ struct Diagnosis {
   // Library effects that explain part of an outside-the-library finding and
   // are therefore not named beside it: labels ("spring[axis 2]").
   std::vector<std::string> partial;
+  // Of those, the ones whose refit beside the outside finding came out with a
+  // value no missing effect has (a negative reflected inertia, a drive gain
+  // beyond 30 %, a parameter pinned at its physical bound) or a parameter
+  // the data do not determine (standard error above the value): never named
+  // as missing, said as partial with the figure and why.
+  struct UnphysicalPartial {
+    std::string effect;
+    int axis = -1;
+    std::vector<ParamEstimate> params;
+    std::string why;
+    [[nodiscard]] std::string label() const { return effect + (axis >= 0 ? "[axis " + std::to_string(axis + 1) + "]" : ""); }
+  };
+  std::vector<UnphysicalPartial> partial_unphysical;
   std::vector<CandidateResult> candidates;  // ranked, best first
   int verdict = -1;                 // index in candidates, -1: none missing
   bool ambiguous = false;           // the verdict cannot be told apart from another candidate

@@ -34,6 +34,16 @@ void legendre_row(double x, double lo, double hi, double* out);
 // acceleration, which a spring at its stiffness bound took up); of an
 // acceleration: at the row.
 Eigen::MatrixXd smooth_columns(const MotionProblem& P, int axis, const std::string& var, double lo, double hi);
+// The nodes of a table of a variable with values x: kTableUniformNodes
+// evenly over its range and the kTableQuantileNodes' inner quantiles (where
+// the log dwells), merged closer than 1 % of the range. Increasing.
+constexpr int kTableUniformNodes = 12, kTableQuantileNodes = 8;
+std::vector<double> table_nodes(std::vector<double> x);
+// A table of `var` on `axis`: piecewise linear between table_nodes of the
+// log's rows, as the hats of nodes 2..n and a constant, filtered as
+// smooth_columns; no columns when fewer than 3 nodes. It follows a narrow
+// hump the polynomial cannot.
+Eigen::MatrixXd table_columns(const MotionProblem& P, int axis, const std::string& var);
 
 // bump_beside_step: also a bump on an axis where a step was found (by
 // default not: one of the two describes the axis).
