@@ -65,7 +65,7 @@ void ExcitationOptions::validate() const {
   if (!(ramp >= 0.2 && ramp <= 10.0)) throw Error("excite: --ramp must be within 0.2..10 s");
   if (iterations < 0 || iterations > 100000) throw Error("excite: --iterations must be 0..100000");
   if (speeds < 0 || speeds > 8) throw Error("excite: --speeds must be 0..8");
-  if (refine < 0 || refine > 100000) throw Error("excite: the refinement's budget must be 0..100000 designs");
+  if (refine < -1 || refine > 100000) throw Error("excite: the refinement's budget must be 0..100000 designs");
 }
 
 MultiSine::MultiSine(Vec3 centre, double period, int periods, double ramp, std::array<std::vector<int>, 3> harmonic,
@@ -637,7 +637,7 @@ ExcitationDesign design_excitation(const ctl::Machine& model, const ExcitationLi
       // A shape the limits leave no amplitude for: not a design.
     }
   }
-  refine(D, best, scaled_design, score_of, o.refine);
+  refine(D, best, scaled_design, score_of, o.refine >= 0 ? o.refine : o.iterations / 2);
   ctl::validate_trajectory(D.trajectory, model, 1e-3, L.velocity, L.acceleration);
   return D;
 }

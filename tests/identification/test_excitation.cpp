@@ -90,7 +90,7 @@ TEST(Excitation, OptimisedDesignAgainstAPlainMultiSineOfTheSameDuration) {
   o.iterations = 150;
   o.refine = 200;
   // The full form, by hand: CPM_EXCITE_ITERATIONS=400 (cpm excite's default), CPM_EXCITE_SEED=2,
-  // CPM_EXCITE_REFINE=400 (the pattern search's designs; default 200) ...
+  // CPM_EXCITE_REFINE=400 (the pattern search's designs; cpm excite's default 200) ...
   if (const char* c = std::getenv("CPM_EXCITE_ITERATIONS")) o.iterations = std::atoi(c);
   if (const char* c = std::getenv("CPM_EXCITE_SEED")) o.seed = std::strtoull(c, nullptr, 10);
   if (const char* c = std::getenv("CPM_EXCITE_REFINE")) o.refine = std::atoi(c);

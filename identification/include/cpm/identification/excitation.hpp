@@ -59,7 +59,7 @@ struct ExcitationOptions {
   int harmonics = 6;           // harmonics per axis
   double ramp = 1.0;           // s, fade in and out
   int iterations = 400;        // candidate designs tried by the optimiser's random search
-  int refine = 200;            // then designs tried by the pattern search from its best
+  int refine = -1;             // then designs tried by the pattern search from its best (-1: iterations / 2)
   std::uint64_t seed = 1;
   bool optimise = true;        // false: the flat spectrum with Schroeder phases
   int speeds = 4;              // pairs of constant-speed passes per axis and period (0: sines only)
