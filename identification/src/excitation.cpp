@@ -65,6 +65,7 @@ void ExcitationOptions::validate() const {
   if (!(ramp >= 0.2 && ramp <= 10.0)) throw Error("excite: --ramp must be within 0.2..10 s");
   if (iterations < 0 || iterations > 100000) throw Error("excite: --iterations must be 0..100000");
   if (speeds < 0 || speeds > 8) throw Error("excite: --speeds must be 0..8");
+  if (refine < -1 || refine > 100000) throw Error("excite: the refinement's budget must be 0..100000 designs");
 }
 
 MultiSine::MultiSine(Vec3 centre, double period, int periods, double ramp, std::array<std::vector<int>, 3> harmonic,
@@ -185,7 +186,11 @@ Peaks peaks(const MultiSine& m, const ctl::Machine& model, double step) {
   Peaks p;
   const double T = m.duration();
   const int n = static_cast<int>(std::ceil(T / step));
+  // The fade in, one period, the fade out: the periods between repeat the first.
+  const int first_end = static_cast<int>(std::ceil((m.ramp() + m.period()) / step));
+  const int last_begin = static_cast<int>(std::floor((T - m.ramp()) / step)) - 1;
   for (int k = 0; k <= n; ++k) {
+    if (k > first_end && k < last_begin) k = last_begin;
     const ctl::TrajectorySample s = m.sample(std::min(T, k * step));
     p.speed = std::max(p.speed, s.v.norm());
     p.acceleration = std::max(p.acceleration, s.a.norm());
@@ -403,6 +408,112 @@ std::array<std::vector<int>, 3> harmonics_of(int n) {
   return k;
 }
 
+// The design's continuous variables as one vector: per axis the
+// log-amplitudes and phases of its harmonics, then (with passes) the
+// log-stroke, the log-shares and the offset; with the step each starts at.
+struct DesignVector {
+  std::vector<double> x, step;
+};
+
+DesignVector design_vector(const MultiSine& m) {
+  DesignVector v;
+  auto add = [&v](double x, double h) {
+    v.x.push_back(x);
+    v.step.push_back(h);
+  };
+  for (int i = 0; i < 3; ++i) {
+    for (double a : m.amplitude()[i]) add(std::log(std::max(a, 1e-9)), 0.3);
+    for (double p : m.phase()[i]) add(p, 0.5);
+    const Passes& q = m.passes()[static_cast<std::size_t>(i)];
+    if (q.stroke > 0.0) {
+      add(std::log(q.stroke), 0.3);
+      for (double w : q.share) add(std::log(w), 0.3);
+      add(q.offset, 0.05);
+    }
+  }
+  return v;
+}
+
+struct DesignParts {
+  std::array<std::vector<double>, 3> a, phi;
+  std::array<Passes, 3> passes;
+};
+
+// The inverse of design_vector, on the layout of `like`.
+DesignParts design_parts(const std::vector<double>& x, const MultiSine& like) {
+  DesignParts d{like.amplitude(), like.phase(), like.passes()};
+  std::size_t k = 0;
+  for (int i = 0; i < 3; ++i) {
+    for (double& a : d.a[i]) a = std::exp(x[k++]);
+    for (double& p : d.phi[i]) p = x[k++];
+    Passes& q = d.passes[static_cast<std::size_t>(i)];
+    if (q.stroke > 0.0) {
+      q.stroke = std::exp(x[k++]);
+      for (double& w : q.share) w = std::exp(x[k++]);
+      q.offset = x[k++];
+    }
+  }
+  return d;
+}
+
+template <class Scaled, class ScoreOf>
+void refine(ExcitationDesign& D, double& best, const Scaled& scaled_design, const ScoreOf& score_of, int budget) {
+  // Pattern search, one variable at a time (Hooke and Jeeves' exploratory
+  // move with a step per variable): a step that pays is kept and doubled,
+  // one that does not is tried the other way, then halved. Deterministic,
+  // no gradient (the criterion has kinks where the limit that binds
+  // changes), every candidate scaled to the limits as in the search.
+  DesignVector v = design_vector(D.trajectory);
+  const std::size_t n = v.x.size();
+  int used = 0;
+  auto attempt = [&](const std::vector<double>& x) {
+    ++used;
+    try {
+      const DesignParts p = design_parts(x, D.trajectory);
+      const MultiSine cand = scaled_design(p.a, p.phi, p.passes);
+      ExcitationFigures F;
+      if (const double s = score_of(cand, F); s > best) {
+        best = s;
+        D.trajectory = cand;
+        D.figures = F;
+        v.x = design_vector(cand).x;  // the scaled design's own amplitudes
+        return true;
+      }
+    } catch (const Error&) {
+      // outside every amplitude the limits allow: not a design
+    }
+    return false;
+  };
+  while (used < budget) {
+    const std::vector<double> before = v.x;
+    bool moved = false;
+    for (std::size_t k = 0; k < n && used < budget; ++k) {
+      if (v.step[k] < 1e-3) continue;
+      bool paid = false;
+      for (const double dir : {1.0, -1.0}) {
+        if (used >= budget) break;
+        std::vector<double> x = v.x;
+        x[k] += dir * v.step[k];
+        if (attempt(x)) {
+          v.step[k] = std::min(2.0 * v.step[k], 2.0);
+          paid = moved = true;
+          break;
+        }
+      }
+      if (!paid) v.step[k] *= 0.5;
+    }
+    // Hooke and Jeeves' pattern move: the sweep's whole move once more, while it pays.
+    while (moved && used < budget) {
+      std::vector<double> x = v.x;
+      const std::vector<double> from = v.x;
+      for (std::size_t k = 0; k < n; ++k) x[k] += v.x[k] - before[k];
+      if (!attempt(x)) break;
+      if (v.x == from) break;
+    }
+    if (!moved && *std::max_element(v.step.begin(), v.step.end()) < 1e-3) break;
+  }
+}
+
 }  // namespace
 
 MultiSine schroeder_multisine(const ctl::Machine& model, const ExcitationLimits& L, const ExcitationOptions& o) {
@@ -526,6 +637,7 @@ ExcitationDesign design_excitation(const ctl::Machine& model, const ExcitationLi
       // A shape the limits leave no amplitude for: not a design.
     }
   }
+  refine(D, best, scaled_design, score_of, o.refine >= 0 ? o.refine : o.iterations / 2);
   ctl::validate_trajectory(D.trajectory, model, 1e-3, L.velocity, L.acceleration);
   return D;
 }

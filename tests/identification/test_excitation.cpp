@@ -2,9 +2,9 @@
 // cpm excite's design (excitation.hpp): within the limits, periodic, and,
 // on the simulated machine, better than a plain multi-sine of the same
 // duration: the standard errors of the design's regressor fitted on each log
-// smaller (1.81x in the median over its 19 effect parameters within the same
-// limits, 1.18x within the plain one's peak displacement; the issue's 2x is
-// not reached).
+// smaller (2.11x in the median over its 19 effect parameters within the same
+// limits, 1.32x within the plain one's peak displacement; the issue's 2x is
+// reached on seeds 1 and 3, not on seed 2: 1.90x).
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -26,6 +26,7 @@ ExcitationOptions quick() {
   o.periods = 3;
   o.harmonics = 5;
   o.iterations = 60;
+  o.refine = 40;
   return o;
 }
 
@@ -87,9 +88,12 @@ TEST(Excitation, OptimisedDesignAgainstAPlainMultiSineOfTheSameDuration) {
   o.period = 5.0;
   o.harmonics = 4;
   o.iterations = 150;
-  // The full form, by hand: CPM_EXCITE_ITERATIONS=400 (cpm excite's default), CPM_EXCITE_SEED=2 ...
+  o.refine = 200;
+  // The full form, by hand: CPM_EXCITE_ITERATIONS=400 (cpm excite's default), CPM_EXCITE_SEED=2,
+  // CPM_EXCITE_REFINE=400 (the pattern search's designs; cpm excite's default 200) ...
   if (const char* c = std::getenv("CPM_EXCITE_ITERATIONS")) o.iterations = std::atoi(c);
   if (const char* c = std::getenv("CPM_EXCITE_SEED")) o.seed = std::strtoull(c, nullptr, 10);
+  if (const char* c = std::getenv("CPM_EXCITE_REFINE")) o.refine = std::atoi(c);
   const MultiSine plain = schroeder_multisine(model, L, o);
   ExcitationLimits same = L;
   const Vec3 room = plain.peak_displacement() / L.margin;
@@ -140,11 +144,12 @@ TEST(Excitation, OptimisedDesignAgainstAPlainMultiSineOfTheSameDuration) {
   const double m_full = compare("within the same limits", full);
   const double m_boxed = compare("within the plain one's peak displacement", boxed);
   for (int i = 0; i < 3; ++i) EXPECT_LE(boxed.trajectory.peak_displacement()[i], plain.peak_displacement()[i] * (1 + 1e-9));
-  // Measured 1.81x and 1.18x at 150 designs; at 400 (seeds 1, 2, 3) 2.01x, 1.73x, 2.07x
-  // and 1.18x, 1.20x, 1.19x (issue 28 asks 2x: not reliably reached, docs/identification.md);
-  // these bars fail if the passes or the optimiser stop paying.
-  EXPECT_GE(m_full, 1.6);
-  EXPECT_GE(m_boxed, 1.05);
+  // Measured 2.11x and 1.32x (150 random designs, then 200 of the pattern search);
+  // seeds 2 and 3: 1.90x and 2.21x, 1.21x and 1.25x. Without the pattern search
+  // 1.80x and 1.18x (seed 1): these bars fail if the passes or the refinement stop
+  // paying. Issue 28 asks 2x; seed 2 stays under it (docs/identification.md).
+  EXPECT_GE(m_full, 1.95);
+  EXPECT_GE(m_boxed, 1.25);
 }
 
 // What cpm identify will run on cpmd, in-process: the designed experiment

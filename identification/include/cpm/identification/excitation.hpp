@@ -22,7 +22,8 @@
 // the regressor diagnosis fits (the base parameters, the plane nuisance and
 // the linear columns of every library effect, motion.hpp), by the
 // D-criterion (log det of X^T X), starting from a flat spectrum with
-// Schroeder phases; or, with `separate`, the one that tells two named
+// Schroeder phases (a random local search, then a pattern search on every
+// continuous variable from its best); or, with `separate`, the one that tells two named
 // effects apart (least correlation of their columns beside the base).
 // Every candidate is scaled to the largest amplitude within the workspace
 // box, the speed, acceleration and force limits (x `margin`), and the design
@@ -57,7 +58,8 @@ struct ExcitationOptions {
   int periods = 4;             // periods played (>= 2 to estimate noise from their differences)
   int harmonics = 6;           // harmonics per axis
   double ramp = 1.0;           // s, fade in and out
-  int iterations = 400;        // candidate designs tried by the optimiser
+  int iterations = 400;        // candidate designs tried by the optimiser's random search
+  int refine = -1;             // then designs tried by the pattern search from its best (-1: iterations / 2)
   std::uint64_t seed = 1;
   bool optimise = true;        // false: the flat spectrum with Schroeder phases
   int speeds = 4;              // pairs of constant-speed passes per axis and period (0: sines only)
