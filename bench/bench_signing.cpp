@@ -61,6 +61,20 @@ void BM_SealAckAlone(benchmark::State& st) {
 }
 BENCHMARK(BM_SealAckAlone);
 
+// Hand the seal to the sealing thread (timed: what the publisher pays), then
+// wait, untimed, until it has signed, so the next iteration starts alike.
+void seal_and_wait_untimed(Signer& signer, benchmark::State& st) {
+  benchmark::DoNotOptimize(signer.seal(1).data());
+  st.PauseTiming();
+  while (signer.seals_waiting() > 0) std::this_thread::yield();
+  st.ResumeTiming();
+}
+
+void stop_and_count(Signer& signer, benchmark::State& st, std::int64_t seals) {
+  signer.stop_thread();
+  st.counters["messages_per_seal"] = static_cast<double>(st.iterations()) / static_cast<double>(std::max<std::int64_t>(seals, 1));
+}
+
 // The same with the signature on the sealing thread (Signer::start_thread,
 // as cpmd runs): the CPU time is the publishing thread's own (the digests,
 // the hand-off); the seal's signature is the sealing thread's. Each seal is
@@ -76,15 +90,9 @@ void BM_SealStateStreamOffThread(benchmark::State& st) {
     ++s.cycle;
     now += 0.001;
     benchmark::DoNotOptimize(signer.add(s, now).data());
-    if (signer.due(now)) {
-      benchmark::DoNotOptimize(signer.seal(1).data());
-      st.PauseTiming();
-      while (signer.seals_waiting() > 0) std::this_thread::yield();
-      st.ResumeTiming();
-    }
+    if (signer.due(now)) seal_and_wait_untimed(signer, st);
   }
-  signer.stop_thread();
-  st.counters["messages_per_seal"] = static_cast<double>(st.iterations()) / static_cast<double>(std::max<std::int64_t>(seals, 1));
+  stop_and_count(signer, st, seals);
 }
 BENCHMARK(BM_SealStateStreamOffThread);
 
@@ -100,13 +108,9 @@ void BM_SealAckAloneOffThread(benchmark::State& st) {
     ++a.id;
     benchmark::DoNotOptimize(signer.add(a, 0.0, true).data());
     if (!signer.due(0.0)) st.SkipWithError("an ack alone is due at once with a sealing thread");
-    benchmark::DoNotOptimize(signer.seal(1).data());
-    st.PauseTiming();
-    while (signer.seals_waiting() > 0) std::this_thread::yield();
-    st.ResumeTiming();
+    seal_and_wait_untimed(signer, st);
   }
-  signer.stop_thread();
-  st.counters["messages_per_seal"] = static_cast<double>(st.iterations()) / static_cast<double>(std::max<std::int64_t>(seals, 1));
+  stop_and_count(signer, st, seals);
 }
 BENCHMARK(BM_SealAckAloneOffThread);
 
