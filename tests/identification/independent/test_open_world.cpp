@@ -331,6 +331,17 @@ TEST(OpenWorld, HumpInItsOwnSpeedNamesNoLibraryEffect) {
   EXPECT_TRUE(D0.found().empty()) << D0.verdict_text;
 }
 
+// A clean zoh log on the one-frequency circle: there a delay is one column
+// with the phase of the zoh's half period (and with a spring or an inertia),
+// so the data cannot name one. Before, the verdict was "actuation_delay
+// ~6 ms"; it must be none, or say the delay is not determined.
+TEST(OpenWorld, NullCircleNamesNoDelay) {
+  const ident::Diagnosis D = diagnose(generate(hump_on_a_circle(0.0)));
+  std::printf("null circle: %s\n", D.verdict_text.c_str());
+  EXPECT_TRUE(D.found().empty()) << D.verdict_text;
+  EXPECT_TRUE(D.outside_library.empty()) << D.verdict_text;
+}
+
 // The alike listing: on the circle d2 and v1 are affine in each other, and a
 // smooth force of one is listed with the other (|corr| >= 0.9 stated); d1, at
 // 90 degrees to both (corr ~ 0), is not listed for its correlation.
