@@ -46,6 +46,19 @@ Alignment estimate_alignment(const MotionProblem& P, const Engine& E) {
   A.rss_at_tau = best;
   A.reference = A.model_tau + std::clamp(A.tau - A.model_tau, -0.5 * P.dt, 0.5 * P.dt);
   A.rss_at_reference = MotionProblem::at_delay(e, A.reference, P.dt).squaredNorm();
+  // A minimum on an end of the range is no minimum: the RSS is still falling
+  // there. On a clean zoh log of a one-frequency circle it ran to the end
+  // (6 periods, "6 +- 1.2 ms"), a false delay; what is left then is the
+  // model's own alignment.
+  const double edge = 1e-6 * P.dt;
+  if (best_tau <= MotionProblem::kShiftLo * P.dt + edge || best_tau >= MotionProblem::kShiftHi * P.dt - edge) {
+    A.determined = false;
+    A.tau = A.reference;
+    A.rss_at_tau = A.rss_at_reference;
+    A.std_error = -1.0;
+    A.n_eff = E.effective_rows(MotionProblem::at_delay(e, A.tau, P.dt));
+    return A;
+  }
   // Standard error from the parabola's curvature, with the residual's variance
   // per effective row (rows of a filtered residual are not independent).
   const double n = static_cast<double>(e.rows());

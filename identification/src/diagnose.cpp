@@ -251,7 +251,12 @@ CandidateResult delay_candidate(const Diagnosis& D, const Engine& E, const Diagn
   const bool beyond = A.beyond_sampling() && (A.std_error < 0.0 || A.missing() - 0.5 * A.period > 3.0 * A.std_error);
   c.significant = beyond && c.p_adjusted < opt.alpha && c.delta_bic < 0.0;
   c.identifiable = true;
-  if (!A.beyond_sampling())
+  if (!A.determined)
+    c.note = "not determined: the fit still improves at an end of the searched range (" +
+             std::to_string(MotionProblem::kShiftLo) + " to " + std::to_string(MotionProblem::kShiftHi) +
+             " periods); on this trajectory a delay cannot be told from a phase, an inertia or viscous friction: "
+             "run a multi-frequency experiment to measure it";
+  else if (!A.beyond_sampling())
     c.note = "within half a period of the model's alignment: how the data were sampled (" + A.convention() + ")";
   c.score = c.significant ? -1e300 : 0.0;
   return c;

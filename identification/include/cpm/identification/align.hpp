@@ -37,6 +37,11 @@ struct Alignment {
   double rss_at_reference = 0.0;  // the same at `reference`
   double n_eff = 0.0;             // effective independent rows of that residual
   int trials = 1;                 // whole-period brackets searched (look-elsewhere)
+  // False when the RSS still falls at an end of the searched range: the log
+  // then does not determine the delay (on a one-frequency path a delay is a
+  // phase, one column with the inertia and viscous friction), and tau is the
+  // reference, the alignment the model as given may take.
+  bool determined = true;
   // The delay the model is missing, tau - model_tau (s), when beyond T/2.
   [[nodiscard]] double missing() const noexcept { return tau - model_tau; }
   [[nodiscard]] bool beyond_sampling() const noexcept { return missing() > 0.5 * period; }
