@@ -19,6 +19,7 @@
 #include "canopen/record_log.hpp"
 #include "cpm/identification/excitation.hpp"
 #include "cpm/identification/model_loop.hpp"
+#include "support/planted_effects.hpp"
 
 namespace cpm::daemon::test {
 namespace {
@@ -94,36 +95,7 @@ TEST(IdentifyThroughTheBus, TheLoopNamesTheBusDelayAndThePlantedEffectsAndTheCir
   double delay_se = -1.0;
   for (const auto& f : R.fitted)
     if (f.name == "effects.actuation_delay.tau") delay_se = f.std_error;
-  bool coulomb = false, viscous = false, payload = false, delay = false;
-  for (const ctl::DynamicEffect& e : R.model.effects) {
-    std::printf("fitted %s: %.5g %.5g %.5g %.5g\n", e.label().c_str(), e.param[0], e.param[1], e.param[2], e.param[3]);
-    if (e.type == ctl::DynamicEffectType::actuation_delay) {
-      delay = true;
-      std::printf("actuation_delay %.4f ms +- %.4f ms (the bus: one period, %.1f ms)\n", e.param[0] * 1e3, delay_se * 1e3,
-                  T * 1e3);
-      EXPECT_NEAR(e.param[0], T, std::max(0.02 * T, 3.0 * delay_se));
-    }
-    if (e.type == ctl::DynamicEffectType::coulomb_friction && e.axis == 0) {
-      coulomb = true;
-      EXPECT_NEAR(e.param[0], 3.0, 0.06);
-    }
-    if (e.type == ctl::DynamicEffectType::viscous_friction && e.axis == 2) {
-      viscous = true;
-      EXPECT_NEAR(e.param[0], 20.0, 0.4);
-    }
-    if (e.type == ctl::DynamicEffectType::payload_mass) {
-      payload = true;
-      EXPECT_NEAR(e.param[0], 0.4, 0.008);
-    }
-    if (e.type == ctl::DynamicEffectType::inertia_error) {
-      payload = true;
-      EXPECT_NEAR(e.param[3], 0.4 * ctl::kGravity, 0.02 * 0.4 * ctl::kGravity);
-    }
-  }
-  EXPECT_TRUE(delay);
-  EXPECT_TRUE(coulomb);
-  EXPECT_TRUE(viscous);
-  EXPECT_TRUE(payload);
+  cpm::test::expect_planted_effects_named(R.model.effects, T, delay_se);  // the bus: one period
 
   // The new model into cpmd (disabled), and the circle again.
   auto load = [&](const ctl::Machine& m) {

@@ -16,6 +16,7 @@
 #include "cpm/identification/fit.hpp"
 #include "cpm/identification/model_loop.hpp"
 #include "identification/sim_data.hpp"
+#include "support/planted_effects.hpp"
 
 namespace cpm::ident {
 namespace {
@@ -174,39 +175,10 @@ TEST(Excitation, TheLoopOnTheDesignedExperimentNamesEveryPlantedEffect) {
   std::fputs(loop_text(R).c_str(), stdout);
   EXPECT_FALSE(R.outside_library);
   EXPECT_LE(R.steps.back().rms, 1.2 * R.steps.back().noise_floor);
-  bool coulomb = false, viscous = false, payload = false, delay = false;
   double delay_se = -1.0;
   for (const auto& f : R.fitted)
     if (f.name == "effects.actuation_delay.tau") delay_se = f.std_error;
-  for (const ctl::DynamicEffect& e : R.model.effects) {
-    if (e.type == ctl::DynamicEffectType::coulomb_friction && e.axis == 0) {
-      coulomb = true;
-      EXPECT_NEAR(e.param[0], 3.0, 0.06);
-    }
-    if (e.type == ctl::DynamicEffectType::viscous_friction && e.axis == 2) {
-      viscous = true;
-      EXPECT_NEAR(e.param[0], 20.0, 0.4);
-    }
-    // The payload as itself or in the base refit (dA = m / 2, dE = m g).
-    if (e.type == ctl::DynamicEffectType::payload_mass) {
-      payload = true;
-      EXPECT_NEAR(e.param[0], 0.4, 0.008);
-    }
-    if (e.type == ctl::DynamicEffectType::inertia_error) {
-      payload = true;
-      EXPECT_NEAR(e.param[0], 0.2, 0.004);
-      EXPECT_NEAR(e.param[3], 0.4 * ctl::kGravity, 0.02 * 0.4 * ctl::kGravity);
-    }
-    if (e.type == ctl::DynamicEffectType::actuation_delay) {
-      delay = true;
-      std::printf("actuation_delay %.4f ms +- %.4f ms (planted 1 ms)\n", e.param[0] * 1e3, delay_se * 1e3);
-      EXPECT_NEAR(e.param[0], 1e-3, std::max(0.02e-3, 3.0 * delay_se));
-    }
-  }
-  EXPECT_TRUE(coulomb);
-  EXPECT_TRUE(viscous);
-  EXPECT_TRUE(payload);
-  EXPECT_TRUE(delay);
+  test::expect_planted_effects_named(R.model.effects, 1e-3, delay_se);
 }
 
 TEST(Excitation, SeparateDesignDecorrelatesTheTwoNamedEffects) {

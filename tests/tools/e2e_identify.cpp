@@ -18,6 +18,7 @@
 #include "support/daemon_process.hpp"
 #include "tools/cpm_command.hpp"
 #include "tools/cpmd_holding.hpp"
+#include "support/planted_effects.hpp"
 
 namespace cpm {
 namespace {
@@ -64,38 +65,10 @@ TEST(IdentifyOnCpmd, TheExperimentRecordedAndTheLoopNameEveryPlantedEffect) {
   ASSERT_EQ(r.status, 0) << r.out << d->log();
   EXPECT_NE(r.out.find("within cpmd's limits"), std::string::npos) << r.out;
   const io::ModelFile got = io::load_model_file(better);
-  bool coulomb = false, viscous = false, payload = false, delay = false;
   double delay_se = -1.0;
   for (const io::FittedParameter& f : got.fitted)
     if (f.name == "effects.actuation_delay.tau") delay_se = f.std_error;
-  for (const ctl::DynamicEffect& x : got.model.effects) {
-    std::printf("fitted %s: %.5g %.5g %.5g %.5g\n", x.label().c_str(), x.param[0], x.param[1], x.param[2], x.param[3]);
-    if (x.type == ctl::DynamicEffectType::coulomb_friction && x.axis == 0) {
-      coulomb = true;
-      EXPECT_NEAR(x.param[0], 3.0, 0.06);
-    }
-    if (x.type == ctl::DynamicEffectType::viscous_friction && x.axis == 2) {
-      viscous = true;
-      EXPECT_NEAR(x.param[0], 20.0, 0.4);
-    }
-    if (x.type == ctl::DynamicEffectType::payload_mass) {
-      payload = true;
-      EXPECT_NEAR(x.param[0], 0.4, 0.008);
-    }
-    if (x.type == ctl::DynamicEffectType::actuation_delay) {  // one period of cpmd's loop
-      delay = true;
-      std::printf("actuation_delay %.4f ms +- %.4f ms (planted 1 ms)\n", x.param[0] * 1e3, delay_se * 1e3);
-      EXPECT_NEAR(x.param[0], 1e-3, std::max(0.02e-3, 3.0 * delay_se));
-    }
-    if (x.type == ctl::DynamicEffectType::inertia_error) {  // the payload in the base refit: dE = m g
-      payload = true;
-      EXPECT_NEAR(x.param[3], 0.4 * ctl::kGravity, 0.02 * 0.4 * ctl::kGravity);
-    }
-  }
-  EXPECT_TRUE(coulomb) << r.out;
-  EXPECT_TRUE(viscous) << r.out;
-  EXPECT_TRUE(payload) << r.out;
-  EXPECT_TRUE(delay) << r.out;
+  test::expect_planted_effects_named(got.model.effects, 1e-3, delay_se, r.out);  // the delay: one period of cpmd's loop
 
   // --apply: the paper's circle before and after, and the same circle with the true model in cpmd.
   double before = 0, after = 0;
