@@ -72,17 +72,13 @@ std::string chromium() {
 TEST(ScopeOnCpmd, TriggerFiresOnThePaperCirclesStartAndTheCaptureMatchesTheRecordToTheSample) {
   const std::string browser = chromium();
   if (browser.empty()) GTEST_SKIP() << "chromium is not installed (apt-get install chromium): the page is not checked";
-  const test::TempDir dir("scope");
-  test::OperatorsDir ops(dir / "operators.d");
-  const daemon::Credentials eng = ops.add("eng", daemon::Role::engineer);
-  const std::string cfg_path = test::sim_config(dir.path(), "sim.yaml", ops.path());
-  const auto cfg = daemon::load_config(cfg_path);
-  auto d = test::start_cpmd(cfg_path, dir / "cpmd.log");
-  daemon::Client c(cfg.lcm, eng);
-  ASSERT_TRUE(test::enable_and_hold(c, *d));
-  ASSERT_TRUE(c.release());
-  const std::string conn = " --url '" + cfg.lcm.url + "'";
-  const std::string op = conn + " --key " + ops.key_path("eng") + " --operator eng";
+  test::EngineerOnCpmd rig("scope");
+  ASSERT_TRUE(rig.holding);
+  ASSERT_TRUE(rig.client.release());
+  const auto& dir = rig.dir;
+  const auto& cfg = rig.cfg;
+  auto& c = rig.client;
+  const std::string op = rig.as_engineer();
 
   // To the circle's start, so that the circle is the next segment to start.
   const auto mv = test::run_command(std::string(CPM_EXE) + " move 0.6,0.425,0.3" + op, dir / "move.out");
@@ -138,7 +134,7 @@ TEST(ScopeOnCpmd, TriggerFiresOnThePaperCirclesStartAndTheCaptureMatchesTheRecor
   });
   for (int i = 0; i < 20; ++i) c.handle(0.05);
   ASSERT_EQ(circle_first, -1) << "a segment started before the circle";
-  test::Process circle({CPM_EXE, "circle", "--paper", "--no-approach", "--url", cfg.lcm.url, "--key", ops.key_path("eng"),
+  test::Process circle({CPM_EXE, "circle", "--paper", "--no-approach", "--url", cfg.lcm.url, "--key", rig.ops.key_path("eng"),
                         "--operator", "eng"},
                        dir / "circle.log", true);
   std::int64_t newest_live = -1;

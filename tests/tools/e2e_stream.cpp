@@ -29,20 +29,16 @@ using cpm_msgs::state_t;
 Vec3 v3(const double* p) { return Vec3(p[0], p[1], p[2]); }
 
 TEST(StreamOnCpmd, AGoodFileIsApproachedAndPlayedAFastOneRefusedWithNothingMoved) {
-  const test::TempDir dir("stream");
-  test::OperatorsDir ops(dir / "operators.d");
-  const daemon::Credentials eng = ops.add("eng", daemon::Role::engineer);
-  const std::string cfg_path = test::sim_config(dir.path(), "sim.yaml", ops.path());
-  const auto cfg = daemon::load_config(cfg_path);
-  auto d = test::start_cpmd(cfg_path, dir / "cpmd.log");
-  daemon::Client c(cfg.lcm, eng);
-  std::optional<state_t> s = test::enable_and_hold(c, *d);
-  ASSERT_TRUE(s);
+  test::EngineerOnCpmd rig("stream");
+  ASSERT_TRUE(rig.holding);
+  std::optional<state_t> s = rig.holding;
   const Vec3 at_start = v3(s->position);
-  ASSERT_TRUE(c.release());  // cpm commands from here; this client only reads the state
+  ASSERT_TRUE(rig.client.release());  // cpm commands from here; this client only reads the state
+  const auto& dir = rig.dir;
+  const auto& cfg = rig.cfg;
+  auto& c = rig.client;
 
-  const std::string cpm = std::string(CPM_EXE) + " stream --url '" + cfg.lcm.url + "' --key " + ops.key_path("eng") +
-                          " --operator eng ";
+  const std::string cpm = std::string(CPM_EXE) + " stream" + rig.as_engineer() + " ";
   // Over the limit at row 9802 (a 30 s file): refused, with the limits cpmd
   // publishes (no --config), before any approach.
   const test::MultiSine fast = test::over_at(9802, cfg.limits.velocity);
@@ -65,7 +61,7 @@ TEST(StreamOnCpmd, AGoodFileIsApproachedAndPlayedAFastOneRefusedWithNothingMoved
   double p_end[3], v_end[3], a_end[3];
   good.at(4.0, p_end, v_end, a_end);
   const auto ok = test::run_command(cpm + (dir / "good.csv"), dir / "good.out");
-  EXPECT_EQ(ok.status, 0) << ok.out << d->log();
+  EXPECT_EQ(ok.status, 0) << ok.out << rig.cpmd->log();
   EXPECT_NE(ok.out.find("approach: moving to the file's first point"), std::string::npos) << ok.out;
   EXPECT_NE(ok.out.find("a stop of"), std::string::npos) << ok.out;
   // The newest state (those queued while cpm ran are read first).
