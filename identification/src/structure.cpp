@@ -413,12 +413,23 @@ SmoothFit smooth_fit(const MotionProblem& P, const AxisResidual& A, const std::s
   return s;
 }
 
-std::optional<StructureFinding> smooth_finding(const MotionProblem& P, const AxisResidual& A) {
+// An axis that covers less than this (m) holds still in these data: its d, v
+// and a are encoder noise and the tracking error the unexplained force itself
+// causes, so they follow that force without being its cause (a force on x
+// was said to follow d3 "over [73.2, 73.2] mm" on a circle in xy).
+constexpr double kAxisMovesAtLeast = 0.005;
+
+std::optional<StructureFinding> smooth_finding(const MotionProblem& P, const AxisResidual& A,
+                                               const std::vector<double>& span) {
   const int R = P.rows(), i = A.axis;
   std::vector<SmoothFit> fits;
   const bool has_a = P.a_columns.size() >= static_cast<std::size_t>(R) || P.a.size() >= static_cast<std::size_t>(R);
-  for (const char* v : kSmoothVariables)
-    if (v[0] != 'a' || has_a) fits.push_back(smooth_fit(P, A, v));
+  for (const char* v : kSmoothVariables) {
+    if (v[0] == 'a' && !has_a) continue;
+    if (v[0] != 't' && span[static_cast<std::size_t>(v[1] - '1')] < kAxisMovesAtLeast) continue;
+    fits.push_back(smooth_fit(P, A, v));
+  }
+  if (fits.empty()) return std::nullopt;
   const auto best = std::max_element(fits.begin(), fits.end(),
                                      [](const SmoothFit& a, const SmoothFit& b) { return a.removed < b.removed; });
   if (best->coef.size() == 0 || !(best->p < 1e-4)) return std::nullopt;
@@ -600,8 +611,8 @@ std::vector<StructureFinding> find_motion_structure(const MotionProblem& P,
     for (int j = 0; j < 3; ++j) add(out, periodic_in_position(P, *A, j, span[j]));
     add(out, periodic_in_time(tvec, *A));
     add(out, trend_in_time(tvec, *A));
-    add(out, smooth_finding(P, *A));
-    if (span[i] < 0.005) continue;
+    add(out, smooth_finding(P, *A, span));
+    if (span[i] < kAxisMovesAtLeast) continue;
     const AlongPosition o = along_position(P, *A);
     std::optional<StructureFinding> step = step_finding(P, *A, o);
     // A bump is not reported beside a step on the same axis.
