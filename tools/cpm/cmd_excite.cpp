@@ -126,6 +126,9 @@ Run setup(CLI::App& app) {
                  "speeds of constant-speed passes per axis and period, both ways (0: sines only)")
       ->default_val(o->design.speeds);
   app.add_option("--iterations", o->design.iterations, "designs the optimiser tries")->default_val(o->design.iterations);
+  app.add_option("--searches", o->design.searches,
+                 "searches from the best start, each on its own seed with its share of the designs")
+      ->default_val(o->design.searches);
   app.add_option("--seed", o->seed, "the optimiser's random seed")->default_val(o->seed);
   add_number(app, "--margin", o->margin, "1", "share of each limit the design may use (0..1]");
   add_number(app, "--rate", o->rate, "HZ", "rows per second of the file");

@@ -60,14 +60,24 @@ struct ExcitationOptions {
   double ramp = 1.0;           // s, fade in and out
   int iterations = 400;        // candidate designs tried by the optimiser's random search
   int refine = -1;             // then designs tried by the pattern search from its best (-1: iterations / 2)
+  int searches = 1;            // searches from the best start, each on its own seed with its share of both budgets
   std::uint64_t seed = 1;
   bool optimise = true;        // false: the flat spectrum with Schroeder phases
   int speeds = 4;              // pairs of constant-speed passes per axis and period (0: sines only)
-  // What the optimiser maximises: the D-criterion (log det X^T X), or the
+  // What the optimiser maximises: the D-criterion (log det X^T X); the
   // product of the standard errors' inverses (sum of -log sigma_j over the
   // columns: it rewards separating each column from all the others, where
-  // the D-criterion also rewards columns already well determined).
-  enum class Criterion { log_det, std_errors } criterion = Criterion::log_det;
+  // the D-criterion also rewards columns already well determined); or the
+  // effect columns' standard errors relative to the flat Schroeder start's
+  // (relative_a: minus the log of the mean of var_j / var_j(start), A-optimality
+  // on relative variances; capped: the sum of log(sigma_j(start) / sigma_j)
+  // each capped at log `cap`, so that no column gains by going past the cap
+  // and the effort goes to the columns still under it, plus `weight` times
+  // the D-criterion). Measured against the D-criterion in
+  // docs/identification.md ("How the designs are compared"): not kept.
+  enum class Criterion { log_det, std_errors, relative_a, capped } criterion = Criterion::log_det;
+  double cap = 3.0;            // capped: the ratio past which a column earns nothing more
+  double weight = 0.0;         // capped: weight of the D-criterion beside it
   // Tell two effects apart ("coulomb_friction:1", "payload_mass") instead of the D-criterion.
   std::optional<std::pair<std::string, std::string>> separate;
   void validate() const;       // throws Error naming the option
@@ -132,6 +142,7 @@ struct ExcitationFigures {
   // Relative standard errors: sqrt(diag((X^T X)^-1)) per column at unit noise, per unit force of column.
   std::vector<std::string> columns;
   Eigen::VectorXd std_error;
+  int base_columns = 0;                   // columns[0, base_columns): the base and the plane nuisance; then the effects
   double separation = 0.0;                // with `separate`: 1 - rho^2 of the two columns beside the base
 };
 
@@ -144,6 +155,14 @@ struct ExcitationDesign {
 
 // The flat spectrum with Schroeder phases, scaled to the limits.
 MultiSine schroeder_multisine(const ctl::Machine& model, const ExcitationLimits& limits, const ExcitationOptions& o);
+
+// The flat spectrum with Schroeder phases whose peak displacement is `peak`
+// (m, per axis), over the same duration as o's: at o.period if the limits
+// allow that peak there, else on fewer, longer periods of the same total
+// (its frequencies lowered), the first that reaches it, or the one that
+// comes nearest. The plain reference at the optimised design's amplitude.
+MultiSine schroeder_multisine_at_peak(const ctl::Machine& model, const ExcitationLimits& limits,
+                                      const ExcitationOptions& o, const Vec3& peak);
 
 // The largest multiple of `shape` (per-axis to the box, then all axes
 // together) within the limits. Throws Error when none is (a centre outside the workspace).
