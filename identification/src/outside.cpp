@@ -24,6 +24,7 @@ constexpr double kStrongZ = 8.0;
 // Columns that describe a finding on its axis' rows.
 Eigen::MatrixXd structure_columns(const StructureFinding& f, const MotionProblem& P) {
   if (f.kind == "smooth") return smooth_columns(P, f.axis, f.coordinate, f.lo, f.hi);
+  if (f.kind == "position_friction") return friction_map_columns(P, f.axis, f.lo, f.hi);
   const int R = P.rows(), i = f.axis;
   const double tp = 2.0 * std::numbers::pi;
   const int j = f.coordinate.size() == 2 && f.coordinate[0] == 'd' ? f.coordinate[1] - '1' : -1;
@@ -205,6 +206,9 @@ std::string settle_outside(const StructureFinding& f) {
     return "pass " + f.coordinate + " slowly in both directions and at another feed: a force of position comes back "
            "at the same place";
   if (f.coordinate == "t") return "repeat the log: a force of time does not repeat with the motion";
+  if (f.kind == "position_friction")
+    return "run axis " + ax + " across its stroke at two constant feeds in both directions: a friction map opposes "
+           "the motion with the same level at the same place at every feed, a force of speed changes with the feed";
   if (j >= 0 && j != f.axis)
     return "move axis " + std::to_string(j + 1) + " alone while axis " + ax + " holds still: a force that follows axis " +
            std::to_string(j + 1) + " then shows on axis " + ax + " at rest";
@@ -228,7 +232,7 @@ std::vector<StructureFinding> structure_that_beats_library(const Diagnosis& D, c
   // the look-elsewhere for a smooth force), not only the strong ones: the
   // comparison by BIC below, against the effects it would replace, is the test.
   for (const auto& f : find_motion_structure(D.motion, probe.residual_final, D.axis_noise, true))
-    if ((f.kind == "bump" || f.kind == "step" || f.kind == "smooth") && f.axis >= 0 &&
+    if ((f.kind == "bump" || f.kind == "step" || f.kind == "smooth" || f.kind == "position_friction") && f.axis >= 0 &&
         std::fabs(f.size) >= 0.5 * D.axis_noise[f.axis])
       early.push_back(f);
   if (early.empty()) return out;
