@@ -425,7 +425,7 @@ std::string loop_text(const LoopResult& R) {
   for (std::size_t j = 0; j < R.steps.size(); ++j) {
     const LoopStep& s = R.steps[j];
     o << "  " << j << "  " << (s.added.empty() ? "model as given" : "+ " + s.added);
-    o << std::string(s.added.empty() ? 16 : std::max<std::size_t>(2, 30 - s.added.size() - 2), ' ') << s.rms * k << " "
+    o << std::string(s.added.empty() ? 16 : (s.added.size() + 4 < 30 ? 28 - s.added.size() : 2), ' ') << s.rms * k << " "
       << u << "  ";
     if (s.noise_floor > s.rms)  // a floor above what was reached is an estimate too high, not a floor
       o << "(below the noise floor's estimate " << s.noise_floor * k << " " << u << ": that estimate is too high)\n";
