@@ -143,16 +143,34 @@ bool same_finding(const StructureFinding& a, const StructureFinding& b) {
   return true;
 }
 
-// The residual of the effects chosen, fitted on E.
-Eigen::VectorXd residual_of_chosen(const Diagnosis& D, const Engine& E) {
+// The residual of the effects chosen, fitted on E (and the base refitted
+// when one of them is its refit, or when `refit_base`).
+Eigen::VectorXd residual_of_chosen(const Diagnosis& D, const Engine& E, bool refit_base = false, int skip_axis = -1) {
   Eigen::MatrixXd XS(E.rows(), 0);
-  bool base_in = false;
+  bool base_in = refit_base;
   for (int j : D.found()) {
     const CandidateResult& c = D.candidates[static_cast<std::size_t>(j)];
     if (is_base_refit(c.effect)) base_in = true;
-    else if (!is_alignment(c.effect) && c.columns.rows() == E.rows()) XS = hstack(XS, c.columns);
+    else if (!is_alignment(c.effect) && c.columns.rows() == E.rows() && (skip_axis < 0 || c.axis != skip_axis))
+      XS = hstack(XS, c.columns);
   }
   return E.fit(XS, base_in).residual;
+}
+
+// The axis whose residual, of the model as given, stands furthest above its
+// floor (by the excess of its mean square), or -1 when none is above it.
+int lead_axis(const Diagnosis& D) {
+  int lead = -1;
+  double most = 0.0;
+  for (int i = 0; i < 3; ++i) {
+    const double f2 = D.axis_floor[i] * D.axis_floor[i];
+    const double excess = f2 > 0.0 ? (D.baseline_axis_rms[i] * D.baseline_axis_rms[i] - f2) / f2 : 0.0;
+    if (excess > most) {
+      most = excess;
+      lead = i;
+    }
+  }
+  return lead;
 }
 
 }  // namespace
@@ -161,13 +179,27 @@ std::vector<StructureFinding> confirmed_outside_library(const Diagnosis& D, cons
   const auto& all = D.outside_library;
   if (all.size() < 2) return all;
   std::vector<StructureFinding> kept;
+  // A finding on another axis than the lead's is looked for again beside the
+  // lead axis' findings only, with the base refitted jointly: a large
+  // structure on one axis pulls the base refit and the plane tilts, which puts
+  // part of it on the other axes, and findings there, fitted together with the
+  // base, then explain part of the first (a friction map on axis 1 was
+  // reported on axes 2 and 3 and not on axis 1).
+  const int lead = lead_axis(D);
   for (std::size_t k = 0; k < all.size(); ++k) {
+    const bool off_lead = lead >= 0 && all[k].axis != lead;
     std::vector<StructureFinding> others;
     for (std::size_t o = 0; o < all.size(); ++o)
-      if (o != k) others.push_back(all[o]);
+      if (o != k && (!off_lead || all[o].axis == lead)) others.push_back(all[o]);
     Diagnosis probe;
     probe.axis_noise = D.axis_noise;
-    probe.residual_final = residual_of_chosen(D, Engine(with_structure(E.problem(), others, D.motion)));
+    LinearProblem L = with_structure(E.problem(), others, D.motion);
+    // Off the lead axis: the shared fit without the lead axis' rows' pull
+    // (weights a millionth: whatever describes that axis or not).
+    if (off_lead)
+      for (Eigen::Index r = lead; r < L.w.size(); r += 3) L.w(r) *= 1e-6;
+    const Engine Ek(std::move(L));
+    probe.residual_final = off_lead ? residual_of_chosen(D, Ek, true, lead) : residual_of_chosen(D, Ek);
     // Looked for as itself: a bump is not hidden behind a step the scan also
     // sees there (the bump's flank on one side is a step too: a 3x bump found
     // beside a step was otherwise dropped with it, and cogging took the axis).
