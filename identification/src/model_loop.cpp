@@ -10,6 +10,7 @@
 #include <nlohmann/json.hpp>
 
 #include "cpm/calibration/workflow.hpp"
+#include "cpm/control/effects.hpp"
 #include "cpm/identification/fit_user.hpp"
 #include "cpm/identification/kinematic.hpp"
 #include "internal.hpp"
@@ -291,6 +292,32 @@ SuggestedUserEffect suggest_user_effect(const StructureFinding& f) {
     s.params = {{"c", f.slope}};
     os << "add to axis " << ax << " the expression effect c*" << f.coordinate << " with c = " << f.slope
        << " (N per SI unit of " << f.coordinate << ")";
+  } else if (f.kind == "position_friction" && f.nodes.size() >= 4 && f.hi > f.lo) {
+    // A table follows one variable: a friction map is an expression, its
+    // level a cubic in u = (d - mid) / half fitted to the finding's levels,
+    // times the library's sign of the speed (docs/effects.md, "Effects you add").
+    const double mid = 0.5 * (f.lo + f.hi), half = 0.5 * (f.hi - f.lo);
+    Eigen::MatrixXd U(static_cast<Eigen::Index>(f.nodes.size()), 4);
+    Eigen::VectorXd L(U.rows());
+    for (Eigen::Index q = 0; q < U.rows(); ++q) {
+      const double u = (f.nodes[static_cast<std::size_t>(q)] - mid) / half;
+      U.row(q) << 1.0, u, u * u, u * u * u;
+      L(q) = f.values[static_cast<std::size_t>(q)];
+    }
+    const Eigen::VectorXd c = U.colPivHouseholderQr().solve(L);
+    std::ostringstream u;
+    u.precision(6);
+    u << "((" << f.coordinate << "-" << mid << ")/" << half << ")";
+    const std::string v = "v" + f.coordinate.substr(1);
+    std::ostringstream tanh_eps;
+    tanh_eps.precision(6);
+    tanh_eps << ctl::kSignEpsilon;
+    s.kind = "expression";
+    s.formula = "(c0+c1*" + u.str() + "+c2*" + u.str() + "^2+c3*" + u.str() + "^3)*tanh(" + v + "/" + tanh_eps.str() + ")";
+    s.params = {{"c0", c(0)}, {"c1", c(1)}, {"c2", c(2)}, {"c3", c(3)}};
+    os << "add to axis " << ax << " the expression effect " << s.formula << " with c0 = " << c(0) << ", c1 = " << c(1)
+       << ", c2 = " << c(2) << ", c3 = " << c(3) << " N (a friction map: its level along " << f.coordinate
+       << ", opposing the motion in both directions)";
   } else if (f.kind == "smooth") {
     s.kind = "table";
     s.input = f.coordinate;
@@ -398,7 +425,7 @@ std::string loop_text(const LoopResult& R) {
   for (std::size_t j = 0; j < R.steps.size(); ++j) {
     const LoopStep& s = R.steps[j];
     o << "  " << j << "  " << (s.added.empty() ? "model as given" : "+ " + s.added);
-    o << std::string(s.added.empty() ? 16 : std::max<std::size_t>(2, 30 - s.added.size() - 2), ' ') << s.rms * k << " "
+    o << std::string(s.added.empty() ? 16 : (s.added.size() + 4 < 30 ? 28 - s.added.size() : 2), ' ') << s.rms * k << " "
       << u << "  ";
     if (s.noise_floor > s.rms)  // a floor above what was reached is an estimate too high, not a floor
       o << "(below the noise floor's estimate " << s.noise_floor * k << " " << u << ": that estimate is too high)\n";

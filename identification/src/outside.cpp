@@ -24,6 +24,7 @@ constexpr double kStrongZ = 8.0;
 // Columns that describe a finding on its axis' rows.
 Eigen::MatrixXd structure_columns(const StructureFinding& f, const MotionProblem& P) {
   if (f.kind == "smooth") return smooth_columns(P, f.axis, f.coordinate, f.lo, f.hi);
+  if (f.kind == "position_friction") return friction_map_columns(P, f.axis, f.lo, f.hi);
   const int R = P.rows(), i = f.axis;
   const double tp = 2.0 * std::numbers::pi;
   const int j = f.coordinate.size() == 2 && f.coordinate[0] == 'd' ? f.coordinate[1] - '1' : -1;
@@ -142,37 +143,80 @@ bool same_finding(const StructureFinding& a, const StructureFinding& b) {
   return true;
 }
 
-// The residual of the effects chosen, fitted on E.
-Eigen::VectorXd residual_of_chosen(const Diagnosis& D, const Engine& E) {
+// The residual of the effects chosen, fitted on E (and the base refitted
+// when one of them is its refit, or when `refit_base`).
+Eigen::VectorXd residual_of_chosen(const Diagnosis& D, const Engine& E, bool refit_base = false, int skip_axis = -1) {
   Eigen::MatrixXd XS(E.rows(), 0);
-  bool base_in = false;
+  bool base_in = refit_base;
   for (int j : D.found()) {
     const CandidateResult& c = D.candidates[static_cast<std::size_t>(j)];
     if (is_base_refit(c.effect)) base_in = true;
-    else if (!is_alignment(c.effect) && c.columns.rows() == E.rows()) XS = hstack(XS, c.columns);
+    else if (!is_alignment(c.effect) && c.columns.rows() == E.rows() && (skip_axis < 0 || c.axis != skip_axis))
+      XS = hstack(XS, c.columns);
   }
   return E.fit(XS, base_in).residual;
 }
 
+// The axis whose residual, of the model as given, stands furthest above its
+// floor (by the excess of its mean square), or -1 when none is above it.
+int lead_axis(const Diagnosis& D) {
+  int lead = -1;
+  double most = 0.0;
+  for (int i = 0; i < 3; ++i) {
+    const double f2 = D.axis_floor[i] * D.axis_floor[i];
+    const double excess = f2 > 0.0 ? (D.baseline_axis_rms[i] * D.baseline_axis_rms[i] - f2) / f2 : 0.0;
+    if (excess > most) {
+      most = excess;
+      lead = i;
+    }
+  }
+  return lead;
+}
+
 }  // namespace
 
-// Strongest first: the strongest finding stands (the scan saw it above the
-// rest), and each weaker one must be seen again beside those kept. Judged
-// each against all the others, two findings that describe one force (on a
-// circle a force even in v1 is a force of d1: a smooth curve of v2 and a step
-// across d1) each explained the other away, both were dropped, and library
-// effects (Stribeck, viscous, cogging, a spring) were named for an
-// asymmetric friction, with the same two findings left at 14 and 10 sigma.
+// Strongest first, those on the lead axis (the one furthest above its floor
+// under the model as given) before the others: the first stands, and each
+// other one must be seen again beside those kept. Judged each against all
+// the others, two findings that describe one force (on a circle a force even
+// in v1 is a force of d1: a smooth curve of v2 and a step across d1) each
+// explained the other away, both were dropped, and library effects
+// (Stribeck, viscous, cogging, a spring) were named for an asymmetric
+// friction, with the same two findings left at 14 and 10 sigma.
+//
+// A finding on another axis than the lead's is looked for again beside the
+// lead axis' findings only, with the base refitted jointly: a large
+// structure on one axis pulls the base refit and the plane tilts, which puts
+// part of it on the other axes, and findings there, fitted together with the
+// base, then explain part of the first (a friction map on axis 1 was
+// reported on axes 2 and 3 and not on axis 1).
 std::vector<StructureFinding> confirmed_outside_library(const Diagnosis& D, const Engine& E, const DiagnoseOptions& opt) {
   std::vector<StructureFinding> all = D.outside_library;
   if (all.size() < 2) return all;
-  std::stable_sort(all.begin(), all.end(),
-                   [](const StructureFinding& a, const StructureFinding& b) { return std::fabs(a.z) > std::fabs(b.z); });
-  std::vector<StructureFinding> kept{all.front()};
-  for (std::size_t k = 1; k < all.size(); ++k) {
+  const int lead = lead_axis(D);
+  std::stable_sort(all.begin(), all.end(), [&](const StructureFinding& a, const StructureFinding& b) {
+    if ((a.axis == lead) != (b.axis == lead)) return a.axis == lead;
+    return std::fabs(a.z) > std::fabs(b.z);
+  });
+  std::vector<StructureFinding> kept;
+  for (std::size_t k = 0; k < all.size(); ++k) {
+    const bool off_lead = lead >= 0 && all[k].axis != lead;
+    if (k == 0 && !off_lead) {
+      kept.push_back(all[k]);
+      continue;
+    }
+    std::vector<StructureFinding> others;
+    for (const StructureFinding& o : kept)
+      if (!off_lead || o.axis == lead) others.push_back(o);
     Diagnosis probe;
     probe.axis_noise = D.axis_noise;
-    probe.residual_final = residual_of_chosen(D, Engine(with_structure(E.problem(), kept, D.motion)));
+    LinearProblem L = with_structure(E.problem(), others, D.motion);
+    // Off the lead axis: the shared fit without the lead axis' rows' pull
+    // (weights a millionth: whatever describes that axis or not).
+    if (off_lead)
+      for (Eigen::Index r = lead; r < L.w.size(); r += 3) L.w(r) *= 1e-6;
+    const Engine Ek(std::move(L));
+    probe.residual_final = off_lead ? residual_of_chosen(D, Ek, true, lead) : residual_of_chosen(D, Ek);
     // Looked for as itself: a bump is not hidden behind a step the scan also
     // sees there (the bump's flank on one side is a step too: a 3x bump found
     // beside a step was otherwise dropped with it, and cogging took the axis).
@@ -211,6 +255,9 @@ std::string settle_outside(const StructureFinding& f) {
     return "pass " + f.coordinate + " slowly in both directions and at another feed: a force of position comes back "
            "at the same place";
   if (f.coordinate == "t") return "repeat the log: a force of time does not repeat with the motion";
+  if (f.kind == "position_friction")
+    return "run axis " + ax + " across its stroke at two constant feeds in both directions: a friction map opposes "
+           "the motion with the same level at the same place at every feed, a force of speed changes with the feed";
   if (j >= 0 && j != f.axis)
     return "move axis " + std::to_string(j + 1) + " alone while axis " + ax + " holds still: a force that follows axis " +
            std::to_string(j + 1) + " then shows on axis " + ax + " at rest";
@@ -234,7 +281,7 @@ std::vector<StructureFinding> structure_that_beats_library(const Diagnosis& D, c
   // the look-elsewhere for a smooth force), not only the strong ones: the
   // comparison by BIC below, against the effects it would replace, is the test.
   for (const auto& f : find_motion_structure(D.motion, probe.residual_final, D.axis_noise, true))
-    if ((f.kind == "bump" || f.kind == "step" || f.kind == "smooth") && f.axis >= 0 &&
+    if ((f.kind == "bump" || f.kind == "step" || f.kind == "smooth" || f.kind == "position_friction") && f.axis >= 0 &&
         std::fabs(f.size) >= 0.5 * D.axis_noise[f.axis])
       early.push_back(f);
   if (early.empty()) return out;

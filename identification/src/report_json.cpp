@@ -107,6 +107,8 @@ Json structure_json(const std::vector<StructureFinding>& items) {
         alike.push_back({{"variable", w.var}, {"correlation", w.correlation}, {"share", w.share}});
       j["smooth"]["alike"] = std::move(alike);
     }
+    if (f.kind == "position_friction")
+      j["position_friction"] = {{"range", {f.lo, f.hi}}, {"nodes", f.nodes}, {"levels", f.values}};
     a.push_back(std::move(j));
   }
   return a;

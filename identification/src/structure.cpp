@@ -7,6 +7,7 @@
 #include <optional>
 #include <sstream>
 
+#include "cpm/control/effects.hpp"
 #include "cpm/identification/stats.hpp"
 
 namespace cpm::ident {
@@ -501,6 +502,115 @@ std::optional<StructureFinding> smooth_finding(const MotionProblem& P, const Axi
   return f;
 }
 
+// 7. A friction that varies along the axis' own travel (a friction map: guide
+// wear, a lubricant that thins towards one end): sign(v_i) (c0 + g(d_i)), g
+// of Legendre P_1..P_kSmoothDegree. The direction finding takes a constant
+// and the smooth scan one variable; neither sees the level change: on a
+// circle sign(v1) (d1 - c) averages to nothing at every value of d1, d2 or
+// v1, and a 0.3-1.7 N friction on axis 1 was named a 0.27 N Coulomb friction
+// beside structure on axes 2 and 3. The level's change is tested beside what
+// it could be mistaken for, a Coulomb friction and smooth forces of the
+// axis' own position and speed (on a single sine |v_i| follows d_i); it is
+// ~ F(K, inf) under noise, look-elsewhere over the smooth scan's family and
+// one more pair per axis.
+constexpr double kFrictionMapFamily = kSmoothPairs + 3;
+
+// sign(v) as the library's Coulomb friction has it, and a softer one: a
+// real contact turns over a few mm/s (pre-sliding), and what the sharp sign
+// left of a map that turned over 2 mm/s was named a viscous and a Stribeck
+// friction beside it. The two together span switches of either width.
+double friction_sign(double v) { return std::tanh(v / ctl::kSignEpsilon); }
+constexpr double kSoftSignSpeed = 5e-3;  // m/s
+double soft_friction_sign(double v) { return std::tanh(v / kSoftSignSpeed); }
+
+std::optional<StructureFinding> position_friction_finding(const MotionProblem& P, const AxisResidual& A) {
+  constexpr int K = kSmoothDegree;
+  const int R = P.rows(), i = A.axis;
+  double lo = 1e300, hi = -1e300, vlo = 1e300, vhi = -1e300;
+  for (int r = 0; r < R; ++r) {
+    lo = std::min(lo, P.d[r][i]);
+    hi = std::max(hi, P.d[r][i]);
+    vlo = std::min(vlo, P.v[r][i]);
+    vhi = std::max(vhi, P.v[r][i]);
+  }
+  if (!(hi > lo) || !(vhi > vlo)) return std::nullopt;
+  // Columns: s | soft s | P(d) | P(v) | s P(d); the last K are the level's change.
+  const int C = 2 + 3 * K;
+  Eigen::MatrixXd X(R, C);
+  double pd[K], pv[K];
+  for (int r = 0; r < R; ++r) {
+    const double sg = friction_sign(P.v[r][i]);
+    legendre_row(P.d[r][i], lo, hi, pd);
+    legendre_row(P.v[r][i], vlo, vhi, pv);
+    X(r, 0) = sg;
+    X(r, 1) = soft_friction_sign(P.v[r][i]);
+    for (int k = 0; k < K; ++k) {
+      X(r, 2 + k) = pd[k];
+      X(r, 2 + K + k) = pv[k];
+      X(r, 2 + 2 * K + k) = sg * pd[k];
+    }
+  }
+  X.rowwise() -= X.colwise().mean();
+  Eigen::VectorXd y(R);
+  for (int r = 0; r < R; ++r) y(r) = A.y[r] - A.mean;
+  const Eigen::MatrixXd G = X.transpose() * X;
+  const Eigen::VectorXd b = X.transpose() * y;
+  const Eigen::LDLT<Eigen::MatrixXd> full(G), rival(G.topLeftCorner(C - K, C - K));
+  if (full.info() != Eigen::Success || rival.info() != Eigen::Success) return std::nullopt;
+  const Eigen::VectorXd cf = full.solve(b), cr = rival.solve(b.head(C - K));
+  const double gain = cf.dot(b) - cr.dot(b.head(C - K));
+  if (!(gain > 0.0) || !std::isfinite(gain)) return std::nullopt;
+  const Eigen::VectorXd left = y - X * cf;
+  const std::vector<double> left_v(left.data(), left.data() + R);
+  const double var_left = left.squaredNorm() / std::max(1, R - C - 1);
+  const double infl_left = static_cast<double>(R) / std::max(2.0, effective_samples({left_v}));
+  const double chi = var_left > 0.0 ? gain / (var_left * infl_left) : 0.0;
+  const double p = std::min(1.0, f_tail(chi / K, K, 1e7) * kFrictionMapFamily);
+  if (!(p < 1e-4) || !(std::sqrt(gain / R) > A.tiny)) return std::nullopt;
+  // The map said to people: sign(v) (c0 + g(d)) alone, its level at 7 places.
+  // (The sharp sign only: on a circle the ends of the stroke are where the
+  // speed turns, and a softer sign there took the level's place, 0.14 N
+  // reported against 0.4 N.)
+  Eigen::MatrixXd M(R, 1 + K);
+  M.col(0) = X.col(0);
+  M.rightCols(K) = X.rightCols(K);
+  const Eigen::VectorXd cm = M.colPivHouseholderQr().solve(y);
+  StructureFinding f;
+  f.kind = "position_friction";
+  f.axis = i;
+  f.coordinate = cat("d", i + 1);
+  f.z = std::sqrt(chi);
+  f.size = std::sqrt((M * cm).squaredNorm() / R);
+  f.lo = lo;
+  f.hi = hi;
+  int at_min = 0, at_max = 0;
+  for (int q = 0; q < 7; ++q) {
+    const double x = lo + (hi - lo) * q / 6.0;
+    legendre_row(x, lo, hi, pd);
+    double level = cm(0);
+    for (int k = 0; k < K; ++k) level += cm(1 + k) * pd[k];
+    f.nodes.push_back(x);
+    f.values.push_back(level);
+    if (level < f.values[static_cast<std::size_t>(at_min)]) at_min = q;
+    if (level > f.values[static_cast<std::size_t>(at_max)]) at_max = q;
+  }
+  f.location = f.nodes[static_cast<std::size_t>(at_max)];
+  f.slope = (f.values.back() - f.values.front()) / (hi - lo);
+  double lin = 0.0, all = 0.0;
+  for (int k = 0; k < K; ++k) all += cm(1 + k) * cm(1 + k) / (2.0 * k + 3.0);  // mean square of c_k P_k over [-1, 1]
+  lin = cm(1) * cm(1) / 3.0;
+  f.shape = all > 0.0 && lin / all > 0.9 ? "linear" : "mixed";
+  std::ostringstream os;
+  os.precision(3);
+  os << "axis " << i + 1 << ": a friction that varies along d" << i + 1 << ": " << f.values.front() << " N at "
+     << lo * 1e3 << " mm to " << f.values.back() << " N at " << hi * 1e3 << " mm";
+  if (at_min != 0 && at_min != 6) os << ", least " << f.values[static_cast<std::size_t>(at_min)] << " N at " << f.nodes[static_cast<std::size_t>(at_min)] * 1e3 << " mm";
+  if (at_max != 0 && at_max != 6) os << ", most " << f.values[static_cast<std::size_t>(at_max)] << " N at " << f.nodes[static_cast<std::size_t>(at_max)] * 1e3 << " mm";
+  os << ", both directions (a direction-dependent force whose level follows the position; RMS " << f.size << " N)";
+  f.text = os.str();
+  return f;
+}
+
 // Stroke covered by each axis (m).
 std::vector<double> spans(const MotionProblem& P) {
   std::vector<double> span(3);
@@ -597,6 +707,29 @@ Eigen::MatrixXd table_columns(const MotionProblem& P, int axis, const std::strin
   });
 }
 
+Eigen::MatrixXd friction_map_columns(const MotionProblem& P, int axis, double lo, double hi) {
+  constexpr int K = kSmoothDegree;
+  Eigen::MatrixXd X(3 * P.rows(), K + 2);
+  const auto at = [&P, axis](int s) { return std::pair(P.d_hat[static_cast<std::size_t>(s)][axis], P.v_hat[static_cast<std::size_t>(s)][axis]); };
+  // The level's mean is the library's Coulomb friction column itself (its
+  // sign averaged over the velocity's noise near rest): a column only close
+  // to it let a 30 N Coulomb friction and -29 N of this one be fitted together.
+  ctl::DynamicEffect coulomb;
+  coulomb.type = ctl::DynamicEffectType::coulomb_friction;
+  coulomb.axis = static_cast<std::int8_t>(axis);
+  coulomb.param = {1.0, 0, 0, 0};
+  X.col(0) = P.effect_column(coulomb, 0);
+  X.col(1) = P.filter_axis(axis, [&](int s, int) { return soft_friction_sign(at(s).second); });
+  for (int k = 0; k < K; ++k)
+    X.col(k + 2) = P.filter_axis(axis, [&](int s, int) {
+      double row[K];
+      const auto [d, v] = at(s);
+      legendre_row(d, lo, hi, row);
+      return friction_sign(v) * row[k];
+    });
+  return X;
+}
+
 std::vector<StructureFinding> find_motion_structure(const MotionProblem& P,
                                                     const Eigen::VectorXd& residual,
                                                     const Vec3& axis_noise, bool bump_beside_step) {
@@ -619,6 +752,7 @@ std::vector<StructureFinding> find_motion_structure(const MotionProblem& P,
     std::optional<StructureFinding> bump = step && !bump_beside_step ? std::nullopt : bump_finding(P, *A, o);
     add(out, std::move(step));
     add(out, std::move(bump));
+    add(out, position_friction_finding(P, *A));
   }
   return out;
 }

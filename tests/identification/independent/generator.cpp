@@ -134,6 +134,7 @@ const char* outside_kind_name(OutsideForce::Kind k) noexcept {
     case OutsideForce::Kind::bump: return "bump";
     case OutsideForce::Kind::velocity_hump: return "velocity_hump";
     case OutsideForce::Kind::cross_velocity_hump: return "cross_velocity_hump";
+    case OutsideForce::Kind::position_friction: return "position_friction";
     default: return "cubic";
   }
 }
@@ -161,6 +162,11 @@ Vec3 outside_forces(const std::vector<OutsideForce>& forces, const Vec3& d, cons
         f[o.axis] += o.size * w * std::exp(0.5 * (1.0 - w * w));
         break;
       }
+      case OutsideForce::Kind::position_friction:
+        // The switch of direction spread over 2 mm/s: a real contact's
+        // pre-sliding, not a step (and not the estimator's own smoothing).
+        f[o.axis] += o.size * (0.65 + 0.35 * u) * std::tanh(v[o.axis] / 2e-3);
+        break;
     }
   }
   return f;

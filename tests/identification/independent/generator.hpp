@@ -72,17 +72,23 @@ struct PlantedEffect {
 //                   friction, peaks (at `size`) at |v| = width and dies away
 //                   above (a wiper seal, a lubricant film that lifts);
 //   cross_velocity_hump: the same in v_from on `axis` (a carrier dragged at
-//                   low speed only).
+//                   low speed only);
+//   position_friction: size * (0.65 + 0.35 u) * tanh(v_axis / 2 mm/s), u =
+//                   (d_axis - centre) / width (N): a dry friction that opposes
+//                   the motion in both directions with a level that rises
+//                   along the travel (guide wear, a lubricant that thins
+//                   towards one end: a friction map), positive everywhere for
+//                   |u| <= 1 (0.3 size to size over centre -+ width).
 struct OutsideForce {
-  enum class Kind { cross_velocity, bump, cubic, velocity_hump, cross_velocity_hump };
+  enum class Kind { cross_velocity, bump, cubic, velocity_hump, cross_velocity_hump, position_friction };
   Kind kind = Kind::cubic;
   int axis = 0;          // 0..2: the axis the force acts on
   int from_axis = -1;    // cross_velocity, cross_velocity_hump: the axis whose velocity it follows
   double size = 0.0;     // N s/m (cross_velocity) or N
-  double centre = 0.0;   // m (bump, cubic)
-  double width = 1.0;    // m (bump, cubic); m/s (the humps)
+  double centre = 0.0;   // m (bump, cubic, position_friction)
+  double width = 1.0;    // m (bump, cubic, position_friction); m/s (the humps)
 };
-// "cross_velocity", "bump", "cubic", "velocity_hump", "cross_velocity_hump"
+// "cross_velocity", "bump", "cubic", "velocity_hump", "cross_velocity_hump", "position_friction"
 const char* outside_kind_name(OutsideForce::Kind k) noexcept;
 // The velocity the force follows (0..2), or -1 when it follows a position.
 int outside_velocity_axis(const OutsideForce& f) noexcept;

@@ -127,6 +127,11 @@ OpenWorldResult run_open_world(const OpenWorldOptions& o) {
                 // expression of the hump found on a circle peaked at an eighth).
                 f.width = std::max(vmax, 1e-6) / 6.0;
                 f.size = peak;
+              } else if (f.kind == OutsideForce::Kind::position_friction) {
+                // A friction of `peak` at the far end, 0.3 of it at the near end.
+                f.centre = 0.5 * (lo + hi);
+                f.width = 0.5 * (hi - lo);
+                f.size = peak;
               } else if (f.kind == OutsideForce::Kind::bump) {
                 // A tight spot a third of the way along the travel, 1/30 of it wide.
                 f.centre = lo + (hi - lo) / 3.0;

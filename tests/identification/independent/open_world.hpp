@@ -24,7 +24,8 @@ struct OpenWorldOptions {
   std::vector<double> rates = {1000.0};
   std::vector<OutsideForce::Kind> kinds = {OutsideForce::Kind::cross_velocity, OutsideForce::Kind::bump,
                                            OutsideForce::Kind::cubic, OutsideForce::Kind::velocity_hump,
-                                           OutsideForce::Kind::cross_velocity_hump};
+                                           OutsideForce::Kind::cross_velocity_hump,
+                                           OutsideForce::Kind::position_friction};
   // The force's largest value over the log, in multiples of the honest floor
   // of its axis on the null log of the same cell and seed.
   std::vector<double> multiples = {3.0, 10.0};

@@ -189,7 +189,8 @@ void add_run_options(CLI::App& app, Flags& f, MatrixOptions& o) {
                         "default cells zoh and delay1, plant and command, 1000 Hz")
       ->trigger_on_parse();
   app.add_option("--outside-kinds", f.outside_kinds,
-                 "with --outside: the kinds planted (cross_velocity, bump, cubic, velocity_hump, cross_velocity_hump; "
+                 "with --outside: the kinds planted (cross_velocity, bump, cubic, velocity_hump, cross_velocity_hump, "
+                 "position_friction; "
                  "--quick-outside: the first three)")
       ->delimiter(',');
   app.add_flag_callback("--quick-outside", [&] {
@@ -317,8 +318,9 @@ int main(int argc, char** argv) {
           else if (k == "cubic") w.kinds.push_back(OutsideForce::Kind::cubic);
           else if (k == "velocity_hump") w.kinds.push_back(OutsideForce::Kind::velocity_hump);
           else if (k == "cross_velocity_hump") w.kinds.push_back(OutsideForce::Kind::cross_velocity_hump);
+          else if (k == "position_friction") w.kinds.push_back(OutsideForce::Kind::position_friction);
           else throw cpm::Error("--outside-kinds: unknown kind '" + k +
-                                "' (cross_velocity, bump, cubic, velocity_hump, cross_velocity_hump)");
+                                "' (cross_velocity, bump, cubic, velocity_hump, cross_velocity_hump, position_friction)");
         }
       }
       const OpenWorldResult r = run_open_world(w);

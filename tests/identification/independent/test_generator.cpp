@@ -156,6 +156,36 @@ TEST(IndependentGenerator, VelocityHumpsAreWhatTheyStateOnTheirAxis) {
   EXPECT_LT(worst_left, 2e-3);
 }
 
+// The friction map: size (0.65 + 0.35 u) tanh(v / 2 mm/s) on axis 2, u along
+// its travel, checked away from the reversals (there the sign turns within a
+// period and the mid-period velocity does not stand for it).
+TEST(IndependentGenerator, PositionFrictionIsWhatItStatesOnItsAxis) {
+  GeneratorSpec s = quiet(Timing::zoh);
+  s.effects.clear();
+  const GeneratedLog g0 = generate(s);
+  const double size = 1.2, centre = 0.5 * (g0.d_min[1] + g0.d_max[1]), width = 0.5 * (g0.d_max[1] - g0.d_min[1]);
+  s.outside = {{OutsideForce::Kind::position_friction, 1, -1, size, centre, width}};
+  const GeneratedLog g = generate(s);
+  const ctl::Machine truth(true_model({}));
+  const auto need = needed_force(g, truth);
+  const auto& L = g.log;
+  double worst_left = 0.0, lowest = 1e9, highest = -1e9;
+  for (std::size_t k = 2; k < need.size(); ++k) {
+    const Vec3 vm = 0.5 * (L.v[k] + L.v[k + 1]), dm = 0.5 * (L.d[k] + L.d[k + 1]);
+    if (std::fabs(vm[1]) < 0.02) continue;
+    const double level = size * (0.65 + 0.35 * (dm[1] - centre) / width);
+    const Vec3 outside(0.0, level * std::tanh(vm[1] / 2e-3), 0.0);
+    worst_left = std::max(worst_left, (L.f[k] - need[k] - outside).cwiseAbs().maxCoeff());
+    lowest = std::min(lowest, level);
+    highest = std::max(highest, level);
+  }
+  std::printf("position friction: level %.3f to %.3f N, |f - needed - outside| <= %.3g N\n", lowest, highest,
+              worst_left);
+  EXPECT_GT(lowest, 0.0);                   // positive everywhere on the path
+  EXPECT_GT(highest - lowest, 0.4 * size);  // and rising along it (0.7 size over the null log's stroke)
+  EXPECT_LT(worst_left, 2e-3);
+}
+
 TEST(IndependentGenerator, Delay1IsZohWithTheAppliedForceShiftedByOneSample) {
   const GeneratorSpec s = quiet(Timing::delay1);
   const GeneratedLog g = generate(s);

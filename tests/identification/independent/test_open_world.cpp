@@ -378,5 +378,68 @@ TEST(OpenWorld, VariablesAffineInTheLeadAreListedAlike) {
   EXPECT_NE(D.verdict_text.find("to tell " + f.coordinate + " from " + partner), std::string::npos);
 }
 
+// A friction on axis 1 whose level rises along its travel (0.3 to 1 of its
+// size, 10x the floor, turning over 2 mm/s). On a circle the level's change,
+// sign(v1) (d1 - c), averages to nothing at every value of d1, d2 or v1, and
+// the verdict named a Coulomb friction of a fraction of the mean level beside
+// structure on axes 2 and 3 (periodic in d2, in time), with a -90 % drive gain
+// and a -4.5 kg rotor inertia. Now: position_friction on axis 1 and nothing on
+// the other axes, no library effect named. (On the circle sign(v1) is
+// sign(d2 - c), which the plane tilts share: the level's mean is not
+// determined there, only its rise; the levels are checked on the generator's
+// own path.)
+GeneratorSpec friction_map(std::uint64_t seed, bool circle, double& size, double& lo, double& hi) {
+  GeneratorSpec s = spec(Timing::zoh, NoisePlacement::plant, seed);
+  if (circle) {
+    s.circle_radius = 0.1;
+    s.circle_omega = 1.5;
+  }
+  const GeneratedLog g0 = generate(s);
+  lo = g0.d_min[0];
+  hi = g0.d_max[0];
+  size = 10.0 * diagnose(g0).axis_floor[0];
+  s.outside = {{OutsideForce::Kind::position_friction, 0, -1, size, 0.5 * (lo + hi), 0.5 * (hi - lo)}};
+  return s;
+}
+
+const ident::StructureFinding& friction_map_found(const ident::Diagnosis& D) {
+  std::printf("%s\n", D.verdict_text.c_str());
+  for (const auto& f : D.structure) std::printf("  structure left: %s (%.1f sigma)\n", f.text.c_str(), f.z);
+  for (const auto& o : D.outside_library) EXPECT_EQ(o.axis, 0) << o.text;
+  EXPECT_EQ(D.verdict, -1) << D.candidates[0].label();
+  if (D.outside_library.empty()) throw Error("no outside_library finding");
+  const ident::StructureFinding& f = D.outside_library.front();
+  EXPECT_EQ(f.kind, "position_friction");
+  EXPECT_EQ(f.axis, 0);
+  EXPECT_EQ(f.coordinate, "d1");
+  EXPECT_EQ(f.values.size(), 7u);
+  return f;
+}
+
+TEST(OpenWorld, FrictionMapOnTheCircleIsFoundOnItsAxis) {
+  double size = 0.0, lo = 0.0, hi = 0.0;
+  const ident::Diagnosis D = diagnose(generate(friction_map(7, true, size, lo, hi)));
+  const ident::StructureFinding& f = friction_map_found(D);
+  EXPECT_GT(f.values.back() - f.values.front(), 0.35 * size);  // truth 0.7 size
+}
+
+TEST(OpenWorld, FrictionMapLevelsAndTheExpressionOffered) {
+  double size = 0.0, lo = 0.0, hi = 0.0;
+  const ident::Diagnosis D = diagnose(generate(friction_map(7, false, size, lo, hi)));
+  const ident::StructureFinding& f = friction_map_found(D);
+  // The level at the ends of the stroke covered (truth 0.65 size -+ 0.35 size at the true ends).
+  auto truth = [&](double d) { return size * (0.65 + 0.35 * (d - 0.5 * (lo + hi)) / (0.5 * (hi - lo))); };
+  EXPECT_NEAR(f.values.front(), truth(f.nodes.front()), 0.15 * size);
+  EXPECT_NEAR(f.values.back(), truth(f.nodes.back()), 0.15 * size);
+  const ident::SuggestedUserEffect u = ident::suggest_user_effect(f);
+  EXPECT_EQ(u.kind, "expression");
+  EXPECT_EQ(u.axis, 0);
+  EXPECT_NO_THROW(ident::user_effect_of(u)) << u.formula;
+  ASSERT_EQ(u.params.size(), 4u);
+  const double mid = truth(0.5 * (f.lo + f.hi)), rise = truth(f.hi) - mid;
+  EXPECT_NEAR(u.params[0].second, mid, 0.15 * size) << u.text;   // c0: the level mid-stroke
+  EXPECT_NEAR(u.params[1].second, rise, 0.15 * size) << u.text;  // c1: its rise to each end
+}
+
 }  // namespace
 }  // namespace cpm::indep

@@ -3,7 +3,8 @@
 // explain, said with where it is. Checks, per axis: a difference between the
 // two directions of motion; a periodic pattern against each axis' position
 // (wavelengths 2 mm .. 2/3 of the stroke covered) and against time; a trend
-// in time; a step or a bump at a position; a smooth force that follows any
+// in time; a step or a bump at a position; a friction whose level varies
+// along the axis' own travel (position_friction); a smooth force that follows any
 // axis' position, velocity or acceleration, or time (the best variable per
 // axis, with the others that explain it nearly as well). Significance uses the residual's
 // own spread, corrected for autocorrelation and for how many places were
@@ -44,6 +45,13 @@ std::vector<double> table_nodes(std::vector<double> x);
 // smooth_columns; no columns when fewer than 3 nodes. It follows a narrow
 // hump the polynomial cannot.
 Eigen::MatrixXd table_columns(const MotionProblem& P, int axis, const std::string& var);
+
+// The columns of a friction that varies along `axis`' own travel (kind
+// "position_friction"): sign(v) and sign(v) P_1..P_kSmoothDegree(d) over
+// [lo, hi] of the axis' own position (the finding's nodes and values: the
+// level (N, opposing the motion) at positions of d_axis), sign(v) as the library's
+// Coulomb friction has it (tanh(v / kSignEpsilon)), filtered as smooth_columns.
+Eigen::MatrixXd friction_map_columns(const MotionProblem& P, int axis, double lo, double hi);
 
 // bump_beside_step: also a bump on an axis where a step was found (by
 // default not: one of the two describes the axis).
