@@ -26,12 +26,14 @@ void ControlLoop::reply(const Command& c, Refusal refusal, const char* msg, cons
   a.queue_end = queue_.end();
   a.queue_end_velocity = queue_.end_velocity();
   a.queue_end_acceleration = queue_.end_acceleration();
+  a.cycle = commands_cycle_;
   // The LCM thread drains 64 acks per millisecond at least; a full ring
   // would lose only the ack, never the command's effect.
   (void)ch_.acks.push(a);
 }
 
 void ControlLoop::handle_commands(std::int64_t k) noexcept {
+  commands_cycle_ = k;
   // A stop rung in from the server's stop listener: before any command.
   if (requests_.take_stop() && (mode_.now() == Mode::moving || mode_.now() == Mode::homing || mode_.now() == Mode::jogging))
     start_stop(k);

@@ -1088,6 +1088,7 @@ int Server::drain() {
     if (a.source == kTrajectorySource || a.source == kPathAckSource) inflight_segments_ = std::max(0, inflight_segments_ - 1);
     if (a.source == kPathAckSource) paths_->answered(a.id, a.accepted);
     ack_newer_than_state_ = true;
+    ack_cycle_ = std::max(ack_cycle_, a.cycle);
     ack_end_ = a.queue_end;
     ack_end_v_ = a.queue_end_velocity;
     settle_pending(a);
@@ -1108,7 +1109,10 @@ int Server::drain() {
     latest_ = st;
     have_state_ = true;
     journal_fault(st);
-    ack_newer_than_state_ = false;
+    // Only a state of the ack's cycle or later knows the acked segment (a
+    // stream chunk was refused as "not continuous" against the queue end
+    // of a state drained after the ack of the chunk before it).
+    if (st.cycle >= ack_cycle_) ack_newer_than_state_ = false;
     ++n;
     s = loop_.snapshots().front();
   }

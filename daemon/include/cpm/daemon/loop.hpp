@@ -160,6 +160,9 @@ struct Ack {
   Vec3 queue_end = Vec3::Zero();           // where the next segment must start
   Vec3 queue_end_velocity = Vec3::Zero();  // and how fast (m/s)
   Vec3 queue_end_acceleration = Vec3::Zero();
+  // The cycle that answered: the state of this cycle and later already holds
+  // the command's effect on the queue (commands come before the state's publish).
+  std::int64_t cycle = 0;
 };
 
 
@@ -323,6 +326,7 @@ class ControlLoop {
   ModeState mode_;
   FaultLatch fault_;
   OverrunCount overruns_;
+  std::int64_t commands_cycle_ = 0;  // the cycle whose commands are being answered (Ack::cycle)
   std::array<std::int64_t, 3> saturated_cycles_{};  // consecutive cycles at the force limit
   Underrun underrun_;
 

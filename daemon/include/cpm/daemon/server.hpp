@@ -236,7 +236,11 @@ class Server {
   int inflight_segments_ = 0;
   Vec3 planned_end_ = Vec3::Zero();
   Vec3 planned_end_v_ = Vec3::Zero();   // the velocity the queue will end with (m/s)
+  // The queue's end from the newest of the last ack and the last state: the
+  // state drained after an ack may be of a cycle before it (the snapshots
+  // wait in their ring), and its queue end then lacks the acked segment.
   bool ack_newer_than_state_ = false;
+  std::int64_t ack_cycle_ = -1;
   Vec3 ack_end_ = Vec3::Zero();
   Vec3 ack_end_v_ = Vec3::Zero();
   ctl::ControlLaw law_;
