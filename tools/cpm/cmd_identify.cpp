@@ -168,7 +168,8 @@ Run setup(CLI::App& app) {
   client::add_operator(app, o->op);
   app.footer("Checks the experiment against the limits cpmd publishes before anything moves, approaches its first\n"
              "point, plays it while recording cpmd's state, runs the loop (cpm loop) on the log and writes the new\n"
-             "model. --apply loads it and shows the paper's circle before and after.");
+             "model. --apply loads it and shows the paper's circle before and after. --record-only --log LOG.csv\n"
+             "stops after the recording: cpm loop on another computer, then cpm load-model.");
   return [o] {
     if (!o->record_only && o->out.empty()) throw UsageError("--out is required (the new model file)");
     return run(*o);
