@@ -53,8 +53,10 @@ std::optional<double> paper_circle(daemon::Client& c, const char* when) {
 }
 
 // The new model into cpmd: disable, load-model, enable (cpmd loads a model only when disabled).
+// Each answer is waited for as long as the load's: a controller busy with its loop (or the SIL
+// guest's emulated CPU) may answer later than a jog's 2 s.
 bool load_into_cpmd(daemon::Client& c, const std::string& path) {
-  if (!c.control(control_command_t::CMD_DISABLE).accepted || !wait_mode(c, state_t::MODE_DISABLED, 5.0)) {
+  if (!c.control(control_command_t::CMD_DISABLE, 10.0).accepted || !wait_mode(c, state_t::MODE_DISABLED, 10.0)) {
     std::printf("apply: cpmd did not disable\n");
     return false;
   }
@@ -64,7 +66,7 @@ bool load_into_cpmd(daemon::Client& c, const std::string& path) {
   const auto ack = c.control(cmd, 10.0);
   std::printf("load-model %s: %s\n", cmd.model_path.c_str(), ack.accepted ? "accepted" : ack.message.c_str());
   if (!ack.accepted) return false;
-  if (!c.control(control_command_t::CMD_ENABLE).accepted || !wait_mode(c, state_t::MODE_HOLDING, 10.0)) {
+  if (!c.control(control_command_t::CMD_ENABLE, 10.0).accepted || !wait_mode(c, state_t::MODE_HOLDING, 10.0)) {
     std::printf("apply: cpmd did not enable again\n");
     return false;
   }
