@@ -8,12 +8,18 @@
 // from the SYNC after the one whose positions it was computed from (CiA 402
 // cyclic synchronous torque): the bus adds one period of actuation delay.
 // cpmd starts from the nominal model (config/machine.yaml), which has none
-// of the four. `cpm excite` designs the experiment, `cpm identify --apply`
-// plays it while recording, runs the loop, loads the new model and runs the
-// paper's circle before and after; then the same circle with the true model
-// and the bus's delay loaded. Asserted: the delay named within 2 % or 3
-// standard errors of one period, every planted effect within 2 %, the
-// circle's error lower after than before and within 2x of the true model's.
+// of the four. Two forms (docs/sil.md):
+//   --host-fit (CI's, sil.daemon.identify): the experiment designed on the
+//     host, recorded here (`cpm identify --record-only`), the loop run on the
+//     host on that log (identify-host-fit.sh, through the shared --out
+//     folder), the new model loaded and the paper's circle run here;
+//   otherwise (sil.daemon.identify.guest): `cpm excite` and `cpm identify
+//     --apply` here, the circle before and after printed by cpm identify.
+// Then the same circle with the true model and the bus's delay loaded.
+// Asserted: the delay within 2 % or 3 standard errors of one period, every
+// planted effect within 2 % or 3 standard errors, the circle's RMS lower
+// after than before and within 2x of the true model's, and so the RMS after
+// the circle's first 0.5 s (the start at full speed from rest is most of it).
 //
 // Time in the guest is not real time: waits only bound a hang, and the
 // physics is exact because the drives step the plant one period per SYNC.
