@@ -1,5 +1,6 @@
 # SPDX-License-Identifier: Apache-2.0
-# cpm_add_sil_test(NAME <name> [NEEDS can|gpio|can,gpio] [TIMEOUT <s>] COMMAND <cmd> [args...])
+# cpm_add_sil_test(NAME <name> [NEEDS can|gpio|can,gpio] [TIMEOUT <s>] [HOST <cmd> [args...]]
+#                  COMMAND <cmd> [args...])
 #
 # Registers a CTest test that runs <cmd> through tests/sil/run-in-vm.sh:
 # on the host in a fresh network namespace when it has vcan (and gpio-sim if
@@ -7,6 +8,8 @@
 # first run downloads and builds the VM image (test sil.prepare, a fixture
 # every SIL test requires, so that the download is not charged to a test's
 # own time-out). TIMEOUT (default 300 s) bounds the run itself, boot included.
+# HOST: a command on the host that runs the runner's command line (its last
+# arguments) and works beside the guest, e.g. through a shared folder.
 # Include this file from a tests/<module>/CMakeLists.txt:
 #   include(${PROJECT_SOURCE_DIR}/tests/sil/SilTest.cmake)
 include_guard(GLOBAL)
@@ -16,7 +19,7 @@ set_property(GLOBAL PROPERTY CPM_SIL_RUNNER ${CMAKE_CURRENT_LIST_DIR}/run-in-vm.
 option(CPM_SIL_TESTS "Register the SIL tests (vcan/gpio-sim; boot a VM when the host has neither)" ON)
 
 function(cpm_add_sil_test)
-  cmake_parse_arguments(ARG "" "NAME;NEEDS;TIMEOUT" "COMMAND" ${ARGN})
+  cmake_parse_arguments(ARG "" "NAME;NEEDS;TIMEOUT" "COMMAND;HOST" ${ARGN})
   if(NOT CPM_SIL_TESTS)
     return()
   endif()
@@ -45,7 +48,7 @@ function(cpm_add_sil_test)
     endif()
   endforeach()
   add_test(NAME ${ARG_NAME}
-           COMMAND bash ${CPM_SIL_RUNNER} --needs ${ARG_NEEDS} --timeout ${ARG_TIMEOUT} ${share} -- ${ARG_COMMAND}
+           COMMAND ${ARG_HOST} bash ${CPM_SIL_RUNNER} --needs ${ARG_NEEDS} --timeout ${ARG_TIMEOUT} ${share} -- ${ARG_COMMAND}
            WORKING_DIRECTORY ${CMAKE_BINARY_DIR})
   # CTest's own limit sits above the runner's, so that the runner reports
   # the time-out (with the serial log) rather than being killed.

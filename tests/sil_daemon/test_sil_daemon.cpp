@@ -39,6 +39,7 @@
 #include "cpm/program_cli.hpp"
 #include "cpm/sim/closed_loop.hpp"
 #include "sil/sil_check.hpp"
+#include "sil_gpio.hpp"
 #include "support/daemon_process.hpp"
 
 #define SIL_REQUIRE_VOID(cond, msg)                          \
@@ -70,21 +71,7 @@ void dump(const char* name, const Process& p) {
   while (std::getline(f, line)) std::fprintf(stderr, "  %s\n", line.c_str());
 }
 
-// The gpio-sim chip: inputs driven by pull, outputs read back.
-struct Gpio {
-  std::string sysfs = sil::env_or("CPM_SIL_GPIO_SYSFS", "");
-  // Offsets of sil-env.sh's CPM_SIL_GPIO_LINES.
-  static constexpr int estop = 0, enable = 1, limit_x_max = 3, brake_z = 8;
-  void pull(int line, bool up) const {
-    std::ofstream(sysfs + "/sim_gpio" + std::to_string(line) + "/pull") << (up ? "pull-up" : "pull-down");
-  }
-  int value(int line) const {
-    std::ifstream f(sysfs + "/sim_gpio" + std::to_string(line) + "/value");
-    int v = -1;
-    f >> v;
-    return v;
-  }
-};
+using sil::Gpio;
 
 // One line to the virtual drives' control socket, one line back.
 std::string vd_command(const std::string& path, const std::string& line) {
@@ -279,8 +266,7 @@ int run(Sil& t, int argc, char** argv) {
   t.client = std::make_unique<daemon::Client>(t.cfg.lcm, ops.add("sil", daemon::Role::engineer));
 
   // The e-stop chain closed, no limit switch.
-  t.gpio.pull(Gpio::estop, true);
-  for (int l = 2; l <= 7; ++l) t.gpio.pull(l, false);
+  t.gpio.healthy();
   if (homing) return run_homing(t);
   SIL_REQUIRE(t.start_vd(), "virtual-drives did not start");
   if (!t.start_cpmd()) {

@@ -58,6 +58,8 @@ bad --radius "$cpm" sim --radius nan
 bad --plane "$cpm" sim --plane ab
 bad --data "$cpm" diagnose
 bad --max-steps "$cpm" loop --data x.csv --out y.yaml --max-steps 0
+bad --out "$cpm" identify x.csv
+bad --log "$cpm" identify x.csv --record-only
 bad --from "$cpm" sim --trajectory p2p --from 0.3,0.3 --to 0.4,0.4,0.4
 bad nosuch "$cpm" nosuch
 bad --bogus "$cpmd" --config x.yaml --bogus

@@ -29,6 +29,7 @@ struct Options {
   client::Operator op;
   int max_steps = 6;
   bool apply = false;
+  bool record_only = false;
 };
 
 using cpm_msgs::control_command_t;
@@ -52,8 +53,10 @@ std::optional<double> paper_circle(daemon::Client& c, const char* when) {
 }
 
 // The new model into cpmd: disable, load-model, enable (cpmd loads a model only when disabled).
+// Each answer is waited for as long as the load's: a controller busy with its loop (or the SIL
+// guest's emulated CPU) may answer later than a jog's 2 s.
 bool load_into_cpmd(daemon::Client& c, const std::string& path) {
-  if (!c.control(control_command_t::CMD_DISABLE).accepted || !wait_mode(c, state_t::MODE_DISABLED, 5.0)) {
+  if (!c.control(control_command_t::CMD_DISABLE, 10.0).accepted || !wait_mode(c, state_t::MODE_DISABLED, 10.0)) {
     std::printf("apply: cpmd did not disable\n");
     return false;
   }
@@ -63,7 +66,7 @@ bool load_into_cpmd(daemon::Client& c, const std::string& path) {
   const auto ack = c.control(cmd, 10.0);
   std::printf("load-model %s: %s\n", cmd.model_path.c_str(), ack.accepted ? "accepted" : ack.message.c_str());
   if (!ack.accepted) return false;
-  if (!c.control(control_command_t::CMD_ENABLE).accepted || !wait_mode(c, state_t::MODE_HOLDING, 10.0)) {
+  if (!c.control(control_command_t::CMD_ENABLE, 10.0).accepted || !wait_mode(c, state_t::MODE_HOLDING, 10.0)) {
     std::printf("apply: cpmd did not enable again\n");
     return false;
   }
@@ -117,6 +120,11 @@ int run(const Options& o) {
     io::write_motion(*o.log, log);
     std::printf("log: %zu rows over %.3f s to %s\n", log.t.size(), log.t.back() - log.t.front(), o.log->c_str());
   }
+  if (o.record_only) {
+    std::printf("recorded only: run the loop on the log elsewhere (cpm loop --model %s --data %s --out NEW.yaml), "
+                "then cpm load-model NEW.yaml\n", model_path.c_str(), o.log->c_str());
+    return 0;
+  }
 
   const ident::LoopResult R = ident::run_loop(io::DataSet(log), mf.model, {}, o.max_steps);
   std::fputs(ident::loop_text(R).c_str(), stdout);
@@ -147,17 +155,27 @@ Run setup(CLI::App& app) {
       ->required();
   add_model_option(app, o->model, "the model cpmd runs (default: the daemon config's model_file)");
   add_new_model_option(app, o->out);
+  app.get_option("--out")->required(false);  // not with --record-only; checked below
   app.add_option("--log", o->log, "also write the recorded motion log")->type_name("LOG.csv");
   app.add_option("--max-steps", o->max_steps, "the loop's steps at most (1 .. 20)")->check(CLI::Range(1, 20));
   app.add_flag("--apply", o->apply,
                "engineer: run the paper's circle, then the experiment and the loop, load the new model into cpmd "
                "(disable, load-model, enable) and run the circle again; print the tracking error before and after");
+  app.add_flag("--record-only", o->record_only,
+               "play the experiment and write the log (--log), without the loop: for a controller too slow for the "
+               "fit, run cpm loop on the log on another computer and cpm load-model the result")
+      ->excludes("--apply")
+      ->needs("--log");
   client::add_connection(app, o->connection);
   client::add_operator(app, o->op);
   app.footer("Checks the experiment against the limits cpmd publishes before anything moves, approaches its first\n"
              "point, plays it while recording cpmd's state, runs the loop (cpm loop) on the log and writes the new\n"
-             "model. --apply loads it and shows the paper's circle before and after.");
-  return [o] { return run(*o); };
+             "model. --apply loads it and shows the paper's circle before and after. --record-only --log LOG.csv\n"
+             "stops after the recording: cpm loop on another computer, then cpm load-model.");
+  return [o] {
+    if (!o->record_only && o->out.empty()) throw UsageError("--out is required (the new model file)");
+    return run(*o);
+  };
 }
 
 const Command reg{"identify", "run an experiment on cpmd while recording, run the loop on the log, write the new model",
