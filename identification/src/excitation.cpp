@@ -65,7 +65,6 @@ void ExcitationOptions::validate() const {
   if (!(ramp >= 0.2 && ramp <= 10.0)) throw Error("excite: --ramp must be within 0.2..10 s");
   if (iterations < 0 || iterations > 100000) throw Error("excite: --iterations must be 0..100000");
   if (speeds < 0 || speeds > 8) throw Error("excite: --speeds must be 0..8");
-  if (!(cap > 1.0 && cap <= 100.0)) throw Error("excite: the capped criterion's cap must be within (1, 100]");
   if (searches < 1 || searches > 32) throw Error("excite: --searches must be 1..32");
   if (refine < -1 || refine > 100000) throw Error("excite: the refinement's budget must be 0..100000 designs");
 }
@@ -398,32 +397,8 @@ ExcitationFigures excitation_figures(const MultiSine& m, const ctl::Machine& mod
 
 namespace {
 
-// The effect columns' standard errors against the reference design's
-// (relative_a, capped). The force gains and actuator inertias are left out:
-// on the noise-free log of the model's own force their columns lie almost in
-// the base span, and their predicted ratios (0.9-1.2x for the inertias, 150x and
-// more for the gains) do not follow those fitted on a log (1.5-10x).
-double relative_score(const ExcitationFigures& F, const ExcitationFigures& ref, const ExcitationOptions& o) {
-  double sum = 0.0;
-  int n = 0;
-  for (std::size_t j = static_cast<std::size_t>(F.base_columns); j < F.columns.size(); ++j) {
-    if (F.columns[j].rfind("force_gain", 0) == 0 || F.columns[j].rfind("actuator_inertia", 0) == 0) continue;
-    const auto k = static_cast<Eigen::Index>(j);
-    const double r = ref.std_error(k) / std::max(F.std_error(k), 1e-300);  // > 1: better than the reference
-    if (o.criterion == ExcitationOptions::Criterion::relative_a)
-      sum += 1.0 / (r * r);
-    else
-      sum += std::log(std::min(r, o.cap));
-    ++n;
-  }
-  return o.criterion == ExcitationOptions::Criterion::relative_a ? -std::log(sum / std::max(n, 1)) : sum + o.weight * F.log_det;
-}
-
-double score(const ExcitationFigures& F, const ExcitationFigures& ref, const ExcitationOptions& o) {
-  using C = ExcitationOptions::Criterion;
-  const double info = o.criterion == C::log_det      ? F.log_det
-                      : o.criterion == C::std_errors ? F.log_std_errors
-                                                     : relative_score(F, ref, o);
+double score(const ExcitationFigures& F, const ExcitationOptions& o) {
+  const double info = o.criterion == ExcitationOptions::Criterion::log_det ? F.log_det : F.log_std_errors;
   // --separate: the separation first, the information beside it as a tie-break.
   return o.separate ? std::log(std::max(F.separation, 1e-12)) * 100.0 + 1e-3 * info : info;
 }
@@ -604,9 +579,9 @@ ExcitationDesign design_excitation(const ctl::Machine& model, const ExcitationLi
   auto score_of = [&](const MultiSine& m, ExcitationFigures& F) {
     F = excitation_figures(m, model, o);
     ++D.evaluations;
-    return score(F, D.start, o);
+    return score(F, o);
   };
-  double best = score(D.figures, D.start, o);
+  double best = score(D.figures, o);
   // Starts with passes: the stroke as large as the sines' peak, the pairs on
   // shares 1 : 1.6 : 2.2 ... of the period (fast to slow), the axes a third
   // of a period apart so that they do not reverse together; and the same

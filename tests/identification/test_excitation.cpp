@@ -96,15 +96,12 @@ TEST(Excitation, OptimisedDesignAgainstAPlainMultiSineOfTheSameDuration) {
   o.searches = 2;
   // The full form, by hand: CPM_EXCITE_ITERATIONS=400 (cpm excite's default), CPM_EXCITE_SEED=2,
   // CPM_EXCITE_REFINE=400 (the pattern search's designs; cpm excite's default 200),
-  // CPM_EXCITE_SEARCHES=1 (cpm excite's default), CPM_EXCITE_CRITERION=0..3 (log_det,
-  // std_errors, relative_a, capped) with CPM_EXCITE_CAP and CPM_EXCITE_WEIGHT for capped,
+  // CPM_EXCITE_SEARCHES=1 (cpm excite's default), CPM_EXCITE_CRITERION=0..1 (log_det, std_errors),
   // CPM_EXCITE_SKIP_BOXED=1 (no design within the plain one's box: half the time) ...
   if (const char* c = std::getenv("CPM_EXCITE_ITERATIONS")) o.iterations = std::atoi(c);
   if (const char* c = std::getenv("CPM_EXCITE_SEED")) o.seed = std::strtoull(c, nullptr, 10);
   if (const char* c = std::getenv("CPM_EXCITE_REFINE")) o.refine = std::atoi(c);
   if (const char* c = std::getenv("CPM_EXCITE_CRITERION")) o.criterion = static_cast<ExcitationOptions::Criterion>(std::atoi(c));
-  if (const char* c = std::getenv("CPM_EXCITE_CAP")) o.cap = std::atof(c);
-  if (const char* c = std::getenv("CPM_EXCITE_WEIGHT")) o.weight = std::atof(c);
   if (const char* c = std::getenv("CPM_EXCITE_SEARCHES")) o.searches = std::atoi(c);
   const bool skip_boxed = std::getenv("CPM_EXCITE_SKIP_BOXED") != nullptr;
   const MultiSine plain = schroeder_multisine(model, L, o);

@@ -64,20 +64,14 @@ struct ExcitationOptions {
   std::uint64_t seed = 1;
   bool optimise = true;        // false: the flat spectrum with Schroeder phases
   int speeds = 4;              // pairs of constant-speed passes per axis and period (0: sines only)
-  // What the optimiser maximises: the D-criterion (log det X^T X); the
+  // What the optimiser maximises: the D-criterion (log det X^T X), or the
   // product of the standard errors' inverses (sum of -log sigma_j over the
   // columns: it rewards separating each column from all the others, where
-  // the D-criterion also rewards columns already well determined); or the
-  // effect columns' standard errors relative to the flat Schroeder start's
-  // (relative_a: minus the log of the mean of var_j / var_j(start), A-optimality
-  // on relative variances; capped: the sum of log(sigma_j(start) / sigma_j)
-  // each capped at log `cap`, so that no column gains by going past the cap
-  // and the effort goes to the columns still under it, plus `weight` times
-  // the D-criterion). Measured against the D-criterion in
-  // docs/identification.md ("How the designs are compared"): not kept.
-  enum class Criterion { log_det, std_errors, relative_a, capped } criterion = Criterion::log_det;
-  double cap = 3.0;            // capped: the ratio past which a column earns nothing more
-  double weight = 0.0;         // capped: weight of the D-criterion beside it
+  // the D-criterion also rewards columns already well determined). Criteria
+  // relative to the flat Schroeder start's standard errors were measured
+  // against the D-criterion and not kept (docs/identification.md, "How the
+  // designs are compared").
+  enum class Criterion { log_det, std_errors } criterion = Criterion::log_det;
   // Tell two effects apart ("coulomb_friction:1", "payload_mass") instead of the D-criterion.
   std::optional<std::pair<std::string, std::string>> separate;
   void validate() const;       // throws Error naming the option
