@@ -269,6 +269,31 @@ constexpr double kAlikeCorrelation = 0.9;
 const char* const kSmoothVariables[] = {"d1", "d2", "d3", "v1", "v2", "v3", "a1", "a2", "a3", "t"};
 constexpr int kSmoothPairs = 3 * 10 * 2;  // (axis, variable) pairs, two bases each
 
+// A fit's removed sum of squares judged against what it leaves: in units of
+// that residual's variance (over R rows less the fit's `params`) inflated by
+// its own autocorrelation (the residual's variance before the fit holds the
+// structure itself, and a strong one hid behind it at 7 sigma), chi ~ chi^2
+// with `dof` degrees of freedom under noise; p after the look-elsewhere over
+// `family` tries.
+struct RemovalTest {
+  double chi = 0.0, p = 1.0;
+  double unit = 0.0;   // the inflated variance: one noise row's worth of sum of squares
+  double n_eff = 0.0;  // effective rows of what is left
+};
+
+RemovalTest judge_removal(const Eigen::VectorXd& left, double removed, int params, int dof, double family) {
+  RemovalTest t;
+  const int R = static_cast<int>(left.size());
+  const std::vector<double> left_v(left.data(), left.data() + R);
+  const double var_left = left.squaredNorm() / std::max(1, R - params - 1);
+  const double infl_left = static_cast<double>(R) / std::max(2.0, effective_samples({left_v}));
+  t.unit = var_left * infl_left;
+  t.n_eff = static_cast<double>(R) / infl_left;
+  t.chi = t.unit > 0.0 ? removed / t.unit : 0.0;
+  t.p = std::min(1.0, f_tail(t.chi / dof, dof, 1e7) * family);
+  return t;
+}
+
 struct SmoothFit {
   std::string var;
   double lo = 0.0, hi = 0.0;
@@ -349,19 +374,13 @@ void table_fit(const std::vector<double>& x, const Eigen::VectorXd& y, SmoothFit
   if (ldlt.info() != Eigen::Success) return;
   const Eigen::VectorXd coef = ldlt.solve(b);
   const double removed = std::max(0.0, coef.dot(b));
-  const Eigen::VectorXd left = y - T * coef;
-  const std::vector<double> left_v(left.data(), left.data() + R);
-  const double var_left = left.squaredNorm() / std::max(1, R - K - 1);
-  const double infl_left = static_cast<double>(R) / std::max(2.0, effective_samples({left_v}));
-  const double chi = var_left > 0.0 ? removed / (var_left * infl_left) : 0.0;
-  const double p = std::min(1.0, f_tail(chi / K, K, 1e7) * kSmoothPairs);
+  const RemovalTest t = judge_removal(y - T * coef, removed, K, K, kSmoothPairs);
   // The table where it removes more than its extra parameters would by BIC
   // (p of either underflows to 0 for strong structure and cannot choose).
-  const double unit = var_left * infl_left, n_eff = static_cast<double>(R) / infl_left;
-  if (!(unit > 0.0) || !(removed - s.removed > unit * (K - kSmoothDegree) * std::log(std::max(n_eff, 3.0)))) return;
+  if (!(t.unit > 0.0) || !(removed - s.removed > t.unit * (K - kSmoothDegree) * std::log(std::max(t.n_eff, 3.0)))) return;
   s.removed = removed;
-  s.p = p;
-  s.chi = chi * kSmoothDegree / K;
+  s.p = t.p;
+  s.chi = t.chi * kSmoothDegree / K;
   s.table = true;
 }
 
@@ -391,15 +410,9 @@ SmoothFit smooth_fit(const MotionProblem& P, const AxisResidual& A, const std::s
   if (ldlt.info() != Eigen::Success) return s;
   s.coef = ldlt.solve(b);
   s.removed = std::max(0.0, s.coef.dot(b));
-  // The F-test's denominator: what the fit leaves, its variance inflated by
-  // its own autocorrelation (the residual's variance before the fit holds the
-  // structure itself, and a strong one hid behind it at 7 sigma).
-  const Eigen::VectorXd left = y - X * s.coef;
-  const std::vector<double> left_v(left.data(), left.data() + R);
-  const double var_left = left.squaredNorm() / std::max(1, R - K - 1);
-  const double infl_left = static_cast<double>(R) / std::max(2.0, effective_samples({left_v}));
-  s.chi = var_left > 0.0 ? s.removed / (var_left * infl_left) : 0.0;
-  s.p = std::min(1.0, f_tail(s.chi / K, K, 1e7) * kSmoothPairs);
+  const RemovalTest t = judge_removal(y - X * s.coef, s.removed, K, K, kSmoothPairs);
+  s.chi = t.chi;
+  s.p = t.p;
   // Shares of the fitted curve: its linear part and its odd part (P1, P3, P5).
   const Eigen::VectorXd fit = X * s.coef;
   const double ff = fit.squaredNorm();
@@ -560,12 +573,8 @@ std::optional<StructureFinding> position_friction_finding(const MotionProblem& P
   const Eigen::VectorXd cf = full.solve(b), cr = rival.solve(b.head(C - K));
   const double gain = cf.dot(b) - cr.dot(b.head(C - K));
   if (!(gain > 0.0) || !std::isfinite(gain)) return std::nullopt;
-  const Eigen::VectorXd left = y - X * cf;
-  const std::vector<double> left_v(left.data(), left.data() + R);
-  const double var_left = left.squaredNorm() / std::max(1, R - C - 1);
-  const double infl_left = static_cast<double>(R) / std::max(2.0, effective_samples({left_v}));
-  const double chi = var_left > 0.0 ? gain / (var_left * infl_left) : 0.0;
-  const double p = std::min(1.0, f_tail(chi / K, K, 1e7) * kFrictionMapFamily);
+  const RemovalTest t = judge_removal(y - X * cf, gain, C, K, kFrictionMapFamily);
+  const double chi = t.chi, p = t.p;
   if (!(p < 1e-4) || !(std::sqrt(gain / R) > A.tiny)) return std::nullopt;
   // The map said to people: sign(v) (c0 + g(d)) alone, its level at 7 places.
   // (The sharp sign only: on a circle the ends of the stroke are where the
