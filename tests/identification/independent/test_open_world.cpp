@@ -18,6 +18,13 @@
 namespace cpm::indep {
 namespace {
 
+// The largest speed an axis reaches on a log (m/s), as the generator made it.
+double peak_speed(const GeneratedLog& g, int axis) {
+  double vmax = 0.0;
+  for (const Vec3& v : g.v_true) vmax = std::max(vmax, std::fabs(v[axis]));
+  return vmax;
+}
+
 GeneratorSpec spec(Timing t, NoisePlacement n, std::uint64_t seed) {
   GeneratorSpec s;
   s.timing = t;
@@ -67,8 +74,7 @@ TEST(OpenWorld, CableCarrierIsOutsideTheLibraryOnItsAxisAndVariable) {
   GeneratorSpec s = spec(Timing::zoh, NoisePlacement::plant, 5);
   const GeneratedLog g0 = generate(s);
   const ident::Diagnosis D0 = diagnose(g0);
-  double vmax = 0.0;
-  for (const Vec3& v : g0.v_true) vmax = std::max(vmax, std::fabs(v[0]));
+  const double vmax = peak_speed(g0, 0);
   const double c = 10.0 * D0.axis_floor[1] / vmax;
   s.outside = {{OutsideForce::Kind::cross_velocity, 1, 0, c, 0.0, 1.0}};
   const ident::Diagnosis D = diagnose(generate(s));
@@ -230,8 +236,7 @@ TEST(OpenWorld, LoopAddsTheLibraryEffectBeforeStoppingAtTheOutsideFinding) {
   GeneratorSpec s = spec(Timing::zoh, NoisePlacement::plant, 6);
   const GeneratedLog g0 = generate(s);
   const ident::Diagnosis D0 = diagnose(g0);
-  double vmax = 0.0;
-  for (const Vec3& v : g0.v_true) vmax = std::max(vmax, std::fabs(v[1]));
+  const double vmax = peak_speed(g0, 1);
   const double c = 6.0 * D0.axis_floor[0] / vmax;
   s.effects = {{"cogging", 0, {1.5, 0.012, 0.5}}};
   s.outside = {{OutsideForce::Kind::cross_velocity, 0, 1, c, 0.0, 1.0}};
@@ -311,8 +316,7 @@ TEST(OpenWorld, HumpInItsOwnSpeedNamesNoLibraryEffect) {
   GeneratorSpec s = spec(Timing::zoh, NoisePlacement::plant, 7);
   const GeneratedLog g0 = generate(s);
   const ident::Diagnosis D0 = diagnose(g0);
-  double vmax = 0.0;
-  for (const Vec3& v : g0.v_true) vmax = std::max(vmax, std::fabs(v[0]));
+  const double vmax = peak_speed(g0, 0);
   s.outside = {{OutsideForce::Kind::velocity_hump, 0, -1, 15.0 * D0.axis_floor[0], 0.0, vmax / 8.0}};
   const ident::Diagnosis D = diagnose(generate(s));
   std::printf("hump: %s\n", D.verdict_text.c_str());
@@ -454,8 +458,7 @@ MatrixHump matrix_hump(Timing t, NoisePlacement n, int seed, double rate, int ax
   s.rate = rate;
   const GeneratedLog g0 = generate(s);
   ident::Diagnosis D0 = diagnose(g0);
-  double vmax = 0.0;
-  for (const Vec3& v : g0.v_true) vmax = std::max(vmax, std::fabs(v[from_axis]));
+  const double vmax = peak_speed(g0, from_axis);
   const auto kind = axis == from_axis ? OutsideForce::Kind::velocity_hump : OutsideForce::Kind::cross_velocity_hump;
   s.outside = {{kind, axis, axis == from_axis ? -1 : from_axis, multiple * D0.axis_floor[axis], 0.0, vmax / 6.0}};
   return {std::move(D0), diagnose(generate(s))};
