@@ -149,11 +149,15 @@ void set_not_identifiable(const CandidateContext& ctx, CandidateResult& c, const
 }
 
 void record_base_after(const CandidateContext& ctx, CandidateResult& c, const JointFit& f, bool with_base) {
+  // The engine's base may be a part of the problem's (nuisance_only,
+  // without_nuisance): its columns are found by name.
   const auto& base = ctx.P.base_params;
-  for (std::size_t b = 0; b < base.size(); ++b)
-    c.base_after.push_back({base[b].name, base[b].unit,
-                            base[b].value + (with_base ? f.base_delta(static_cast<Eigen::Index>(b)) : 0.0), -1.0,
-                            false});
+  const std::vector<std::string>& fitted = ctx.E.problem().base_names;
+  for (const BaseParameter& b : base) {
+    const auto at = std::find(fitted.begin(), fitted.end(), b.name) - fitted.begin();
+    const bool moved = with_base && at < f.base_delta.size();
+    c.base_after.push_back({b.name, b.unit, b.value + (moved ? f.base_delta(at) : 0.0), -1.0, false});
+  }
 }
 
 void record_fit(const CandidateContext& ctx, CandidateResult& c, const Eigen::MatrixXd& X, const JointFit& f,

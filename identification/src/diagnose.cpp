@@ -126,11 +126,14 @@ void check_effect_for_kind(const std::string& effect, const std::string& kind) {
                 " data cannot show it; record a motion log (kind = motion) with the commanded forces");
 }
 
-LinearProblem nuisance_only(const LinearProblem& L) {
+namespace {
+
+// L with the base columns whose nuisance flag is `nuisance` only.
+LinearProblem base_columns_where(const LinearProblem& L, bool nuisance) {
   LinearProblem N = L;
   std::vector<int> keep;
   for (std::size_t b = 0; b < L.nuisance.size(); ++b)
-    if (L.nuisance[b]) keep.push_back(static_cast<int>(b));
+    if ((L.nuisance[b] != 0) == nuisance) keep.push_back(static_cast<int>(b));
   N.B.resize(L.B.rows(), static_cast<Eigen::Index>(keep.size()));
   N.base_names.clear();
   N.base_units.clear();
@@ -141,10 +144,16 @@ LinearProblem nuisance_only(const LinearProblem& L) {
     N.base_names.push_back(L.base_names[static_cast<std::size_t>(keep[q])]);
     N.base_units.push_back(L.base_units[static_cast<std::size_t>(keep[q])]);
     N.base_values.push_back(L.base_values[static_cast<std::size_t>(keep[q])]);
-    N.nuisance.push_back(1);
+    N.nuisance.push_back(nuisance ? 1 : 0);
   }
   return N;
 }
+
+}  // namespace
+
+LinearProblem nuisance_only(const LinearProblem& L) { return base_columns_where(L, true); }
+
+LinearProblem without_nuisance(const LinearProblem& L) { return base_columns_where(L, false); }
 
 LinearProblem motion_linear_problem(const MotionProblem& P, Vec3* axis_noise) {
   LinearProblem L;

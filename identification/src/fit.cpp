@@ -161,6 +161,32 @@ Backfit backfit(const MotionProblem& P, LinearProblem L, const ctl::MachineModel
   return B;
 }
 
+// The additive effects by back-fitting on `L` (the base as the request
+// refits it, with the plane nuisance), or, where the nuisance takes more force
+// than the fit leaves, on `L` without it. The nuisance stands for plane errors
+// a calibrated model keeps to the size of the noise; the model written does
+// not carry it. On a log with a spring and a drive gain on one axis the
+// spring alone, fitted beside the nuisance, left 0.31 N while the tilts took
+// 2.3 N RMS (planes tilted 0.1-0.2 rad): the model written left 2.4 N, and
+// the loop's next step named drive gains of -28 % on the other axes.
+Backfit backfit_written(const MotionProblem& P, const LinearProblem& L, const ctl::MachineModel& work,
+                        const std::vector<FitRequest>& additive, const DiagnoseOptions& opt, const std::string& path,
+                        std::vector<std::string>& notes) {
+  Backfit B = backfit(P, L, work, additive, opt, path);
+  if (additive.empty()) return B;
+  LinearProblem left = L;
+  for (const auto& c : B.contrib) left.y -= c;
+  LinearProblem plain = without_nuisance(left);
+  const JointFit with = Engine(left).base_fit();
+  const Eigen::VectorXd by_nuisance = Engine(plain).base_fit().residual - with.residual;
+  if (!(Engine::rms(by_nuisance) > Engine::rms(with.residual))) return B;
+  notes.push_back("the plane nuisance took " + std::to_string(Engine::rms(by_nuisance)) +
+                  " N RMS beside these effects, more than the " + std::to_string(Engine::rms(with.residual)) +
+                  " N they leave (it stands for plane errors of the size of the noise, and a model file does not "
+                  "carry it): the effects were fitted without it");
+  return backfit(P, without_nuisance(L), work, additive, opt, path);
+}
+
 // The base (A..E) on what the effects leave: changed when inertia_error was
 // asked for; otherwise a note when the data say it differs from the model's.
 CandidateResult base_change(const MotionProblem& P, const LinearProblem& L_full, const Backfit& B,
@@ -284,8 +310,8 @@ FitResult fit_motion(const io::MotionData& data, const ctl::MachineModel& model,
     P.set_delay(roles.fit_delay ? A.tau : A.reference);
     if (roles.fit_delay) F.delay = fit_delay(A, work, F.notes);
     const LinearProblem L_full = motion_linear_problem(P);
-    const Backfit B = backfit(P, roles.refit_base ? L_full : nuisance_only(L_full), work, roles.additive, opt,
-                              data.info.path);
+    const Backfit B = backfit_written(P, roles.refit_base ? L_full : nuisance_only(L_full), work, roles.additive,
+                                      opt, data.info.path, F.notes);
     const CandidateResult base = base_change(P, L_full, B, work, opt, roles.refit_base, F.notes);
     F.base_refitted = roles.refit_base;
     F.base_change = base.params;

@@ -114,6 +114,9 @@ void select_motion_effects(Diagnosis& D, const Engine& E, const DiagnoseOptions&
 void verdict_text_motion(Diagnosis& D);
 // Why a fitted value is physically implausible for this machine, or empty (verdict.cpp).
 std::string implausible(const CandidateResult& c);
+// The same for an effect's first parameter at `first_param` (its unit's, SI);
+// with impossible_only, only values no machine at all has (a negative mass).
+std::string implausible_value(const std::string& effect, double first_param, bool impossible_only = false);
 // Why a fitted value is no missing effect's (implausible, or a parameter held
 // at a physical bound other than 0), or empty (verdict.cpp).
 std::string unphysical(const CandidateResult& c);

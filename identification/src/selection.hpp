@@ -77,7 +77,11 @@ struct SelectionState {
 struct Selection {
   SelectionState state;
   std::vector<StepFit> at_choice, last;
-  Selection(const Engine& E, const SelectionKind& kind, std::size_t n) : state(E, kind), at_choice(n), last(n) {}
+  // Candidates that gave way to a plausible term the data see alike, their
+  // value being one no healthy machine has: not tried again (select.cpp).
+  std::vector<bool> gave_way;
+  Selection(const Engine& E, const SelectionKind& kind, std::size_t n)
+      : state(E, kind), at_choice(n), last(n), gave_way(n, false) {}
 };
 
 // Look-elsewhere (Bonferroni) correction of a p-value: its own search trials

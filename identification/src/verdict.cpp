@@ -17,11 +17,12 @@ struct Implausible {
   const char* effect;
   bool (*off)(double);
   const char* why;
+  bool impossible = false;  // no machine at all has it (a mass taken off), not only no healthy one
 };
 
 constexpr Implausible kImplausible[] = {
     {"payload_mass", [](double v) { return v < 0.0; },
-     "a negative payload: mass taken off the platform, or the model's masses too large"},
+     "a negative payload: mass taken off the platform, or the model's masses too large", true},
     {"force_gain", [](double v) { return std::fabs(v) > 0.3; },
      "a drive gain off by more than 30 %: check the torque constant and the units of the force column"},
     {"coulomb_friction", [](double v) { return v > 30.0; },
@@ -33,7 +34,8 @@ constexpr Implausible kImplausible[] = {
     // corrected; a rotor the model lacks only adds inertia.
     {"actuator_inertia", [](double v) { return v < 0.0; },
      "a negative reflected inertia: no rotor takes mass off an axis; the model's masses on it too large, or "
-     "something else that follows its acceleration"},
+     "something else that follows its acceleration",
+     true},
 };
 
 // Ambiguity: an effect chosen that another explains as well (alternatives),
@@ -67,12 +69,14 @@ void write_found_effect(std::ostringstream& os, const CandidateResult& v) {
 
 }  // namespace
 
-std::string implausible(const CandidateResult& c) {
-  if (c.params.empty()) return {};
-  const double v = c.params[0].value;
+std::string implausible_value(const std::string& effect, double first_param, bool impossible_only) {
   for (const Implausible& i : kImplausible)
-    if (c.effect == i.effect && i.off(v)) return i.why;
+    if (effect == i.effect && i.off(first_param) && (i.impossible || !impossible_only)) return i.why;
   return {};
+}
+
+std::string implausible(const CandidateResult& c) {
+  return c.params.empty() ? std::string() : implausible_value(c.effect, c.params[0].value);
 }
 
 std::string unphysical(const CandidateResult& c) {

@@ -6,6 +6,8 @@
 
 #include <string>
 
+#include "cpm/identification/align.hpp"
+#include "cpm/identification/fit.hpp"
 #include "matrix.hpp"
 
 namespace cpm::indep {
@@ -65,9 +67,10 @@ const std::vector<std::string> kLibraryOfTheseLogs = {"viscous_friction", "coulo
 
 // One log of the combination matrix (10x each effect), as cpm_robustness
 // --combos plants it for that seed and cell.
-LogResult combination_log(Timing timing, NoisePlacement noise, double rate, int size, int seed) {
+LogResult combination_log(Timing timing, NoisePlacement noise, double rate, int size, int seed,
+                          const std::vector<std::string>& library = kLibraryOfTheseLogs) {
   MatrixOptions o;
-  o.effects = kLibraryOfTheseLogs;
+  o.effects = library;
   o.timings = {timing};
   o.noises = {noise};
   o.rates = {rate};
@@ -108,6 +111,62 @@ TEST(CombinationLogs, ABaseRefitChosenForWhatTwoEffectsDidTogetherIsDroppedBesid
   ASSERT_EQ(planted_labels(r), "spring[axis 3], force_gain[axis 2]");
   EXPECT_TRUE(r.hit) << combo_log_text(r);
   EXPECT_TRUE(r.phantoms.empty()) << combo_log_text(r);
+}
+
+// The library with the reflected inertia (since 2026-11-27).
+std::vector<std::string> library_with_rotor() {
+  std::vector<std::string> lib = kLibraryOfTheseLogs;
+  lib.push_back("actuator_inertia");
+  return lib;
+}
+
+// Under a plant disturbance at 250 Hz a drive gain of +18 % on axis 1 fitted a
+// little worse than a reflected inertia of -0.76 kg there (the acceleration
+// columns share some of the disturbance), and the negative rotor was named
+// beside the spring, with the spring at 9.4 N/m (true 15.9). A value no
+// healthy machine has now gives way to the plausible effect the data see alike.
+TEST(CombinationLogs, ANegativeRotorGivesWayToTheDriveGainTheDataSeeAlike) {
+  const LogResult r = combination_log(Timing::sampled, NoisePlacement::plant, 250.0, 2, 2, library_with_rotor());
+  ASSERT_EQ(planted_labels(r), "spring[axis 1], force_gain[axis 1]");
+  EXPECT_TRUE(r.hit) << combo_log_text(r);
+  for (const NamedEffect& n : r.named) EXPECT_NE(n.effect, "actuator_inertia") << combo_log_text(r);
+  ASSERT_EQ(r.combo.size(), 2u);
+  for (const NamedEffect& n : r.named) {
+    if (n.effect != "spring" || n.values.empty()) continue;
+    const double k = r.combo[0].values[0];
+    EXPECT_NEAR(n.values[0], k, 3.0 * n.std_errors[0] + 0.05 * k) << combo_log_text(r);
+  }
+}
+
+// The force residual of `model` on `log` as a model file gives it: no plane
+// nuisance refitted (cpm compare).
+double written_model_rms(const io::MotionData& log, const ctl::MachineModel& model) {
+  const ctl::Machine m(model);
+  ident::MotionProblem P = ident::prepare_motion(log, m);
+  P.set_delay(ident::align_motion(log, m, {}).reference);
+  return ident::Engine::rms(P.residual);
+}
+
+// cpm fit fits beside the plane nuisance, which a model file does not carry.
+// With a spring and a drive gain on axis 1, the spring alone took a rest
+// position 0.25 m off while plane tilts of 0.1-0.2 rad took 2.3 N: the fit
+// said 0.31 N was left, the model written left 2.4 N, and the loop's next step
+// named drive gains of -28 % on the other axes. The model written must leave
+// what the fit says.
+TEST(CombinationLogs, TheModelCpmFitWritesLeavesTheResidualItReports) {
+  GeneratorSpec s;
+  s.timing = Timing::sampled;
+  s.noise = NoisePlacement::plant;
+  s.rate = 250.0;
+  s.duration = 15.0;
+  s.seed = 2;
+  s.effects = {{"spring", 0, {15.94, 0.2}}, {"force_gain", 0, {0.1837}}};
+  const io::MotionData log = generate(s).log;
+  const ctl::MachineModel nominal = ctl::MachineModel::elkady();
+  const ident::FitResult F = ident::fit_motion(log, nominal, {ident::parse_fit_request("spring:1")}, {}, nullptr, false);
+  const double written = written_model_rms(log, F.model);
+  EXPECT_LT(written, 1.2 * F.on_fit.after) << "the fit said " << F.on_fit.after << " N";
+  EXPECT_LT(written, 0.8 * written_model_rms(log, nominal));
 }
 
 }  // namespace

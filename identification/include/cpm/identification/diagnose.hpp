@@ -239,6 +239,8 @@ LinearProblem motion_linear_problem(const MotionProblem& P, Vec3* axis_noise = n
 // the base parameters at the model's values (the selection before it chooses
 // inertia_error, and cpm fit without it).
 LinearProblem nuisance_only(const LinearProblem& L);
+// The problem with its base columns but the nuisance.
+LinearProblem without_nuisance(const LinearProblem& L);
 
 // One candidate evaluated on an engine (used by diagnose and fit).
 CandidateResult evaluate_dynamic_candidate(const MotionProblem& P, const Engine& E,
