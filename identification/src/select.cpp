@@ -96,22 +96,22 @@ std::string implausible_at_step(const CandidateResult& c, const StepFit& s, bool
 // a drive gain of +18 % on an axis under a plant disturbance at 250 Hz fitted
 // a little worse than a reflected inertia of -0.76 kg there (the acceleration
 // columns share some of the disturbance, the gain's instrument does not), and
-// the negative rotor was named. Where nothing possible is alike, the term stays
-// chosen and the verdict flags its value. Values that are only unusual (a gain
-// of -90 % on a one-frequency circle, where structure outside the library
-// leads) are left to the verdict. One that gave way is not tried again: beside
-// the term chosen instead it would only take what that leaves of the noise.
+// the negative rotor was named. Where nothing plausible is alike, the term is
+// chosen and the verdict flags its value (drop_what_no_longer_adds lets it go
+// first). Values that are only unusual (a gain of -90 % on a one-frequency
+// circle, where structure outside the library leads) are left to the verdict.
+// One that gave way is not tried again.
 int possible_instead(const Diagnosis& D, const Engine& E, const std::vector<Term>& terms, Selection& sel,
                      int best) {
   const auto b = static_cast<std::size_t>(best);
   if (implausible_at_step(D.candidates[b], sel.last[b], true).empty()) return best;
+  const int axis = D.candidates[b].axis;
   const Eigen::VectorXd gain_best = gain_off_nuisance(E, sel.state, sel.last[b]);
   int instead = -1;
   for (const Term& t : terms) {
     const auto j = static_cast<std::size_t>(t.candidate);
-    if (t.candidate == best || sel.state.has(t.candidate) || !sel.last[j].ok) continue;
-    if (D.candidates[j].axis != D.candidates[b].axis || !implausible_at_step(D.candidates[j], sel.last[j], false).empty())
-      continue;
+    if (t.candidate == best || sel.state.has(t.candidate) || sel.gave_way[j] || !sel.last[j].ok) continue;
+    if (D.candidates[j].axis != axis || !implausible_at_step(D.candidates[j], sel.last[j], false).empty()) continue;
     if (instead >= 0 && sel.last[j].dbic >= sel.last[static_cast<std::size_t>(instead)].dbic) continue;
     if (alike(gain_best, gain_off_nuisance(E, sel.state, sel.last[j]))) instead = t.candidate;
   }
@@ -121,7 +121,8 @@ int possible_instead(const Diagnosis& D, const Engine& E, const std::vector<Term
 }
 
 // Every term not chosen tried on top of the state (their statistics kept in
-// sel.last); the candidate with the lowest BIC change among those that pass, or -1.
+// sel.last); the candidate with the lowest BIC change among those that pass,
+// or the one it gives way to (possible_instead), or -1.
 int best_next_term(const Diagnosis& D, const Engine& E, const DiagnoseOptions& opt, const std::vector<Term>& terms,
                    Selection& sel) {
   // The family: every candidate of the library on every axis that has not been
@@ -186,17 +187,42 @@ void drop_from_state(const Engine& E, const std::vector<Term>& terms, int j, int
   if (S.reference_follows) S.reference = f.residual;
 }
 
+// A term chosen whose value in the state's joint fit no machine has, on
+// `axis`, other than `except`; or -1.
+int impossible_on_axis(const Diagnosis& D, const Engine& E, const std::vector<Term>& terms, const SelectionState& S,
+                       int axis, int except) {
+  const JointFit f = E.fit(S.XS, S.base_in);
+  Eigen::Index at = 0;
+  for (int j : S.chosen) {
+    const Term* t = term_of(terms, j);
+    if (!t || t->base) continue;
+    const Eigen::Index q = t->X.cols();
+    const CandidateResult& c = D.candidates[static_cast<std::size_t>(j)];
+    if (j != except && c.axis == axis && q == 1 && c.n_params <= 1 && at < f.beta.size() &&
+        !implausible_value(c.effect, f.beta(at), true).empty())
+      return j;
+    at += q;
+  }
+  return -1;
+}
+
 // kind.prune: each term chosen before the last tested again on top of all the
 // others, over the family it would be chosen from again; the first that no
 // longer passes is dropped (its statistics those of that test), and the rest
-// tested again without it.
+// tested again without it. Where a term on its axis has a value no machine
+// has, that one is dropped instead and set aside (possible_instead): a +16 %
+// drive gain chosen first, a reflected inertia of -0.69 kg on its axis came
+// next, then a spring, and the gain had been the one dropped.
 void drop_what_no_longer_adds(Diagnosis& D, const Engine& E, const DiagnoseOptions& opt,
                               const std::vector<Term>& terms, Selection& sel, const SelectionKind& kind) {
   SelectionState& S = sel.state;
+  // The last chosen passed its test beside the others; once one of those was
+  // set aside it is tested again too.
+  bool last_too = false;
   for (bool dropped = kind.prune; dropped;) {
     dropped = false;
     const double n_eff = E.fit(S.XS, S.base_in).n_eff;
-    for (std::size_t m = 0; m + 1 < S.chosen.size() && !dropped; ++m) {
+    for (std::size_t m = 0; m + (last_too ? 0 : 1) < S.chosen.size() && !dropped; ++m) {
       const int j = S.chosen[m];
       const Term* t = term_of(terms, j);
       // The base refit (motion: a term of its own) is tested again too: chosen
@@ -208,6 +234,15 @@ void drop_what_no_longer_adds(Diagnosis& D, const Engine& E, const DiagnoseOptio
       const double rss_without = E.fit(chosen_columns(terms, S, j), S.base_in && !t->base).rss;
       const StepFit s = step_statistics(E, opt, rss_without, S.rss, q, S.k, n_eff, c.trials, remaining_family(D, S) + 1.0);
       if (s.ok) continue;
+      if (const int i = impossible_on_axis(D, E, terms, S, c.axis, j); i >= 0) {
+        CandidateResult& ci = D.candidates[static_cast<std::size_t>(i)];
+        sel.at_choice[static_cast<std::size_t>(i)] = StepFit{};
+        sel.gave_way[static_cast<std::size_t>(i)] = true;
+        ci.alternatives.clear();
+        drop_from_state(E, terms, i, params_added(*term_of(terms, i), ci, E), S);
+        dropped = last_too = true;
+        continue;
+      }
       sel.last[static_cast<std::size_t>(j)] = s;
       sel.at_choice[static_cast<std::size_t>(j)] = StepFit{};
       c.alternatives.clear();
