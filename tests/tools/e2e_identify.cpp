@@ -10,6 +10,7 @@
 #include <algorithm>
 #include <cstdlib>
 #include <fstream>
+#include <map>
 #include <sstream>
 #include <string>
 
@@ -66,9 +67,14 @@ TEST(IdentifyOnCpmd, TheExperimentRecordedAndTheLoopNameEveryPlantedEffect) {
   EXPECT_NE(r.out.find("within cpmd's limits"), std::string::npos) << r.out;
   const io::ModelFile got = io::load_model_file(better);
   double delay_se = -1.0;
-  for (const io::FittedParameter& f : got.fitted)
+  // Issue 28's "within 2 % (or within 3 sigma)", as sil.daemon.identify judges: at 2 % alone a dA
+  // of 0.2045 (planted 0.2) failed a clean-clone CI run on 2026-11-28.
+  std::map<std::string, double> se;
+  for (const io::FittedParameter& f : got.fitted) {
     if (f.name == "effects.actuation_delay.tau") delay_se = f.std_error;
-  test::expect_planted_effects_named(got.model.effects, 1e-3, delay_se, r.out);  // the delay: one period of cpmd's loop
+    se[f.name] = f.std_error;
+  }
+  test::expect_planted_effects_named(got.model.effects, 1e-3, delay_se, r.out, se);  // the delay: one period of cpmd's loop
 
   // --apply: the paper's circle before and after, and the same circle with the true model in cpmd.
   double before = 0, after = 0;
